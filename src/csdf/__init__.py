@@ -1,0 +1,37 @@
+"""csdf: continuous signed distance functions for 3D vision.
+
+Build shapes from primitives and operators, with named parameters::
+
+    import csdf
+    r = csdf.param("r", 1.0, 0.5, 2.0)
+    shape = csdf.sphere(r) & csdf.box(1.5)
+    prog = csdf.compile(shape)
+    d = prog(points, r=1.2)           # (N,) signed distances
+    g = prog.gradient(points)         # (N, 3) exact gradients
+    J = prog.param_jacobian(points)   # (N, P) derivatives by parameter
+"""
+
+from __future__ import annotations
+
+from .compiler import Call, Program
+from .errors import BytecodeError, CsdfError, ParamError, ShapeError
+from .expr import Expr, Param, param
+from .shapes import *  # noqa: F403
+from .shapes import REGISTRY, Shape
+from .shapes import __all__ as _shape_names
+
+__version__ = "0.1.0"
+
+
+def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
+    """Compile a shape into a :class:`Program` (cached on the shape)."""
+    if not isinstance(shape, Shape):
+        raise ShapeError(f"csdf.compile expects a Shape, got {type(shape).__name__}")
+    return shape.compile()
+
+
+__all__ = [
+    "compile", "param", "Param", "Expr", "Program", "Call", "Shape", "REGISTRY",
+    "CsdfError", "BytecodeError", "ParamError", "ShapeError", "__version__",
+    *_shape_names,
+]

@@ -1,0 +1,1 @@
+"""Evaluators of compiled programs. ``numpy_backend`` is the reference."""

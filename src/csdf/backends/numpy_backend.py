@@ -1,0 +1,197 @@
+"""The NumPy reference evaluator: values and forward-mode derivatives over the tape.
+
+It interprets one instruction at a time over a chunk of points (so memory stays
+bounded: at most ``n_slots`` arrays of ``chunk`` values plus their tangents), with
+every op computed by NumPy in the points' dtype. Tangents are carried per slot as
+``None`` (zero), a ``(T,)`` vector (uniform over the chunk) or a ``(chunk, T)`` array,
+where the T seeds are x, y, z (gradient), the parameters (Jacobian), or both.
+
+Derivative conventions at non-differentiable points: ``min``/``max`` follow the
+first operand on ties, ``abs``/``sign``/``step``/``floor`` have derivative ``sign(a)``
+/ 0 / 0 / 0, ``sqrt`` at 0 has derivative 0, ``atan2`` at the origin 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..ops import OPS_BY_CODE, numpy_impl
+
+__all__ = ["evaluate", "CHUNK"]
+
+CHUNK = 1 << 16
+
+
+def _sc(c, d):
+    """Scale tangent ``d`` by the per-point (or scalar) factor ``c``."""
+    if d is None:
+        return None
+    if np.ndim(c):
+        return c[:, None] * d
+    return c * d
+
+
+def _add(u, v):
+    if u is None:
+        return v
+    if v is None:
+        return u
+    return u + v
+
+
+def _sub(u, v):
+    if v is None:
+        return u
+    if u is None:
+        return -v
+    return u - v
+
+
+def _select(mask, da, db, n: int, t: int, dtype):
+    if da is None and db is None:
+        return None
+    if np.ndim(mask) == 0:
+        return da if bool(mask) else db
+    za = da if da is not None else np.zeros(t, dtype)
+    zb = db if db is not None else np.zeros(t, dtype)
+    return np.where(mask[:, None], za, zb)
+
+
+def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype):
+    """Tangent of ``out = op(a, b)`` given tangents ``da``, ``db``."""
+    one = dtype.type(1)
+    if op == "add":
+        return _add(da, db)
+    if op == "sub":
+        return _sub(da, db)
+    if op == "neg":
+        return None if da is None else -da
+    if op == "mul":
+        return _add(_sc(b, da), _sc(a, db))
+    if op == "div":
+        return _sc(one / b, _sub(da, _sc(out, db)))
+    if op == "square":
+        return _sc(2 * a, da)
+    if op in ("min", "max"):
+        mask = a <= b if op == "min" else a >= b
+        return _select(mask, da, db, n, t, dtype)
+    if op in ("floor", "step", "sign"):
+        return None
+    if da is None and op != "atan2" and op != "mod":
+        return None
+    if op == "abs":
+        return _sc(np.sign(a), da)
+    if op == "sqrt":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = np.where(out > 0, 0.5 / out, 0).astype(dtype, copy=False)
+        return _sc(f, da)
+    if op == "sin":
+        return _sc(np.cos(a), da)
+    if op == "cos":
+        return _sc(-np.sin(a), da)
+    if op == "tan":
+        return _sc(one + out * out, da)
+    if op == "asin":
+        return _sc(one / np.sqrt(one - a * a), da)
+    if op == "acos":
+        return _sc(-one / np.sqrt(one - a * a), da)
+    if op == "atan":
+        return _sc(one / (one + a * a), da)
+    if op == "exp":
+        return _sc(out, da)
+    if op == "log":
+        return _sc(one / a, da)
+    if op == "atan2":  # out = atan2(a=y, b=x)
+        r2 = a * a + b * b
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fy = np.where(r2 > 0, b / r2, 0).astype(dtype, copy=False)
+            fx = np.where(r2 > 0, -a / r2, 0).astype(dtype, copy=False)
+        return _add(_sc(fy, da), _sc(fx, db))
+    if op == "mod":  # a - b*floor(a/b)
+        return _sub(da, _sc(np.floor(a / b), db))
+    raise AssertionError(op)  # pragma: no cover
+
+
+def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
+    """Evaluate a program on points.
+
+    Args:
+        prog: the :class:`csdf.Program`.
+        pts: ``(N, D)`` float32/float64, D = 2 or 3.
+        pvals: ``(P,)`` float64 parameter values.
+        mode: ``'value' | 'grad' | 'jac' | 'all'``.
+
+    Returns:
+        ``{'value': (N,), 'grad': (N, 3), 'jac': (N, P)}`` (the keys the mode asks for),
+        in the points' dtype.
+    """
+    dtype = pts.dtype
+    n, d = pts.shape
+    P = len(prog.params)
+    spatial = mode in ("grad", "all")
+    wrt_params = mode in ("jac", "all")
+    T = (3 if spatial else 0) + (P if wrt_params else 0)
+    res: dict[str, np.ndarray] = {"value": np.empty(n, dtype)}
+    if spatial:
+        res["grad"] = np.zeros((n, 3), dtype)
+    if wrt_params:
+        res["jac"] = np.zeros((n, P), dtype)
+
+    consts = prog.consts.astype(dtype)
+    pv = pvals.astype(dtype)
+    code = [(OPS_BY_CODE[op].name, OPS_BY_CODE[op].arity, dst, a, b)
+            for op, dst, a, b in prog.code.tolist()]
+    fns = {name: numpy_impl(name) for name, *_ in code}
+    n_slots = prog.n_slots
+    chunk = CHUNK if T == 0 else max(1024, (1 << 20) // max(T, 1) // 4)
+
+    seeds: list = [None] * n_slots
+    if T:
+        eye = np.eye(T, dtype=dtype)
+        if spatial:
+            for i in range(3):
+                seeds[i] = eye[i]
+        if wrt_params:
+            off = 3 if spatial else 0
+            for i in range(P):
+                seeds[3 + i] = eye[off + i]
+
+    for start in range(0, n, chunk):
+        stop = min(n, start + chunk)
+        m = stop - start
+        vals: list = [None] * n_slots
+        vals[0] = pts[start:stop, 0]
+        vals[1] = pts[start:stop, 1]
+        vals[2] = pts[start:stop, 2] if d == 3 else np.zeros(m, dtype)
+        for i in range(P):
+            vals[3 + i] = pv[i]
+        base = 3 + P
+        for i, c in enumerate(consts):
+            vals[base + i] = c
+        tans = list(seeds) if T else None
+        with np.errstate(all="ignore"):
+            for name, arity, dst, a, b in code:
+                va = vals[a]
+                vb = vals[b] if arity == 2 else None
+                out = fns[name](va, vb) if arity == 2 else fns[name](va)
+                if T:
+                    tans[dst] = _tangent(name, va, vb, out, tans[a],
+                                         tans[b] if arity == 2 else None, m, T, dtype)
+                vals[dst] = out
+        v = vals[prog.output]
+        res["value"][start:stop] = v
+        if T:
+            tv = tans[prog.output]
+            if tv is not None:
+                if spatial:
+                    res["grad"][start:stop] = tv[..., :3]
+                if wrt_params:
+                    res["jac"][start:stop] = tv[..., (3 if spatial else 0):]
+
+    bad = np.isnan(pts).any(axis=1)
+    if np.isnan(pvals).any():
+        bad[:] = True
+    if bad.any():
+        for arr in res.values():
+            arr[bad] = np.nan
+    return res

@@ -1,0 +1,208 @@
+"""Binary bytecode: encoding, decoding and validation (format v1, ``docs/bytecode.md``).
+
+Layout (little-endian)::
+
+    header   32 bytes  magic "CSDF", u16 version, u16 flags, u16 n_params, u16 n_consts,
+                       u16 n_regs, u16 output slot, u32 n_instr, u32 n_calls, f64 lipschitz
+    params   n_params x (u8 name length, UTF-8 name, f64 default, f64 lo, f64 hi)
+    consts   n_consts x f64
+    code     n_instr x 8 bytes: u8 opcode, u8 reserved (0), u16 dst, u16 a, u16 b
+    calls    n_calls x (u8 name length, name, u32 out instruction, u16 n_in, n_in x u32)
+    crc32    u32 of everything before it
+
+:func:`decode` checks every field and raises :class:`~csdf.BytecodeError` naming the
+byte offset; a program it returns is safe to evaluate (every operand refers to a slot
+written before it is read).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import struct
+import zlib
+
+import numpy as np
+
+from ..errors import BytecodeError
+from ..expr import RESERVED_PARAM_NAMES, Param
+from ..ops import OPS_BY_CODE
+from .program import INSTR_REF, Call, Program
+
+__all__ = ["encode", "decode", "validate", "VERSION", "MAGIC"]
+
+MAGIC = b"CSDF"
+VERSION = 1
+HEADER = struct.Struct("<4sHHHHHHIId")
+INSTR = struct.Struct("<BBHHH")
+EXACTNESS_CODES = {"exact": 0, "bound": 1, "neither": 2}
+EXACTNESS_NAMES = {v: k for k, v in EXACTNESS_CODES.items()}
+FLAG_DIM2 = 4
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+MAX_SLOTS = 65535
+
+
+def encode(prog: Program) -> bytes:
+    """Serialise a program (see the module docstring for the layout)."""
+    flags = EXACTNESS_CODES[prog.exactness] | (FLAG_DIM2 if prog.dim == 2 else 0)
+    out = bytearray(
+        HEADER.pack(
+            MAGIC, VERSION, flags, len(prog.params), len(prog.consts), prog.n_regs,
+            prog.output, len(prog.code), len(prog.calls), prog.lipschitz,
+        )
+    )
+    for p in prog.params:
+        name = p.name.encode()
+        out += struct.pack("<B", len(name)) + name + struct.pack("<ddd", p.default, p.lo, p.hi)
+    out += prog.consts.astype("<f8").tobytes()
+    for op, dst, a, b in prog.code.tolist():
+        out += INSTR.pack(op, 0, dst, a, b)
+    for c in prog.calls:
+        name = c.name.encode()
+        out += struct.pack("<B", len(name)) + name + struct.pack("<IH", c.out, len(c.inputs))
+        out += struct.pack(f"<{len(c.inputs)}I", *c.inputs)
+    out += struct.pack("<I", zlib.crc32(out) & 0xFFFFFFFF)
+    return bytes(out)
+
+
+class _Reader:
+    def __init__(self, data: bytes):
+        self.data = data
+        self.pos = 0
+
+    def take(self, n: int, what: str) -> bytes:
+        if n < 0 or self.pos + n > len(self.data):
+            raise BytecodeError(
+                f"truncated at byte {self.pos}: {what} needs {n} bytes, "
+                f"{len(self.data) - self.pos} left"
+            )
+        b = self.data[self.pos:self.pos + n]
+        self.pos += n
+        return b
+
+    def unpack(self, fmt: str, what: str):
+        s = struct.calcsize(fmt)
+        return struct.unpack(fmt, self.take(s, what))
+
+    def name(self, what: str) -> str:
+        at = self.pos
+        (n,) = self.unpack("<B", f"{what} length")
+        raw = self.take(n, what)
+        try:
+            s = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise BytecodeError(f"byte {at}: {what} is not valid UTF-8") from None
+        if not _IDENT.match(s):
+            raise BytecodeError(f"byte {at}: {what} {s!r} is not an identifier")
+        return s
+
+
+def decode(data: bytes) -> Program:
+    """Parse and validate bytecode; raise :class:`BytecodeError` on any flaw."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise BytecodeError(f"bytecode must be bytes, got {type(data).__name__}")
+    data = bytes(data)
+    if len(data) < HEADER.size + 4:
+        raise BytecodeError(
+            f"too short: {len(data)} bytes, a program has at least {HEADER.size + 4}"
+        )
+    if data[:4] != MAGIC:
+        raise BytecodeError(f"byte 0: bad magic {data[:4]!r}, expected {MAGIC!r}")
+    (crc,) = struct.unpack("<I", data[-4:])
+    if zlib.crc32(data[:-4]) & 0xFFFFFFFF != crc:
+        raise BytecodeError(f"byte {len(data) - 4}: checksum mismatch (corrupt or truncated)")
+    r = _Reader(data[:-4])
+    (_, version, flags, n_params, n_consts, n_regs, output, n_instr, n_calls,
+     lipschitz) = HEADER.unpack(r.take(HEADER.size, "header"))
+    if version != VERSION:
+        raise BytecodeError(f"byte 4: unsupported version {version} (this csdf reads {VERSION})")
+    if flags & ~(3 | FLAG_DIM2) or (flags & 3) == 3:
+        raise BytecodeError(f"byte 6: invalid flags 0x{flags:04x}")
+    params = []
+    for i in range(n_params):
+        name = r.name(f"parameter {i} name")
+        d, lo, hi = r.unpack("<ddd", f"parameter {name!r} values")
+        params.append(Param(name, d, lo, hi))
+    consts = np.frombuffer(r.take(8 * n_consts, "constant pool"), dtype="<f8").astype(np.float64)
+    raw = r.take(INSTR.size * n_instr, "instructions")
+    code = np.zeros((n_instr, 4), dtype=np.int64)
+    reserved = []
+    for k in range(n_instr):
+        op, res, dst, a, b = INSTR.unpack_from(raw, k * INSTR.size)
+        code[k] = (op, dst, a, b)
+        reserved.append(res)
+    if any(reserved):
+        k = next(i for i, v in enumerate(reserved) if v)
+        raise BytecodeError(f"instruction {k}: reserved byte must be 0")
+    calls = []
+    for i in range(n_calls):
+        name = r.name(f"call {i} name")
+        out, n_in = r.unpack("<IH", f"call {i} header")
+        inputs = r.unpack(f"<{n_in}I", f"call {i} inputs")
+        calls.append(Call(name, out, tuple(inputs)))
+    if r.pos != len(r.data):
+        raise BytecodeError(f"byte {r.pos}: {len(r.data) - r.pos} unexpected trailing bytes")
+    prog = Program(
+        params=tuple(params), consts=consts, code=code, output=output, n_regs=n_regs,
+        dim=2 if flags & FLAG_DIM2 else 3, exactness=EXACTNESS_NAMES[flags & 3],
+        lipschitz=lipschitz, calls=tuple(calls),
+    )
+    validate(prog)
+    return prog
+
+
+def validate(prog: Program) -> None:
+    """Check a program's internal consistency; raise :class:`BytecodeError` if broken."""
+    seen = set()
+    for p in prog.params:
+        if not _IDENT.match(p.name) or p.name in RESERVED_PARAM_NAMES:
+            raise BytecodeError(f"parameter name {p.name!r} is not allowed")
+        if p.name in seen:
+            raise BytecodeError(f"parameter {p.name!r} appears twice")
+        seen.add(p.name)
+        if not math.isfinite(p.default) or math.isnan(p.lo) or math.isnan(p.hi):
+            raise BytecodeError(f"parameter {p.name!r}: default/bounds are not numbers")
+        if not p.lo <= p.default <= p.hi:
+            raise BytecodeError(f"parameter {p.name!r}: default outside [lo, hi]")
+    if [p.name for p in prog.params] != sorted(p.name for p in prog.params):
+        raise BytecodeError("parameters must be sorted by name")
+    n_fixed = prog.n_fixed
+    n_slots = prog.n_slots
+    if n_slots > MAX_SLOTS:
+        raise BytecodeError(f"{n_slots} slots exceed the limit of {MAX_SLOTS}")
+    if math.isnan(prog.lipschitz) or prog.lipschitz < 0:
+        raise BytecodeError(f"lipschitz bound {prog.lipschitz} is not a non-negative number")
+    written = set()
+    for k, (op, dst, a, b) in enumerate(prog.code.tolist()):
+        info = OPS_BY_CODE.get(op)
+        if info is None:
+            raise BytecodeError(f"instruction {k}: unknown opcode {op}")
+        if not n_fixed <= dst < n_slots:
+            raise BytecodeError(f"instruction {k}: destination slot {dst} is not a register")
+        for name, s in (("a", a), ("b", b)) if info.arity == 2 else (("a", a),):
+            if not 0 <= s < n_slots:
+                raise BytecodeError(f"instruction {k}: operand {name} slot {s} out of range")
+            if s >= n_fixed and s not in written:
+                raise BytecodeError(f"instruction {k}: operand {name} reads register "
+                                    f"r{s - n_fixed} before it is written")
+        if info.arity == 1 and b != 0:
+            raise BytecodeError(f"instruction {k}: unary op {info.name} has operand b = {b}")
+        written.add(dst)
+    if not 0 <= prog.output < n_slots or (prog.output >= n_fixed and prog.output not in written):
+        raise BytecodeError(f"output slot {prog.output} is never written")
+    if prog.dim == 2 and any(2 in (a, b) for _, _, a, b in prog.code.tolist()):
+        raise BytecodeError("a 2D program reads z")
+    n_instr = len(prog.code)
+    for i, c in enumerate(prog.calls):
+        if not _IDENT.match(c.name):
+            raise BytecodeError(f"call {i}: bad name {c.name!r}")
+        if not 0 <= c.out < n_instr:
+            raise BytecodeError(f"call {i}: output instruction {c.out} out of range")
+        for s in c.inputs:
+            if s & INSTR_REF:
+                if (s & ~INSTR_REF) >= n_instr:
+                    raise BytecodeError(
+                        f"call {i}: input instruction {s & ~INSTR_REF} out of range"
+                    )
+            elif s >= n_fixed:
+                raise BytecodeError(f"call {i}: input slot {s} is not a fixed slot")

@@ -1,0 +1,276 @@
+"""The compiled program (tape) and its evaluation entry points.
+
+A :class:`Program` is immutable data: the parameter table, the constant pool, the
+instructions (``opcode, dst, a, b`` over one slot file) and metadata. Parameter values
+are given at evaluation time, so changing them never recompiles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import CsdfError, ParamError
+from ..expr import Param
+from ..ops import CATEGORIES, OPS_BY_CODE
+
+__all__ = ["Program", "Call"]
+
+INSTR_REF = 0x80000000
+
+
+@dataclass(frozen=True)
+class Call:
+    """A primitive invocation inside a program (for primitive-level counts).
+
+    Attributes:
+        name: primitive name (``'sphere'``, ...).
+        out: index of the instruction that produces the primitive's distance.
+        inputs: where its inputs come from: a fixed slot index, or
+            ``0x80000000 | i`` for the result of instruction ``i``.
+    """
+
+    name: str
+    out: int
+    inputs: tuple[int, ...]
+
+
+class Program:
+    """A compiled signed distance function: a linear register tape.
+
+    Slot file: ``0..2`` = x, y, z; then one slot per parameter (``params`` order, sorted
+    by name); then the constants; then ``n_regs`` registers. Instruction ``k`` is
+    ``code[k] = (opcode, dst, a, b)`` computing ``slot[dst] = op(slot[a], slot[b])``
+    (``b`` is 0 and unused for unary ops). See ``docs/bytecode.md``.
+
+    Attributes:
+        params: the parameters (``.name``, ``.default``, ``.lo``, ``.hi``).
+        consts: ``(C,)`` float64 constant pool.
+        code: ``(K, 4)`` int64 instructions.
+        output: slot holding the distance after the last instruction.
+        n_regs: number of registers.
+        dim: 3, or 2 for planar shapes.
+        exactness: ``'exact' | 'bound' | 'neither'``; lipschitz: gradient-norm bound.
+        calls: primitive invocations (:class:`Call`).
+    """
+
+    def __init__(
+        self,
+        *,
+        params: tuple[Param, ...],
+        consts: np.ndarray,
+        code: np.ndarray,
+        output: int,
+        n_regs: int,
+        dim: int = 3,
+        exactness: str = "neither",
+        lipschitz: float = math.inf,
+        calls: tuple[Call, ...] = (),
+    ):
+        self.params = tuple(params)
+        self.consts = np.asarray(consts, dtype=np.float64)
+        self.code = np.asarray(code, dtype=np.int64).reshape(-1, 4)
+        self.output = int(output)
+        self.n_regs = int(n_regs)
+        self.dim = int(dim)
+        self.exactness = exactness
+        self.lipschitz = float(lipschitz)
+        self.calls = tuple(calls)
+        self._param_index = {p.name: i for i, p in enumerate(self.params)}
+        self.consts.setflags(write=False)
+        self.code.setflags(write=False)
+
+    # ------------------------------------------------------------------ layout
+    @property
+    def n_fixed(self) -> int:
+        """Number of preloaded slots (x, y, z, parameters, constants)."""
+        return 3 + len(self.params) + len(self.consts)
+
+    @property
+    def n_slots(self) -> int:
+        return self.n_fixed + self.n_regs
+
+    def __len__(self) -> int:
+        return len(self.code)
+
+    @property
+    def param_names(self) -> list[str]:
+        return [p.name for p in self.params]
+
+    def __repr__(self) -> str:
+        return (
+            f"<Program {len(self.code)} instructions, {len(self.params)} params, "
+            f"{len(self.consts)} constants, {self.n_regs} registers, {self.exactness}>"
+        )
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Program):
+            return NotImplemented
+        return self.to_bytes() == other.to_bytes()
+
+    def __hash__(self) -> int:
+        return hash(self.to_bytes())
+
+    # ------------------------------------------------------------------ parameters
+    def param_values(self, params: dict | None = None, **kw: Any) -> np.ndarray:
+        """Parameter vector ``(P,)`` float64 from defaults overridden by ``params``/``kw``.
+
+        Raises:
+            ParamError: an unknown name (the message lists the known ones) or a value
+                that is not a real number.
+        """
+        vals = np.array([p.default for p in self.params], dtype=np.float64)
+        given = dict(params or {})
+        overlap = set(given) & set(kw)
+        if overlap:
+            raise ParamError(f"parameter(s) {sorted(overlap)} given twice")
+        given.update(kw)
+        for name, v in given.items():
+            i = self._param_index.get(name)
+            if i is None:
+                known = ", ".join(self.param_names) or "none"
+                raise ParamError(f"unknown parameter {name!r}; this shape's parameters: {known}")
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                if not (isinstance(v, np.ndarray) and v.shape == ()):
+                    raise ParamError(
+                        f"parameter {name!r} must be a real number, got {type(v).__name__}"
+                    )
+            vals[i] = float(v)
+        return vals
+
+    # ------------------------------------------------------------------ evaluation
+    def _run(self, points, params, kw, mode: str):
+        from ..backends.numpy_backend import evaluate
+        from ..points import as_points
+
+        pts, batch, dtype = as_points(points, self.dim)
+        pv = self.param_values(params, **kw)
+        return evaluate(self, pts, pv, mode), batch, pts.shape[1]
+
+    def __call__(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+        """Signed distances.
+
+        Args:
+            points: ``(N, 3)`` (or any ``(..., 3)``) float32/float64 array in model units;
+                2D programs also take ``(..., 2)``. Integers are converted to float64.
+            params: optional ``{name: value}``; keyword arguments work too.
+
+        Returns:
+            ``(N,)`` (or ``(...)``) distances in the points' dtype. A point with a NaN
+            coordinate gives NaN (NaN in, NaN out), as does a NaN parameter value.
+        """
+        res, batch, _ = self._run(points, params, kw, "value")
+        return res["value"].reshape(batch)
+
+    def gradient(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+        """Exact spatial gradient ``(..., D)`` (D = the points' last dimension), by
+        forward-mode differentiation of the tape. Where the function is not
+        differentiable (a kink of ``min``/``abs``) one of the one-sided gradients is
+        returned; ``sqrt`` at 0 gets derivative 0."""
+        res, batch, d = self._run(points, params, kw, "grad")
+        return res["grad"][:, :d].reshape(*batch, d)
+
+    def value_and_grad(self, points, params: dict | None = None, **kw: Any):
+        """``(values (...), gradients (..., D))`` in one pass."""
+        res, batch, d = self._run(points, params, kw, "grad")
+        return res["value"].reshape(batch), res["grad"][:, :d].reshape(*batch, d)
+
+    def param_jacobian(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+        """Exact derivatives of the distance by each parameter, ``(..., P)``, columns in
+        :attr:`params` order."""
+        res, batch, _ = self._run(points, params, kw, "jac")
+        return res["jac"].reshape(*batch, len(self.params))
+
+    def value_grad_param_jacobian(self, points, params: dict | None = None, **kw: Any):
+        """``(values (...), gradients (..., D), param Jacobian (..., P))`` in one pass."""
+        res, batch, d = self._run(points, params, kw, "all")
+        return (
+            res["value"].reshape(batch),
+            res["grad"][:, :d].reshape(*batch, d),
+            res["jac"].reshape(*batch, len(self.params)),
+        )
+
+    def contains(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+        """Boolean ``(...)``: True where the distance is ``<= 0`` (NaN gives False)."""
+        v = self(points, params, **kw)
+        with np.errstate(invalid="ignore"):
+            return v <= 0
+
+    # ------------------------------------------------------------------ counts
+    def counts(self, level: str = "expanded") -> dict[str, int]:
+        """The paper's Table-1 instruction counts.
+
+        Args:
+            level: ``'expanded'`` counts every scalar instruction of the tape by category
+                (see :mod:`csdf.ops`); ``'primitive'`` counts each primitive invocation as
+                one ``call`` and only the instructions outside primitives by category.
+
+        Returns:
+            ``{'add': .., 'mul': .., 'div': .., 'call': .., 'branch': ..}``.
+        """
+        if level not in ("expanded", "primitive"):
+            raise CsdfError(f"level must be 'expanded' or 'primitive', got {level!r}")
+        out = dict.fromkeys(CATEGORIES, 0)
+        inside = self._primitive_bodies() if level == "primitive" else set()
+        for k, row in enumerate(self.code):
+            if k in inside:
+                continue
+            out[OPS_BY_CODE[int(row[0])].category] += 1
+        if level == "primitive":
+            out["call"] += len(self.calls)
+        return out
+
+    def _primitive_bodies(self) -> set[int]:
+        """Instruction indices computed inside primitive calls."""
+        writer: list[tuple[int, int]] = []  # per instruction: producers of a and b
+        last: dict[int, int] = {}
+        for k, (op, dst, a, b) in enumerate(self.code.tolist()):
+            arity = OPS_BY_CODE[op].arity
+            writer.append((last.get(a, -1), last.get(b, -1) if arity == 2 else -1))
+            last[dst] = k
+        inside: set[int] = set()
+        for call in self.calls:
+            stop = {s & ~INSTR_REF for s in call.inputs if s & INSTR_REF}
+            stack = [call.out]
+            while stack:
+                k = stack.pop()
+                if k < 0 or k in inside or k in stop:
+                    continue
+                inside.add(k)
+                stack.extend(writer[k])
+        return inside
+
+    # ------------------------------------------------------------------ serialisation
+    def to_bytes(self) -> bytes:
+        """The binary bytecode (versioned, fixed-width instructions; docs/bytecode.md)."""
+        from .binary import encode
+
+        return encode(self)
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> Program:
+        """Decode and validate bytecode. Raises :class:`csdf.BytecodeError` on any flaw."""
+        from .binary import decode
+
+        return decode(data)
+
+    def disassemble(self) -> str:
+        """A readable text listing that :meth:`from_text` loads back to the same program."""
+        from .text import disassemble
+
+        return disassemble(self)
+
+    @classmethod
+    def from_text(cls, text: str) -> Program:
+        """Assemble a listing made by :meth:`disassemble` (raises BytecodeError)."""
+        from .text import assemble
+
+        return assemble(text)
+
+    @property
+    def nbytes(self) -> int:
+        """Size of :meth:`to_bytes` in bytes."""
+        return len(self.to_bytes())

@@ -1,0 +1,183 @@
+"""Text form of a program: a readable listing that assembles back to the same program.
+
+Example (a sphere of parameter radius ``r``)::
+
+    csdf-program 1
+    dim 3
+    exactness exact
+    lipschitz 1.0
+    param r 1.0 -inf inf
+    r0 = square x
+    r1 = square y
+    r0 = add r0 r1
+    r1 = square z
+    r0 = add r0 r1
+    r0 = sqrt r0
+    r0 = sub r0 $r
+    output r0
+    call sphere @6 x y z $r
+
+Operands: ``x y z``, ``$name`` (parameter), ``c<k>`` (constant ``k``, declared by a
+``const c<k> <value>`` line), ``r<k>`` (register). In ``call`` lines ``@i`` is the
+result of instruction ``i``. Floats are written with ``repr`` so they round-trip exactly.
+Comments start with ``;``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from ..errors import BytecodeError
+from ..expr import Param
+from ..ops import OPS, OPS_BY_CODE
+from .binary import validate
+from .program import INSTR_REF, Call, Program
+
+__all__ = ["disassemble", "assemble"]
+
+_MAX_LINES = 1_000_000
+
+
+def _slot_name(prog: Program, s: int) -> str:
+    if s < 3:
+        return "xyz"[s]
+    if s < 3 + len(prog.params):
+        return "$" + prog.params[s - 3].name
+    if s < prog.n_fixed:
+        return f"c{s - 3 - len(prog.params)}"
+    return f"r{s - prog.n_fixed}"
+
+
+def disassemble(prog: Program) -> str:
+    lines = [
+        "csdf-program 1",
+        f"dim {prog.dim}",
+        f"exactness {prog.exactness}",
+        f"lipschitz {prog.lipschitz!r}",
+    ]
+    for p in prog.params:
+        lines.append(f"param {p.name} {p.default!r} {p.lo!r} {p.hi!r}")
+    for i, c in enumerate(prog.consts.tolist()):
+        lines.append(f"const c{i} {c!r}")
+    for op, dst, a, b in prog.code.tolist():
+        info = OPS_BY_CODE[op]
+        args = [_slot_name(prog, a)] + ([_slot_name(prog, b)] if info.arity == 2 else [])
+        lines.append(f"{_slot_name(prog, dst)} = {info.name} {' '.join(args)}")
+    lines.append(f"output {_slot_name(prog, prog.output)}")
+    for c in prog.calls:
+        ins = [f"@{s & ~INSTR_REF}" if s & INSTR_REF else _slot_name(prog, s) for s in c.inputs]
+        lines.append(f"call {c.name} @{c.out} {' '.join(ins)}".rstrip())
+    return "\n".join(lines) + "\n"
+
+
+def _float(tok: str, ln: int) -> float:
+    if not re.fullmatch(r"[-+]?(inf|nan|(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)", tok):
+        raise BytecodeError(f"line {ln}: {tok!r} is not a number")
+    return float(tok)
+
+
+def assemble(text: str) -> Program:
+    """Parse a listing (see module docs); raise :class:`BytecodeError` with the line."""
+    if not isinstance(text, str):
+        raise BytecodeError(f"a program listing must be text, got {type(text).__name__}")
+    raw_lines = text.splitlines()
+    if len(raw_lines) > _MAX_LINES:
+        raise BytecodeError(f"listing has {len(raw_lines)} lines; at most {_MAX_LINES}")
+    header = {"dim": 3, "exactness": "neither", "lipschitz": math.inf}
+    params: list[Param] = []
+    consts: list[float] = []
+    code: list[tuple[int, int, int, int]] = []
+    reg_rows: list[tuple[int, str, str, str | None]] = []
+    output_tok: tuple[int, str] | None = None
+    call_rows: list[tuple[int, list[str]]] = []
+    seen_magic = False
+    for ln, line in enumerate(raw_lines, 1):
+        line = line.split(";", 1)[0].strip()
+        if not line:
+            continue
+        toks = line.split()
+        if not seen_magic:
+            if toks != ["csdf-program", "1"]:
+                raise BytecodeError(f"line {ln}: expected 'csdf-program 1'")
+            seen_magic = True
+            continue
+        kw = toks[0]
+        if kw == "dim" and len(toks) == 2 and toks[1] in ("2", "3"):
+            header["dim"] = int(toks[1])
+        elif kw == "exactness" and len(toks) == 2 and toks[1] in ("exact", "bound", "neither"):
+            header["exactness"] = toks[1]
+        elif kw == "lipschitz" and len(toks) == 2:
+            header["lipschitz"] = _float(toks[1], ln)
+        elif kw == "param" and len(toks) == 5:
+            params.append(Param(toks[1], *(_float(t, ln) for t in toks[2:])))
+        elif kw == "const" and len(toks) == 3:
+            if toks[1] != f"c{len(consts)}":
+                raise BytecodeError(f"line {ln}: expected constant c{len(consts)}, got {toks[1]}")
+            consts.append(_float(toks[2], ln))
+        elif kw == "output" and len(toks) == 2:
+            output_tok = (ln, toks[1])
+        elif kw == "call" and len(toks) >= 3:
+            call_rows.append((ln, toks[1:]))
+        elif len(toks) in (4, 5) and toks[1] == "=":
+            if toks[2] not in OPS:
+                raise BytecodeError(f"line {ln}: unknown op {toks[2]!r}")
+            arity = OPS[toks[2]].arity
+            if len(toks) != 3 + arity:
+                raise BytecodeError(f"line {ln}: {toks[2]} takes {arity} operand(s)")
+            reg_rows.append((ln, toks[0], toks[2], " ".join(toks[3:])))
+        else:
+            raise BytecodeError(f"line {ln}: cannot read {line[:60]!r}")
+    if not seen_magic:
+        raise BytecodeError("line 1: empty listing (expected 'csdf-program 1')")
+    pindex = {p.name: 3 + i for i, p in enumerate(params)}
+    n_fixed = 3 + len(params) + len(consts)
+
+    def slot(tok: str, ln: int) -> int:
+        if tok in ("x", "y", "z"):
+            return "xyz".index(tok)
+        if tok.startswith("$") and tok[1:] in pindex:
+            return pindex[tok[1:]]
+        m = re.fullmatch(r"c(\d{1,6})", tok)
+        if m and int(m.group(1)) < len(consts):
+            return 3 + len(params) + int(m.group(1))
+        m = re.fullmatch(r"r(\d{1,5})", tok)
+        if m:
+            return n_fixed + int(m.group(1))
+        raise BytecodeError(f"line {ln}: unknown operand {tok!r}")
+
+    n_regs = 0
+    for ln, dst_tok, opname, operands in reg_rows:
+        if not re.fullmatch(r"r\d{1,5}", dst_tok):
+            raise BytecodeError(f"line {ln}: destination must be a register r<k>, got {dst_tok!r}")
+        dst = slot(dst_tok, ln)
+        ops = [slot(t, ln) for t in operands.split()]
+        n_regs = max(n_regs, dst - n_fixed + 1)
+        code.append((OPS[opname].code, dst, ops[0], ops[1] if len(ops) > 1 else 0))
+    if output_tok is None:
+        raise BytecodeError("missing 'output' line")
+    output = slot(output_tok[1], output_tok[0])
+    calls = []
+    for ln, toks in call_rows:
+        name = toks[0]
+        if not re.fullmatch(r"@\d{1,9}", toks[1]):
+            raise BytecodeError(f"line {ln}: call output must be @<instruction>")
+        ins = []
+        for t in toks[2:]:
+            ins.append(INSTR_REF | int(t[1:]) if re.fullmatch(r"@\d{1,9}", t) else slot(t, ln))
+        calls.append(Call(name, int(toks[1][1:]), tuple(ins)))
+    if n_fixed + n_regs > 65535:
+        raise BytecodeError("too many slots (limit 65535)")
+    try:
+        prog = Program(
+            params=tuple(params), consts=np.array(consts, dtype=np.float64),
+            code=np.array(code, dtype=np.int64).reshape(-1, 4), output=output, n_regs=n_regs,
+            dim=int(header["dim"]), exactness=str(header["exactness"]),
+            lipschitz=float(header["lipschitz"]), calls=tuple(calls),
+        )
+    except (ValueError, OverflowError) as exc:
+        raise BytecodeError(f"invalid program: {exc}") from None
+    validate(prog)
+    return prog

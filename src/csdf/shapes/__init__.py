@@ -1,0 +1,67 @@
+"""The modelling API: primitives, CSG, domain operations and deformations."""
+
+from . import deform as _deform  # noqa: F401  (registers shape methods)
+from .base import REGISTRY, ApiEntry, Shape
+from .csg import BLENDS, complement, difference, intersection, union
+from .domain import (
+    mirror,
+    orient,
+    repeat,
+    repeat_mirrored,
+    repeat_polar,
+    rotate,
+    scale,
+    translate,
+)
+from .primitives2d import (
+    circle,
+    ellipse,
+    equilateral_triangle,
+    extrude,
+    hexagon,
+    polygon,
+    rectangle,
+    regular_polygon,
+    revolve,
+    rhombus,
+    ring,
+    rounded_rectangle,
+    segment,
+    trapezoid,
+    triangle,
+)
+from .primitives3d import (
+    box,
+    box_frame,
+    capped_cone,
+    capped_torus,
+    capsule,
+    cone,
+    cylinder,
+    ellipsoid,
+    hex_prism,
+    link,
+    octahedron,
+    plane,
+    pyramid,
+    round_cone,
+    rounded_box,
+    rounded_cylinder,
+    slab,
+    sphere,
+    torus,
+    tri_prism,
+)
+
+__all__ = [
+    "Shape", "REGISTRY", "ApiEntry", "BLENDS",
+    "sphere", "box", "rounded_box", "box_frame", "cylinder", "rounded_cylinder", "capsule",
+    "cone", "capped_cone", "round_cone", "torus", "capped_torus", "link", "plane", "slab",
+    "ellipsoid", "octahedron", "pyramid", "hex_prism", "tri_prism",
+    "circle", "rectangle", "rounded_rectangle", "regular_polygon", "polygon", "triangle",
+    "equilateral_triangle", "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse",
+    "extrude", "revolve",
+    "union", "intersection", "difference", "complement",
+    "translate", "rotate", "orient", "scale", "mirror", "repeat", "repeat_mirrored",
+    "repeat_polar",
+]

@@ -1,0 +1,336 @@
+"""The :class:`Shape` node, argument coercion, exactness rules and the API registry.
+
+A shape is a *call-level* tree: each node remembers the public function that made
+it (``name``, ``args``, ``kwargs``) and its child shapes, so it can be printed back
+as a model file, and it knows how to build its scalar expression at any coordinate
+vector (``sdf(p)``). No backend knows what a box is: they all see the expression.
+
+Exactness contract (hg_sdf's): every shape carries
+
+* ``exactness``: ``'exact'`` (the Euclidean signed distance to its surface),
+  ``'bound'`` (never overestimates the distance to its own zero set: the function is
+  continuous with Lipschitz constant <= 1), or ``'neither'``;
+* ``lipschitz``: an upper bound of ``|grad f|``. Where a deformation makes this depend
+  on the region (twist, bend, taper), it holds inside the child's bounding box, and it
+  is ``inf`` when no bound is known. Consumers divide step sizes by it.
+
+Parameters in arguments: bounding boxes and Lipschitz bounds hold for every value
+of a parameter in ``[lo, hi]`` when both are finite, otherwise at its default.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import ShapeError
+from ..expr import Expr, Param, X, Y, Z, as_expr, expr_params
+from ..interval import expr_range
+from ..vec import Vec
+
+__all__ = [
+    "Shape", "BuildContext", "REGISTRY", "ApiEntry", "register", "scalar_arg", "vector_arg",
+    "int_arg", "derive_exactness", "Bounds", "EXACTNESS",
+]
+
+EXACTNESS = ("exact", "bound", "neither")
+Bounds = "np.ndarray | None"  # (2, dim) array [lo, hi] or None when unbounded/unknown
+
+
+@dataclass
+class BuildContext:
+    """State carried while building a shape's expression.
+
+    Attributes:
+        calls: primitive invocations seen: ``id(out) -> (name, out, inputs)``.
+        memo: ``(id(shape), ids of p) -> Expr`` so a subtree evaluated twice at the same
+            coordinates is built once.
+    """
+
+    calls: dict[int, tuple[str, Expr, tuple[Expr, ...]]] = field(default_factory=dict)
+    memo: dict[tuple, Expr] = field(default_factory=dict)
+
+
+class Shape:
+    """A signed distance field built from primitives and operators.
+
+    Evaluate with ``shape(points)``; compile with ``shape.compile()``. Combine with
+    ``|`` (union), ``&`` (intersection), ``-`` (difference) and ``~`` (complement);
+    transform with the methods below (``translate``, ``rotate``, ``scale``, ...).
+
+    Attributes:
+        name: the public function or method that made this node.
+        args, kwargs: its arguments as given (numbers, expressions, tuples, shapes).
+        children: child shapes.
+        dim: 3, or 2 for planar shapes (a 2D shape evaluated in 3D is its infinite prism).
+        exactness: ``'exact' | 'bound' | 'neither'`` (see module docs).
+        lipschitz: upper bound of the gradient norm (float, may be inf).
+        bounds: ``(2, dim)`` array ``[min, max]`` of the zero set, or None if unbounded.
+    """
+
+    __slots__ = (
+        "name", "args", "kwargs", "children", "dim", "exactness", "lipschitz", "bounds",
+        "_fn", "_primitive", "_expr", "_program",
+    )
+
+    def __init__(
+        self,
+        name: str,
+        fn: Callable[[Vec, BuildContext], Expr],
+        *,
+        dim: int,
+        exactness: str,
+        lipschitz: float,
+        bounds: np.ndarray | None,
+        args: tuple = (),
+        kwargs: dict | None = None,
+        children: tuple[Shape, ...] = (),
+        primitive: tuple[Expr, ...] | None = None,
+    ):
+        if exactness not in EXACTNESS:
+            raise ValueError(f"bad exactness {exactness!r}")
+        self.name = name
+        self.args = args
+        self.kwargs = dict(kwargs or {})
+        self.children = children
+        self.dim = dim
+        self.exactness = exactness
+        self.lipschitz = float(lipschitz)
+        self.bounds = None if bounds is None else np.asarray(bounds, dtype=np.float64)
+        self._fn = fn
+        self._primitive = primitive
+        self._expr: Expr | None = None
+        self._program = None
+
+    # ------------------------------------------------------------------ expressions
+    def sdf(self, p: Vec, ctx: BuildContext | None = None) -> Expr:
+        """The signed distance expression at coordinates ``p`` (a Vec of dim >= self.dim)."""
+        ctx = ctx or BuildContext()
+        key = (id(self), tuple(id(c) for c in p.c[: self.dim]))
+        hit = ctx.memo.get(key)
+        if hit is not None:
+            return hit
+        q = Vec(p.c[: self.dim])
+        out = self._fn(q, ctx)
+        if self._primitive is not None and out.op not in ("x", "y", "z", "const", "param"):
+            ctx.calls.setdefault(id(out), (self.name, out, tuple(q.c) + self._primitive))
+        ctx.memo[key] = out
+        return out
+
+    def build(self) -> tuple[Expr, BuildContext]:
+        """Build the expression at (x, y, z) (or (x, y)); returns it and the context."""
+        ctx = BuildContext()
+        p = Vec((X, Y, Z)[: self.dim])
+        return self.sdf(p, ctx), ctx
+
+    @property
+    def expr(self) -> Expr:
+        """The scalar expression of this shape over x, y, z (cached)."""
+        if self._expr is None:
+            self._expr = self.build()[0]
+        return self._expr
+
+    @property
+    def params(self) -> list[Param]:
+        """Parameters of this shape, sorted by name."""
+        return expr_params(self.expr)
+
+    # ------------------------------------------------------------------ compile / eval
+    def compile(self):
+        """Compile to a :class:`csdf.Program` (cached on the shape)."""
+        if self._program is None:
+            from ..compiler.tape import compile_shape
+
+            self._program = compile_shape(self)
+        return self._program
+
+    def __call__(self, points, params: dict | None = None, **kw):
+        """Signed distances at ``points`` ``(..., 3)``; see :meth:`csdf.Program.__call__`."""
+        return self.compile()(points, params, **kw)
+
+    def gradient(self, points, params: dict | None = None, **kw):
+        """Spatial gradient ``(..., 3)``; see :meth:`csdf.Program.gradient`."""
+        return self.compile().gradient(points, params, **kw)
+
+    def value_and_grad(self, points, params: dict | None = None, **kw):
+        """Values and gradients; see :meth:`csdf.Program.value_and_grad`."""
+        return self.compile().value_and_grad(points, params, **kw)
+
+    def param_jacobian(self, points, params: dict | None = None, **kw):
+        """Derivatives by parameter ``(..., P)``; see :meth:`csdf.Program.param_jacobian`."""
+        return self.compile().param_jacobian(points, params, **kw)
+
+    def contains(self, points, params: dict | None = None, **kw):
+        """Inside test (``f <= 0``); see :meth:`csdf.Program.contains`."""
+        return self.compile().contains(points, params, **kw)
+
+    # ------------------------------------------------------------------ operators
+    def __or__(self, other: Shape) -> Shape:
+        from .csg import union
+
+        return union(self, other)
+
+    def __and__(self, other: Shape) -> Shape:
+        from .csg import intersection
+
+        return intersection(self, other)
+
+    def __sub__(self, other: Shape) -> Shape:
+        from .csg import difference
+
+        return difference(self, other)
+
+    def __invert__(self) -> Shape:
+        from .csg import complement
+
+        return complement(self)
+
+    def __repr__(self) -> str:
+        parts = [repr(a) for a in self.args]
+        parts += [f"{k}={v!r}" for k, v in self.kwargs.items()]
+        return f"<Shape {self.name}({', '.join(parts)}) dim={self.dim} {self.exactness}>"
+
+
+# ---------------------------------------------------------------------- the registry
+@dataclass(frozen=True)
+class ApiEntry:
+    """One public modelling function: a primitive, an operator or a shape method."""
+
+    name: str
+    kind: str  # 'primitive3d' | 'primitive2d' | 'operator' | 'method'
+    fn: Callable[..., Shape]
+
+
+REGISTRY: dict[str, ApiEntry] = {}
+
+
+def register(kind: str, name: str | None = None):
+    """Decorator adding a function to the public modelling API registry."""
+
+    def deco(fn):
+        key = name or fn.__name__
+        REGISTRY[key] = ApiEntry(key, kind, fn)
+        if kind == "method":
+            setattr(Shape, key, fn)
+        return fn
+
+    return deco
+
+
+# ---------------------------------------------------------------------- arguments
+def scalar_arg(v: Any, what: str) -> Expr:
+    """Coerce a number or parameter expression; raise ShapeError naming ``what``."""
+    if isinstance(v, Expr):
+        if any(n in (X, Y, Z) for n in _leaves(v)):
+            raise ShapeError(f"{what} must not depend on x, y or z")
+        return v
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ShapeError(f"{what} must be a number or a parameter, got {type(v).__name__}")
+    if not math.isfinite(float(v)):
+        raise ShapeError(f"{what} must be finite, got {v}")
+    return as_expr(float(v))
+
+
+def _leaves(e: Expr):
+    from ..expr import walk
+
+    return (n for n in walk(e) if not n.args)
+
+
+def vector_arg(v: Any, n: int, what: str, *, broadcast: bool = False) -> tuple[Expr, ...]:
+    """Coerce an ``n``-vector (tuple/list/array of numbers or parameters).
+
+    With ``broadcast`` a scalar is repeated ``n`` times.
+    """
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    if isinstance(v, (tuple, list)):
+        if len(v) != n:
+            raise ShapeError(f"{what} must have {n} components, got {len(v)}")
+        return tuple(scalar_arg(c, f"{what}[{i}]") for i, c in enumerate(v))
+    if broadcast:
+        e = scalar_arg(v, what)
+        return (e,) * n
+    raise ShapeError(f"{what} must be a {n}-vector (tuple of {n} numbers), got {type(v).__name__}")
+
+
+def int_arg(v: Any, what: str, lo: int = 1, hi: int = 10_000) -> int:
+    """Coerce a constant integer within ``[lo, hi]`` (counts, sides, steps)."""
+    if isinstance(v, Expr):
+        if v.op != "const":
+            raise ShapeError(f"{what} must be a constant integer, not a parameter expression")
+        v = float(v.value)  # type: ignore[arg-type]
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ShapeError(f"{what} must be an integer, got {type(v).__name__}")
+    if float(v) != int(v):
+        raise ShapeError(f"{what} must be an integer, got {v}")
+    if not lo <= int(v) <= hi:
+        raise ShapeError(f"{what} must be in [{lo}, {hi}], got {int(v)}")
+    return int(v)
+
+
+def mag(e: Expr) -> float:
+    """Largest magnitude of a parameter-only argument (see module docs)."""
+    lo, hi = expr_range(e)
+    return max(abs(lo), abs(hi))
+
+
+def derive_exactness(
+    children: Sequence[Shape], *, keeps_exact: bool, lipschitz: float, continuous: bool = True
+) -> str:
+    """Exactness label of an operator node from its children.
+
+    * ``'exact'`` when the operator preserves exact distances and all children are exact;
+    * ``'bound'`` when the result is continuous, no child is ``'neither'`` and the
+      Lipschitz bound is <= 1 (a 1-Lipschitz function vanishing on its zero set never
+      overestimates the distance to it);
+    * ``'neither'`` otherwise.
+    """
+    if keeps_exact and all(c.exactness == "exact" for c in children):
+        return "exact"
+    if continuous and all(c.exactness != "neither" for c in children) and lipschitz <= 1 + 1e-12:
+        return "bound"
+    return "neither"
+
+
+def require_dim(shapes: Sequence[Shape], what: str) -> int:
+    """All shapes must share one dimension; return it."""
+    for s in shapes:
+        if not isinstance(s, Shape):
+            raise ShapeError(f"{what} expects shapes, got {type(s).__name__}")
+    dims = {s.dim for s in shapes}
+    if len(dims) != 1:
+        raise ShapeError(
+            f"{what} mixes 2D and 3D shapes; extrude or revolve the 2D shape first"
+        )
+    return dims.pop()
+
+
+def box_bounds(lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
+    return np.array([lo, hi], dtype=np.float64)
+
+
+def union_bounds(bs: Sequence[np.ndarray | None]) -> np.ndarray | None:
+    if any(b is None for b in bs):
+        return None
+    arr = np.stack(bs)  # type: ignore[arg-type]
+    return np.array([arr[:, 0].min(0), arr[:, 1].max(0)])
+
+
+def intersect_bounds(bs: Sequence[np.ndarray | None]) -> np.ndarray | None:
+    known = [b for b in bs if b is not None]
+    if not known:
+        return None
+    arr = np.stack(known)
+    return np.array([arr[:, 0].max(0), arr[:, 1].min(0)])
+
+
+def radius_of(bounds: np.ndarray | None) -> float:
+    """Largest distance from the origin to a point of ``bounds`` (inf if unbounded)."""
+    if bounds is None:
+        return math.inf
+    return float(np.linalg.norm(np.maximum(np.abs(bounds[0]), np.abs(bounds[1]))))

@@ -1,0 +1,279 @@
+"""2D primitives in the xy plane, and the sweeps that make solids of them.
+
+A 2D shape evaluated at 3D points ignores z (it is its infinite prism along z, which
+keeps its exactness). :func:`extrude` and :func:`revolve` turn it into a bounded solid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ShapeError
+from ..expr import Expr
+from ..interval import expr_range
+from ..vec import Vec, length
+from .base import (
+    Shape,
+    box_bounds,
+    derive_exactness,
+    int_arg,
+    mag,
+    register,
+    scalar_arg,
+    vector_arg,
+)
+from .formulas import (
+    box_distance,
+    equilateral_triangle2,
+    hexagon2,
+    polygon2,
+    regular_polygon2,
+    rhombus2,
+    segment_distance,
+    trapezoid2,
+)
+from .primitives3d import primitive
+
+__all__ = [
+    "circle", "rectangle", "rounded_rectangle", "regular_polygon", "polygon", "triangle",
+    "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse", "equilateral_triangle",
+    "extrude", "revolve",
+]
+
+
+def _square(r: float) -> np.ndarray:
+    return box_bounds([-r, -r], [r, r])
+
+
+def _prim2(name, fn, args, prim_args, bounds, exactness="exact") -> Shape:
+    return primitive(
+        name, fn, args=args, prim_args=prim_args, exactness=exactness, bounds=bounds, dim=2
+    )
+
+
+@register("primitive2d")
+def circle(radius=0.5) -> Shape:
+    """Disk of ``radius``. **Exact.**"""
+    r = scalar_arg(radius, "circle: radius")
+    return _prim2("circle", lambda p: length(p) - r, (radius,), (r,), _square(mag(r)))
+
+
+@register("primitive2d")
+def rectangle(size=1.0) -> Shape:
+    """Axis-aligned rectangle with full side lengths ``size`` (scalar or 2-vector). **Exact.**"""
+    s = vector_arg(size, 2, "rectangle: size", broadcast=True)
+    h = Vec(s) * 0.5
+    m = [mag(c) / 2 for c in s]
+    return _prim2(
+        "rectangle", lambda p: box_distance(p.abs() - h), (size,), s,
+        box_bounds([-m[0], -m[1]], m),
+    )
+
+
+@register("primitive2d")
+def rounded_rectangle(size=1.0, radius=0.1) -> Shape:
+    """Rectangle of outer full size ``size`` with corners rounded by ``radius``. **Exact.**"""
+    s = vector_arg(size, 2, "rounded_rectangle: size", broadcast=True)
+    r = scalar_arg(radius, "rounded_rectangle: radius")
+    h = Vec(s) * 0.5
+    m = [mag(c) / 2 for c in s]
+    return _prim2(
+        "rounded_rectangle", lambda p: box_distance(p.abs() - h + r) - r, (size, radius),
+        (*s, r), box_bounds([-m[0], -m[1]], m),
+    )
+
+
+@register("primitive2d")
+def regular_polygon(n=5, radius=0.5) -> Shape:
+    """Regular ``n``-gon (``n`` a constant integer >= 3) of circumradius ``radius`` with a
+    vertex on +y. **Exact.**"""
+    k = int_arg(n, "regular_polygon: n", 3, 1000)
+    r = scalar_arg(radius, "regular_polygon: radius")
+    return _prim2(
+        "regular_polygon", lambda p: regular_polygon2(p, k, r), (n, radius), (r,),
+        _square(mag(r)),
+    )
+
+
+def _vertices(vertices, what: str) -> list[tuple[Expr, Expr]]:
+    if isinstance(vertices, np.ndarray):
+        vertices = vertices.tolist()
+    if not isinstance(vertices, (list, tuple)) or len(vertices) < 3:
+        raise ShapeError(f"{what} needs a list of at least 3 (x, y) vertices")
+    if len(vertices) > 1000:
+        raise ShapeError(f"{what} has {len(vertices)} vertices; at most 1000 are allowed")
+    vs = [vector_arg(v, 2, f"{what}[{i}]") for i, v in enumerate(vertices)]
+    for i in range(len(vs)):
+        a, b = vs[i], vs[i - 1]
+        if all(c.op == "const" for c in a + b) and all(
+            float(u.value) == float(w.value) for u, w in zip(a, b)  # type: ignore[arg-type]
+        ):
+            raise ShapeError(f"{what}: vertices {i - 1 if i else len(vs) - 1} and {i} coincide")
+    return vs
+
+
+def _poly_bounds(vs) -> np.ndarray:
+    rx = [expr_range(v[0]) for v in vs]
+    ry = [expr_range(v[1]) for v in vs]
+    return box_bounds([min(r[0] for r in rx), min(r[0] for r in ry)],
+                      [max(r[1] for r in rx), max(r[1] for r in ry)])
+
+
+@register("primitive2d")
+def polygon(vertices=((0.0, 0.5), (-0.5, -0.5), (0.5, -0.5))) -> Shape:
+    """Simple polygon with ``vertices`` ``(K, 2)`` in either winding. **Exact.**"""
+    vs = _vertices(vertices, "polygon: vertices")
+    return _prim2(
+        "polygon", lambda p: polygon2(p, [Vec(v) for v in vs]), (vertices,),
+        tuple(c for v in vs for c in v), _poly_bounds(vs),
+    )
+
+
+@register("primitive2d")
+def triangle(a=(0.0, 0.5), b=(-0.5, -0.5), c=(0.5, -0.5)) -> Shape:
+    """Triangle with corners ``a``, ``b``, ``c`` (2-vectors). **Exact.**"""
+    vs = _vertices([a, b, c], "triangle")
+    return _prim2(
+        "triangle", lambda p: polygon2(p, [Vec(v) for v in vs]), (a, b, c),
+        tuple(x for v in vs for x in v), _poly_bounds(vs),
+    )
+
+
+@register("primitive2d")
+def equilateral_triangle(radius=0.5) -> Shape:
+    """Equilateral triangle of circumradius ``radius``, centroid at the origin, a vertex
+    on +y. **Exact.**"""
+    r = scalar_arg(radius, "equilateral_triangle: radius")
+    return _prim2(
+        "equilateral_triangle", lambda p: equilateral_triangle2(p, r), (radius,), (r,),
+        _square(mag(r)),
+    )
+
+
+@register("primitive2d")
+def hexagon(radius=0.5) -> Shape:
+    """Regular hexagon of circumradius ``radius`` with a vertex on +x. **Exact.**"""
+    r = scalar_arg(radius, "hexagon: radius")
+    return _prim2(
+        "hexagon", lambda p: hexagon2(p, r * (math.sqrt(3.0) / 2.0)), (radius,), (r,),
+        _square(mag(r)),
+    )
+
+
+@register("primitive2d")
+def ring(radius=0.5, thickness=0.1) -> Shape:
+    """Annulus ``| |p| - radius | <= thickness/2``. **Exact.**"""
+    r = scalar_arg(radius, "ring: radius")
+    t = scalar_arg(thickness, "ring: thickness")
+    return _prim2(
+        "ring", lambda p: abs(length(p) - r) - t * 0.5, (radius, thickness), (r, t),
+        _square(mag(r) + mag(t) / 2),
+    )
+
+
+@register("primitive2d")
+def segment(a=(-0.5, 0.0), b=(0.5, 0.0), thickness=0.0) -> Shape:
+    """Points within ``thickness/2`` of the segment ``a -> b`` (a stadium); with
+    thickness 0 the unsigned distance to the segment. **Exact.**"""
+    av = vector_arg(a, 2, "segment: a")
+    bv = vector_arg(b, 2, "segment: b")
+    t = scalar_arg(thickness, "segment: thickness")
+    e = mag(t) / 2
+    bb = _poly_bounds([av, bv, av])
+    return _prim2(
+        "segment", lambda p: segment_distance(p, Vec(av), Vec(bv)) - t * 0.5,
+        (a, b, thickness), (*av, *bv, t), bb + np.array([[-e, -e], [e, e]]),
+    )
+
+
+@register("primitive2d")
+def trapezoid(r1=0.5, r2=0.25, height=1.0) -> Shape:
+    """Isosceles trapezoid, centred: half-width ``r1`` at ``y=-height/2`` and ``r2`` at
+    ``y=+height/2``. **Exact.**"""
+    a = scalar_arg(r1, "trapezoid: r1")
+    b = scalar_arg(r2, "trapezoid: r2")
+    h = scalar_arg(height, "trapezoid: height")
+    w, hh = max(mag(a), mag(b)), mag(h) / 2
+    return _prim2(
+        "trapezoid", lambda p: trapezoid2(p, a, b, h * 0.5), (r1, r2, height), (a, b, h),
+        box_bounds([-w, -hh], [w, hh]),
+    )
+
+
+@register("primitive2d")
+def rhombus(size=(1.0, 0.6)) -> Shape:
+    """Rhombus with full diagonals ``size = (sx, sy)`` along x and y. **Exact.**"""
+    s = vector_arg(size, 2, "rhombus: size", broadcast=True)
+    m = [mag(c) / 2 for c in s]
+    return _prim2(
+        "rhombus", lambda p: rhombus2(p, s[0] * 0.5, s[1] * 0.5), (size,), s,
+        box_bounds([-m[0], -m[1]], m),
+    )
+
+
+@register("primitive2d")
+def ellipse(radii=(0.5, 0.3)) -> Shape:
+    """Ellipse with semi-axes ``radii`` as ``(|p / radii| - 1) * min(radii)``. **Bound.**"""
+    r = vector_arg(radii, 2, "ellipse: radii", broadcast=True)
+    rv = Vec(r)
+    m = [mag(c) for c in r]
+    return _prim2(
+        "ellipse", lambda p: (length(p / rv) - 1.0) * rv.min_comp(), (radii,), r,
+        box_bounds([-m[0], -m[1]], m), exactness="bound",
+    )
+
+
+# ------------------------------------------------------------------------- sweeps
+def _require2d(shape, what: str) -> None:
+    if not isinstance(shape, Shape):
+        raise ShapeError(f"{what} expects a 2D shape, got {type(shape).__name__}")
+    if shape.dim != 2:
+        raise ShapeError(f"{what} expects a 2D shape (circle, polygon, ...), got a 3D shape")
+
+
+@register("operator")
+def extrude(shape, height=1.0) -> Shape:
+    """Extrude a 2D shape along z to ``z`` in ``[-height/2, height/2]``.
+    **Exact** when the 2D shape is exact; Lipschitz ``max(L2d, 1)``."""
+    _require2d(shape, "extrude")
+    h = scalar_arg(height, "extrude: height")
+
+    def f(p: Vec, ctx) -> Expr:
+        d = shape.sdf(Vec((p.x, p.y)), ctx)
+        return box_distance(Vec((d, abs(p.z) - h * 0.5)))
+
+    lip = max(shape.lipschitz, 1.0)
+    b = shape.bounds
+    H = mag(h) / 2
+    bounds = None if b is None else box_bounds([b[0, 0], b[0, 1], -H], [b[1, 0], b[1, 1], H])
+    return Shape(
+        "extrude", f, dim=3, lipschitz=lip, bounds=bounds, args=(shape, height),
+        children=(shape,),
+        exactness=derive_exactness([shape], keeps_exact=True, lipschitz=lip),
+    )
+
+
+@register("operator")
+def revolve(shape, offset=0.0) -> Shape:
+    """Revolve a 2D shape around the z axis: its x becomes the distance from the axis
+    minus ``offset`` and its y becomes z. **Exact** when the 2D shape is exact and lies
+    in ``x >= -offset``."""
+    _require2d(shape, "revolve")
+    o = scalar_arg(offset, "revolve: offset")
+
+    def f(p: Vec, ctx) -> Expr:
+        return shape.sdf(Vec((length(Vec((p.x, p.y))) - o, p.z)), ctx)
+
+    b = shape.bounds
+    if b is None:
+        bounds = None
+    else:
+        R = max(abs(b[0, 0]), abs(b[1, 0])) + mag(o)
+        bounds = box_bounds([-R, -R, b[0, 1]], [R, R, b[1, 1]])
+    return Shape(
+        "revolve", f, dim=3, lipschitz=shape.lipschitz, bounds=bounds,
+        args=(shape, offset), children=(shape,),
+        exactness=derive_exactness([shape], keeps_exact=True, lipschitz=shape.lipschitz),
+    )

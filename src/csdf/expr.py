@@ -3,8 +3,11 @@
 Every node is created through :func:`make`, which
 
 * folds constants (all-constant arguments are evaluated right away in float64),
-* applies a few algebraic identities that keep IEEE semantics (``a + 0 -> a``,
-  ``a * 1 -> a``, ``-(-a) -> a``, ``|(-a)| -> |a|``, ``min(a, a) -> a`` ...),
+* applies a few algebraic identities that hold for all finite values (``a + 0 -> a``,
+  ``a * 1 -> a``, ``a * 0 -> 0``, ``0 - a -> -a``, ``-(-a) -> a``, ``|(-a)| -> |a|``,
+  ``min(a, a) -> a`` ...); with infinities or NaN inside an expression, or for the sign
+  of zero, they can differ from step-by-step IEEE evaluation (NaN *points* still give
+  NaN: the evaluators check for them),
 * orders the arguments of commutative ops canonically, and
 * interns the node, so structurally equal expressions are the *same* Python object.
 
@@ -36,7 +39,7 @@ __all__ = [
 ]
 
 Number = int | float
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 RESERVED_PARAM_NAMES = frozenset({"points", "params", "backend", "dtype", "level"})
 
 
@@ -230,7 +233,7 @@ def param(name: str, default: Number, lo: Number | None = None, hi: Number | Non
     Raises:
         ParamError: bad name, non-finite default, or default outside ``[lo, hi]``.
     """
-    if not isinstance(name, str) or not _NAME_RE.match(name):
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
         raise ParamError(f"parameter name {name!r} is not an identifier ([A-Za-z_][A-Za-z0-9_]*)")
     if name in RESERVED_PARAM_NAMES:
         raise ParamError(f"parameter name {name!r} is reserved; pick another name")

@@ -6,7 +6,9 @@ every op computed by NumPy in the points' dtype. Tangents are carried per slot a
 ``None`` (zero), a ``(T,)`` vector (uniform over the chunk) or a ``(chunk, T)`` array,
 where the T seeds are x, y, z (gradient), the parameters (Jacobian), or both.
 
-Derivative conventions at non-differentiable points: ``min``/``max`` follow the
+Where a value is NaN (a NaN coordinate or parameter, or a NaN made inside the tape)
+its derivatives are NaN too. Derivative conventions at non-differentiable
+points: ``min``/``max`` follow the
 first operand on ties, ``abs``/``sign``/``step``/``floor`` have derivative ``sign(a)``
 / 0 / 0 / 0, ``sqrt`` at 0 has derivative 0, ``atan2`` at the origin 0.
 """
@@ -17,7 +19,7 @@ import numpy as np
 
 from ..ops import OPS_BY_CODE, numpy_impl
 
-__all__ = ["evaluate", "CHUNK"]
+__all__ = ["evaluate", "uniform_prefix", "CHUNK"]
 
 CHUNK = 1 << 16
 
@@ -137,8 +139,9 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
     if wrt_params:
         res["jac"] = np.zeros((n, P), dtype)
 
-    consts = prog.consts.astype(dtype)
-    pv = pvals.astype(dtype)
+    with np.errstate(over="ignore"):  # constants beyond float32 range become inf
+        consts = prog.consts.astype(dtype)
+        pv = pvals.astype(dtype)
     code = [(OPS_BY_CODE[op].name, OPS_BY_CODE[op].arity, dst, a, b)
             for op, dst, a, b in prog.code.tolist()]
     fns = {name: numpy_impl(name) for name, *_ in code}
@@ -194,4 +197,41 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
     if bad.any():
         for arr in res.values():
             arr[bad] = np.nan
+    if T:
+        vnan = np.isnan(res["value"])
+        if vnan.any():
+            for key in ("grad", "jac"):
+                if key in res:
+                    res[key][vnan] = np.nan
     return res
+
+
+def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int):
+    """Values and parameter derivatives of the first ``n_prefix`` instructions, which
+    must read only parameters, constants and earlier prefix results (float64).
+
+    Returns:
+        ``(values, dparams)``: lists indexed by instruction; ``dparams[k]`` is ``(P,)``.
+    """
+    P = len(prog.params)
+    dtype = np.dtype(np.float64)
+    vals: list = [None] * prog.n_slots
+    tans: list = [None] * prog.n_slots
+    eye = np.eye(P, dtype=dtype)
+    for i in range(P):
+        vals[3 + i] = np.float64(pvals[i])
+        tans[3 + i] = eye[i]
+    for i, c in enumerate(prog.consts):
+        vals[3 + P + i] = np.float64(c)
+    out_v, out_d = [], []
+    with np.errstate(all="ignore"):
+        for op, dst, a, b in prog.code[:n_prefix].tolist():
+            info = OPS_BY_CODE[op]
+            va, vb = vals[a], (vals[b] if info.arity == 2 else None)
+            v = numpy_impl(info.name)(va, vb) if info.arity == 2 else numpy_impl(info.name)(va)
+            t = _tangent(info.name, va, vb, v, tans[a], tans[b] if info.arity == 2 else None,
+                         1, P, dtype)
+            vals[dst], tans[dst] = v, t
+            out_v.append(float(v))
+            out_d.append(np.zeros(P) if t is None else np.asarray(t, dtype=np.float64))
+    return out_v, out_d

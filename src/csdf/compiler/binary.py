@@ -38,7 +38,7 @@ INSTR = struct.Struct("<BBHHH")
 EXACTNESS_CODES = {"exact": 0, "bound": 1, "neither": 2}
 EXACTNESS_NAMES = {v: k for k, v in EXACTNESS_CODES.items()}
 FLAG_DIM2 = 4
-_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 MAX_SLOTS = 65535
 
 
@@ -92,7 +92,7 @@ class _Reader:
             s = raw.decode("utf-8")
         except UnicodeDecodeError:
             raise BytecodeError(f"byte {at}: {what} is not valid UTF-8") from None
-        if not _IDENT.match(s):
+        if not _IDENT.fullmatch(s):
             raise BytecodeError(f"byte {at}: {what} {s!r} is not an identifier")
         return s
 
@@ -155,8 +155,10 @@ def validate(prog: Program) -> None:
     """Check a program's internal consistency; raise :class:`BytecodeError` if broken."""
     seen = set()
     for p in prog.params:
-        if not _IDENT.match(p.name) or p.name in RESERVED_PARAM_NAMES:
+        if not _IDENT.fullmatch(p.name) or p.name in RESERVED_PARAM_NAMES:
             raise BytecodeError(f"parameter name {p.name!r} is not allowed")
+        if len(p.name.encode()) > 255:
+            raise BytecodeError(f"parameter name {p.name[:20]!r}... is longer than 255 bytes")
         if p.name in seen:
             raise BytecodeError(f"parameter {p.name!r} appears twice")
         seen.add(p.name)
@@ -190,12 +192,21 @@ def validate(prog: Program) -> None:
         written.add(dst)
     if not 0 <= prog.output < n_slots or (prog.output >= n_fixed and prog.output not in written):
         raise BytecodeError(f"output slot {prog.output} is never written")
+    used = max(written) - n_fixed + 1 if written else 0
+    if prog.n_regs != used:
+        raise BytecodeError(
+            f"register count {prog.n_regs} does not match the registers written ({used})"
+        )
+    if len(prog.code) >= 2**32 or len(prog.calls) >= 2**32:
+        raise BytecodeError("too many instructions or calls")
     if prog.dim == 2 and any(2 in (a, b) for _, _, a, b in prog.code.tolist()):
         raise BytecodeError("a 2D program reads z")
     n_instr = len(prog.code)
     for i, c in enumerate(prog.calls):
-        if not _IDENT.match(c.name):
-            raise BytecodeError(f"call {i}: bad name {c.name!r}")
+        if not _IDENT.fullmatch(c.name) or len(c.name.encode()) > 255:
+            raise BytecodeError(f"call {i}: bad name {c.name[:40]!r}")
+        if len(c.inputs) > 65535:
+            raise BytecodeError(f"call {i}: {len(c.inputs)} inputs; at most 65535")
         if not 0 <= c.out < n_instr:
             raise BytecodeError(f"call {i}: output instruction {c.out} out of range")
         for s in c.inputs:

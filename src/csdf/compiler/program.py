@@ -142,60 +142,75 @@ class Program:
         return vals
 
     # ------------------------------------------------------------------ evaluation
-    def _run(self, points, params, kw, mode: str):
-        from ..backends.numpy_backend import evaluate
+    def _run(self, points, params, kw, mode: str, backend: str):
+        from ..backends import select
         from ..points import as_points
 
         pts, batch, dtype = as_points(points, self.dim)
         pv = self.param_values(params, **kw)
-        return evaluate(self, pts, pv, mode), batch, pts.shape[1]
+        impl = select(backend, pts.shape[0], self, mode)
+        return impl.evaluate(self, pts, pv, mode), batch, pts.shape[1]
 
-    def __call__(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+    def __call__(
+        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+    ) -> np.ndarray:
         """Signed distances.
 
         Args:
             points: ``(N, 3)`` (or any ``(..., 3)``) float32/float64 array in model units;
                 2D programs also take ``(..., 2)``. Integers are converted to float64.
             params: optional ``{name: value}``; keyword arguments work too.
+            backend: ``'auto' | 'numpy' | 'interp' | 'fast'`` (see :mod:`csdf.backends`);
+                every evaluation method takes it.
 
         Returns:
             ``(N,)`` (or ``(...)``) distances in the points' dtype. A point with a NaN
             coordinate gives NaN (NaN in, NaN out), as does a NaN parameter value.
         """
-        res, batch, _ = self._run(points, params, kw, "value")
+        res, batch, _ = self._run(points, params, kw, "value", backend)
         return res["value"].reshape(batch)
 
-    def gradient(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+    def gradient(
+        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+    ) -> np.ndarray:
         """Exact spatial gradient ``(..., D)`` (D = the points' last dimension), by
         forward-mode differentiation of the tape. Where the function is not
         differentiable (a kink of ``min``/``abs``) one of the one-sided gradients is
         returned; ``sqrt`` at 0 gets derivative 0."""
-        res, batch, d = self._run(points, params, kw, "grad")
+        res, batch, d = self._run(points, params, kw, "grad", backend)
         return res["grad"][:, :d].reshape(*batch, d)
 
-    def value_and_grad(self, points, params: dict | None = None, **kw: Any):
+    def value_and_grad(
+        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+    ):
         """``(values (...), gradients (..., D))`` in one pass."""
-        res, batch, d = self._run(points, params, kw, "grad")
+        res, batch, d = self._run(points, params, kw, "grad", backend)
         return res["value"].reshape(batch), res["grad"][:, :d].reshape(*batch, d)
 
-    def param_jacobian(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+    def param_jacobian(
+        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+    ) -> np.ndarray:
         """Exact derivatives of the distance by each parameter, ``(..., P)``, columns in
         :attr:`params` order."""
-        res, batch, _ = self._run(points, params, kw, "jac")
+        res, batch, _ = self._run(points, params, kw, "jac", backend)
         return res["jac"].reshape(*batch, len(self.params))
 
-    def value_grad_param_jacobian(self, points, params: dict | None = None, **kw: Any):
+    def value_grad_param_jacobian(
+        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+    ):
         """``(values (...), gradients (..., D), param Jacobian (..., P))`` in one pass."""
-        res, batch, d = self._run(points, params, kw, "all")
+        res, batch, d = self._run(points, params, kw, "all", backend)
         return (
             res["value"].reshape(batch),
             res["grad"][:, :d].reshape(*batch, d),
             res["jac"].reshape(*batch, len(self.params)),
         )
 
-    def contains(self, points, params: dict | None = None, **kw: Any) -> np.ndarray:
+    def contains(
+        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+    ) -> np.ndarray:
         """Boolean ``(...)``: True where the distance is ``<= 0`` (NaN gives False)."""
-        v = self(points, params, **kw)
+        v = self(points, params, backend=backend, **kw)
         with np.errstate(invalid="ignore"):
             return v <= 0
 

@@ -19,7 +19,8 @@ Example (a sphere of parameter radius ``r``)::
 
 Operands: ``x y z``, ``$name`` (parameter), ``c<k>`` (constant ``k``, declared by a
 ``const c<k> <value>`` line), ``r<k>`` (register). In ``call`` lines ``@i`` is the
-result of instruction ``i``. Floats are written with ``repr`` so they round-trip exactly.
+result of instruction ``i``. Floats are written with ``repr`` so they round-trip exactly
+(a NaN constant as ``nan:0x<16 hex digits>``, its bit pattern).
 Comments start with ``;``.
 """
 
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 
 import numpy as np
 
@@ -61,7 +63,7 @@ def disassemble(prog: Program) -> str:
     for p in prog.params:
         lines.append(f"param {p.name} {p.default!r} {p.lo!r} {p.hi!r}")
     for i, c in enumerate(prog.consts.tolist()):
-        lines.append(f"const c{i} {c!r}")
+        lines.append(f"const c{i} {_fmt(c)}")
     for op, dst, a, b in prog.code.tolist():
         info = OPS_BY_CODE[op]
         args = [_slot_name(prog, a)] + ([_slot_name(prog, b)] if info.arity == 2 else [])
@@ -73,7 +75,20 @@ def disassemble(prog: Program) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _fmt(v: float) -> str:
+    """``repr`` (exact for every finite and infinite float); NaN with its bit pattern."""
+    if v != v:
+        return "nan:0x" + struct.pack(">d", v).hex()
+    return repr(v)
+
+
 def _float(tok: str, ln: int) -> float:
+    m = re.fullmatch(r"nan:0x([0-9a-f]{16})", tok)
+    if m:
+        v = struct.unpack(">d", bytes.fromhex(m.group(1)))[0]
+        if v == v:
+            raise BytecodeError(f"line {ln}: {tok!r} is not a NaN bit pattern")
+        return v
     if not re.fullmatch(r"[-+]?(inf|nan|(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)", tok):
         raise BytecodeError(f"line {ln}: {tok!r} is not a number")
     return float(tok)

@@ -1,0 +1,191 @@
+"""Preparing a program for the Numba backends, and running them on all cores.
+
+Per program (cached on the Program) the tape is *lowered*:
+
+* the leading instructions that depend only on parameters and constants (the compiler
+  puts them first) are split off; their values, and their derivatives by the
+  parameters, are computed once per call by the NumPy reference on scalars;
+* every uniform value (parameter, constant, prefix result) gets its own row, and the
+  rest of the tape is renamed to read them, so a block never reloads them;
+* each instruction is flagged when an operand's tangent is structurally zero, so the
+  derivative kernels skip that half of a product or sum.
+
+Threads: the points are split into one contiguous range per core and each range runs
+in a ``nogil`` kernel on a worker thread.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from ..ops import OPS_BY_CODE
+from .numpy_backend import uniform_prefix
+
+__all__ = ["Lowered", "lowered", "run_parallel", "N_THREADS", "numba_available"]
+
+N_THREADS = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                else (os.cpu_count() or 1))
+_MIN_PER_THREAD = 8192
+_pool: ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+
+def numba_available() -> bool:
+    """True when Numba can be imported."""
+    try:
+        import numba  # noqa: F401
+    except Exception:  # pragma: no cover - numba is a dependency
+        return False
+    return True
+
+
+def _executor() -> ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(max_workers=N_THREADS, thread_name_prefix="csdf")
+        return _pool
+
+
+def run_parallel(job, n: int, align: int) -> None:
+    """Call ``job((start, stop))`` on one contiguous range per core (``align``-sized)."""
+    if n == 0:
+        return
+    nt = max(1, min(N_THREADS, n // _MIN_PER_THREAD))
+    step = -(-n // nt)
+    step = -(-step // align) * align
+    ranges = [(s, min(n, s + step)) for s in range(0, n, step)]
+    if len(ranges) == 1:
+        job(ranges[0])
+    else:
+        list(_executor().map(job, ranges))
+
+
+class Lowered:
+    """A program prepared for the kernels (see the module docstring)."""
+
+    def __init__(self, prog):
+        n_fixed = prog.n_fixed
+        P = len(prog.params)
+        code = prog.code.tolist()
+        # 1. the uniform prefix
+        uniform_slots = set(range(3, n_fixed))
+        n_prefix = 0
+        for op, dst, a, b in code:
+            arity = OPS_BY_CODE[op].arity
+            if a in uniform_slots and (arity == 1 or b in uniform_slots):
+                uniform_slots.add(dst)
+                n_prefix += 1
+            else:
+                break
+        self.n_prefix = n_prefix
+        # 2. rows: x y z | params consts | prefix results | registers
+        loc = {0: 0, 1: 1, 2: 2}
+        for s in range(3, n_fixed):
+            loc[s] = s  # same index: rows 3.. hold params then constants
+        row = n_fixed
+        self.prefix_rows: list[tuple[int, int]] = []  # (instruction index, row)
+        for k in range(n_prefix):
+            loc[code[k][1]] = row
+            self.prefix_rows.append((k, row))
+            row += 1
+        n_uniform_rows = row - 3
+        reg_base = row
+        lowered = []
+        for op, dst, a, b in code[n_prefix:]:
+            arity = OPS_BY_CODE[op].arity
+            ra = loc[a]
+            rb = loc[b] if arity == 2 else 0
+            rd = reg_base + (dst - n_fixed)
+            loc[dst] = rd
+            lowered.append([op, rd, ra, rb, 0])
+        self.code = np.array(lowered, dtype=np.int32).reshape(-1, 5)
+        self.n_rows = reg_base + prog.n_regs
+        self.n_uniform_rows = n_uniform_rows
+        self.out_row = loc[prog.output]
+        self.n_params = P
+        self.n_consts = len(prog.consts)
+        self.prog = prog
+        # parameters each prefix result depends on (structurally)
+        deps: dict[int, set[int]] = {3 + i: {i} for i in range(P)}
+        self._prefix_deps: dict[int, list[int]] = {}
+        for k, row in self.prefix_rows:
+            op, _dst, a, b = code[k]
+            ds = set(deps.get(_src_row(code, k, a, n_fixed), set()))
+            if OPS_BY_CODE[op].arity == 2:
+                ds |= deps.get(_src_row(code, k, b, n_fixed), set())
+            deps[row] = ds
+            self._prefix_deps[row] = sorted(ds)
+        self._prefix_row_of = {k: row for k, row in self.prefix_rows}
+
+    def prefix_param_deps(self) -> dict[int, list[int]]:
+        """``row -> sorted parameter indices`` for the prefix rows that depend on any."""
+        return {r: d for r, d in self._prefix_deps.items() if d}
+
+    def prefix_param_deps_key(self) -> bytes:
+        return repr(sorted(self.prefix_param_deps().items())).encode()
+
+    def uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
+        """Uniform row values ``(U,)`` and tangents ``(U, T)`` for this call."""
+        prog = self.prog
+        P = self.n_params
+        vals, dparams = uniform_prefix(prog, pvals, self.n_prefix)
+        U = self.n_uniform_rows
+        uvals = np.empty(U, dtype=np.float64)
+        uvals[:P] = pvals
+        uvals[P:P + self.n_consts] = prog.consts
+        for i, (k, _row) in enumerate(self.prefix_rows):
+            uvals[P + self.n_consts + i] = vals[k]
+        T = (3 if spatial else 0) + (P if wrt_params else 0)
+        utans = np.zeros((U, max(T, 1)), dtype=np.float64)
+        if wrt_params:
+            off = 3 if spatial else 0
+            utans[:P, off:off + P] = np.eye(P)
+            for i, (k, _row) in enumerate(self.prefix_rows):
+                utans[P + self.n_consts + i, off:off + P] = dparams[k]
+        zero = np.all(utans == 0, axis=1)
+        with np.errstate(over="ignore"):  # values beyond float32 range become inf
+            return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
+
+    def flagged_code(self, zero_uniform: np.ndarray) -> np.ndarray:
+        """Instructions with flag bits: 1 = ``b``'s tangent is structurally zero, 2 = ``a``'s,
+        4 = the result's (as the reference treats it: no tangent, not ``0 * factor``)."""
+        code = self.code.copy()
+        if len(code) == 0:
+            return code
+        zero = np.zeros(self.n_rows, dtype=bool)
+        zero[3:3 + self.n_uniform_rows] = zero_uniform
+        for k in range(len(code)):
+            op, d, a, b, _ = code[k]
+            info = OPS_BY_CODE[int(op)]
+            binary = info.arity == 2
+            za = bool(zero[a])
+            zb = bool(zero[b]) if binary else True
+            zd = (za and zb) or info.name in ("floor", "step", "sign")
+            code[k, 4] = (1 if (binary and zb) else 0) | (2 if za else 0) | (4 if zd else 0)
+            zero[d] = zd
+        return code
+
+
+def _src_row(code, k: int, slot: int, n_fixed: int) -> int:
+    """Row holding ``slot`` as read by prefix instruction ``k`` (prefix rows are numbered
+    from ``n_fixed`` in instruction order)."""
+    if slot < n_fixed:
+        return slot
+    for j in range(k - 1, -1, -1):
+        if code[j][1] == slot:
+            return n_fixed + j
+    return -1
+
+
+def lowered(prog) -> Lowered:
+    """The (cached) lowering of a program."""
+    low = prog.__dict__.get("_lowered")
+    if low is None:
+        low = Lowered(prog)
+        prog.__dict__["_lowered"] = low
+    return low

@@ -1,0 +1,149 @@
+"""One conformance suite, run over every backend: values, gradients and parameter
+derivatives agree with the NumPy reference (float64: 1e-9 relative; float32: 1e-5) on
+every primitive and operator of the catalogue and on random expression DAGs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import csdf
+from catalogue import catalogue, sample_box
+from csdf.backends import BACKENDS
+from csdf.compiler import compile_expr
+from strategies import expr_dags
+
+CAT = catalogue()
+EVAL_BACKENDS = [b for b in BACKENDS if b != "auto"]
+TOL = {np.float64: (1e-9, 1e-9), np.float32: (1e-5, 1e-5)}
+
+
+def _points(shape, n=3000, seed=0, dtype=np.float64):
+    rng = np.random.default_rng(seed)
+    lo, hi = sample_box(shape)
+    pts = rng.uniform(lo, hi, (n, 3)).astype(dtype)
+    pts[:7] = [[0, 0, 0], [np.nan, 0, 0], [0, 0, np.nan], [1e-300, 0, 0], [0, 0, 1e30],
+               [np.inf, 0, 0], [0, -np.inf, 0]]
+    return pts
+
+
+def _close(got, ref, dtype, what):
+    rtol, atol = TOL[dtype]
+    assert got.dtype == ref.dtype, what
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(ref), err_msg=f"{what}: NaN mask")
+    ok = ~np.isnan(ref)
+    g, r = got[ok].astype(np.float64), ref[ok].astype(np.float64)
+    inf = np.isinf(r)
+    np.testing.assert_array_equal(g[inf], r[inf], err_msg=f"{what}: infinities")
+    err = np.abs(g[~inf] - r[~inf])
+    lim = rtol * np.abs(r[~inf]) + atol
+    assert np.all(err <= lim), f"{what}: worst error {np.max(err - lim):.3e} over tolerance"
+
+
+def _check(prog, pts, backend, dtype):
+    # derivatives at infinite coordinates are undefined (0 * inf): values only there
+    fin = ~np.isinf(pts).any(axis=1)
+    ref = prog.value_grad_param_jacobian(pts, backend="numpy")
+    got = prog.value_grad_param_jacobian(pts, backend=backend)
+    _close(got[0], ref[0], dtype, f"{backend} value")
+    _close(got[1][fin], ref[1][fin], dtype, f"{backend} gradient")
+    _close(got[2][fin], ref[2][fin], dtype, f"{backend} param jacobian")
+    _close(prog(pts, backend=backend), ref[0], dtype, f"{backend} value-only")
+    v, g = prog.value_and_grad(pts, backend=backend)
+    _close(v, ref[0], dtype, f"{backend} value_and_grad value")
+    _close(g[fin], ref[1][fin], dtype, f"{backend} value_and_grad gradient")
+    _close(prog.param_jacobian(pts, backend=backend)[fin], ref[2][fin], dtype,
+           f"{backend} jacobian")
+
+
+@pytest.mark.parametrize("backend", EVAL_BACKENDS)
+@pytest.mark.parametrize("name", sorted(CAT))
+def test_catalogue_float64(backend, name):
+    shape = CAT[name]()
+    _check(shape.compile(), _points(shape), backend, np.float64)
+
+
+FLOAT32_SHAPES = ["sphere", "box", "capped_cone", "pyramid", "polygon", "union_smooth",
+                  "intersection_exponential", "twist", "repeat_polar", "rotate_param"]
+
+
+@pytest.mark.parametrize("backend", EVAL_BACKENDS)
+@pytest.mark.parametrize("name", FLOAT32_SHAPES)
+def test_catalogue_float32(backend, name):
+    shape = CAT[name]()
+    pts = _points(shape, dtype=np.float32)
+    pts[3:7] = 0.5  # no coordinates that overflow float32 when squared
+    prog = shape.compile()
+    ref = prog.value_grad_param_jacobian(pts, backend="numpy")
+    got = prog.value_grad_param_jacobian(pts, backend=backend)
+    fin = ~np.isinf(pts).any(axis=1)
+    for what, g, r in zip(("value", "gradient", "jacobian"), got, ref):
+        assert g.dtype == np.float32
+        if what != "value":
+            g, r = g[fin], r[fin]
+        ok = np.isfinite(r) & np.isfinite(g)
+        np.testing.assert_array_equal(np.isnan(g), np.isnan(r), err_msg=what)
+        np.testing.assert_allclose(g[ok], r[ok], rtol=1e-5, atol=1e-5, err_msg=what)
+
+
+@pytest.mark.parametrize("backend", EVAL_BACKENDS)
+def test_parameter_values_and_2d_points(backend):
+    shape = CAT["union3_smooth"]()
+    prog = shape.compile()
+    pts = _points(shape)
+    for r in (0.35, 0.8):
+        _close(prog(pts, r=r, backend=backend), prog(pts, r=r, backend="numpy"),
+               np.float64, f"{backend} r={r}")
+    poly = csdf.polygon([(0, 0), (1, 0), (1, 1), (0.3, 0.6)]).compile()
+    p2 = np.random.default_rng(1).uniform(-1, 2, (500, 2))
+    _close(poly(p2, backend=backend), poly(p2, backend="numpy"), np.float64, backend)
+    g = poly.gradient(p2, backend=backend)
+    assert g.shape == (500, 2)
+    _close(g, poly.gradient(p2, backend="numpy"), np.float64, backend)
+    nanp = prog(pts[:10], r=np.nan, backend=backend)
+    assert np.isnan(nanp).all()
+    assert prog(np.zeros((0, 3)), backend=backend).shape == (0,)
+
+
+def _random_case_settings(n):
+    return settings(max_examples=n, deadline=None,
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+@pytest.mark.parametrize("backend", [b for b in EVAL_BACKENDS if b != "numpy"])
+def test_random_expression_dags(backend):
+    n = 12 if backend == "fast" else 60  # each new structure compiles a fast kernel
+
+    @_random_case_settings(n)
+    @given(e=expr_dags(max_depth=5, allow_nonfinite=False), seed=st.integers(0, 2**16))
+    def check(e, seed):
+        prog = compile_expr(e)
+        pts = np.random.default_rng(seed).uniform(-3, 3, (257, 3))
+        ref = prog.value_grad_param_jacobian(pts, backend="numpy")
+        got = prog.value_grad_param_jacobian(pts, backend=backend)
+        finite = np.isfinite(ref[0])
+        for what, g, r in zip(("value", "gradient", "jacobian"), got, ref):
+            if what != "value":  # derivatives where the value is finite (NaN -> NaN)
+                assert np.isnan(g[np.isnan(ref[0])]).all()
+                g, r = g[finite], r[finite]
+            np.testing.assert_array_equal(np.isnan(g), np.isnan(r), err_msg=what)
+            ok = np.isfinite(r)
+            np.testing.assert_array_equal(g[~ok & ~np.isnan(r)], r[~ok & ~np.isnan(r)])
+            np.testing.assert_allclose(g[ok], r[ok], rtol=1e-9, atol=1e-9, err_msg=what)
+
+    check()
+
+
+def test_auto_backend_choice():
+    from csdf.backends import AUTO_MIN_POINTS, fast, numpy_backend, select
+
+    prog = csdf.sphere(csdf.param("r", 1.0)).compile()
+    assert select("numpy", 10**7) is numpy_backend
+    small = select("auto", 10, csdf.torus(0.3, 0.1).compile())
+    assert small is numpy_backend or fast.is_ready(csdf.torus(0.3, 0.1).compile(), "value")
+    prog(np.zeros((AUTO_MIN_POINTS, 3)), backend="fast")
+    assert select("auto", 10, prog, "value") is fast  # its kernel is ready now
+    with pytest.raises(csdf.CsdfError, match="backend must be one of"):
+        prog(np.zeros((1, 3)), backend="gpu")

@@ -13,9 +13,11 @@ Build shapes from primitives and operators, with named parameters::
 
 from __future__ import annotations
 
+from . import io
 from .compiler import Call, Program
 from .errors import BytecodeError, CsdfError, ParamError, ShapeError
 from .expr import Expr, Param, param
+from .mesh import mesh
 from .shapes import *  # noqa: F403
 from .shapes import REGISTRY, Shape
 from .shapes import __all__ as _shape_names
@@ -31,7 +33,7 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
 
 
 __all__ = [
-    "compile", "param", "Param", "Expr", "Program", "Call", "Shape", "REGISTRY",
+    "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
     "CsdfError", "BytecodeError", "ParamError", "ShapeError", "__version__",
     *_shape_names,
 ]

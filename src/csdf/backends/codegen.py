@@ -16,13 +16,15 @@ programs that differ only in constants share a kernel); no user text ever reache
 from __future__ import annotations
 
 import hashlib
+import re
 
 from ..ops import OPS_BY_CODE
 
 __all__ = ["generate", "structure_key", "CODEGEN_VERSION"]
 
-CODEGEN_VERSION = 2
+CODEGEN_VERSION = 4
 BLOCK = 256
+SEGMENT = 2000  # statements per generated function
 
 # extra uniform constants appended after the program's uniform rows
 _K_ZERO, _K_ONE, _K_TWO, _K_HALF, _K_NAN = range(5)
@@ -127,14 +129,11 @@ class _Gen:
         if op == "min" or op == "max":
             cmp = "<=" if op == "min" else ">="
             c = self.emit(f"{va} {cmp} {vb}")
-            m = self.emit(f"{va} if {c} else {vb}")
-            v = self.emit(f"{m} if {va} == {va} else {va}")
+            v = self.emit(f"{op}_({va}, {vb})")
         elif op == "step":
-            v = self.emit(f"{K[_K_ONE]} if {va} >= 0 else ({K[_K_ZERO]} if {va} < 0 else {va})")
+            v = self.emit(f"step_({va}, {K[_K_ONE]}, {K[_K_ZERO]})")
         elif op == "sign":
-            v = self.emit(
-                f"{K[_K_ONE]} if {va} > 0 else (-{K[_K_ONE]} if {va} < 0 else {va} * {K[_K_ZERO]})"
-            )
+            v = self.emit(f"sign_({va}, {K[_K_ONE]}, {K[_K_ZERO]})")
         else:
             v = self.emit(_VALUE[op].format(a=va, b=vb))
         self.val[d] = v
@@ -163,7 +162,7 @@ class _Gen:
                 else:
                     xs = K[_K_ZERO] if x is None else self._v(x)
                     ys = K[_K_ZERO] if y is None else self._v(y)
-                    out.append(self.emit(f"{xs} if {c} else {ys}"))
+                    out.append(self.emit(f"sel_({c}, {xs}, {ys})"))
             return out
         if op == "div":
             if all(y is None for y in tb):
@@ -177,8 +176,8 @@ class _Gen:
             return out
         if op == "atan2":
             r2 = self.emit(f"{a} * {a} + {b} * {b}")
-            fy = self.emit(f"{b} / {r2} if {r2} > 0 else {K[_K_ZERO]}")
-            fx = self.emit(f"-{a} / {r2} if {r2} > 0 else {K[_K_ZERO]}")
+            fy = self.emit(f"safe_div_({b}, {r2}, {K[_K_ZERO]})")
+            fx = self.emit(f"safe_div_(-{a}, {r2}, {K[_K_ZERO]})")
             return [self.add(self.scale(fy, x), self.scale(fx, y)) for x, y in zip(ta, tb)]
         if op == "mod":
             q = self.emit(f"np.floor({a} / {b})")
@@ -187,8 +186,8 @@ class _Gen:
             return [None] * T
         factor = {
             "square": f"{K[_K_TWO]} * {a}",
-            "sqrt": f"{K[_K_HALF]} / {v} if {v} > 0 else {K[_K_ZERO]}",
-            "abs": f"{K[_K_ONE]} if {a} > 0 else (-{K[_K_ONE]} if {a} < 0 else {a} * {K[_K_ZERO]})",
+            "sqrt": f"safe_div_({K[_K_HALF]}, {v}, {K[_K_ZERO]})",
+            "abs": f"sign_({a}, {K[_K_ONE]}, {K[_K_ZERO]})",
             "sin": f"np.cos({a})",
             "cos": f"-np.sin({a})",
             "tan": f"{K[_K_ONE]} + {v} * {v}",
@@ -208,36 +207,67 @@ class _Gen:
             self.instr(info.name, d, a, b if info.arity == 2 else None)
         out_v = self.val[low.out_row]
         out_t = self.tan.get(low.out_row, [None] * self.T) if self.T else []
-        n_out = 1 + self.T
-        ind = " " * 12
-        body = "\n".join(ind + ln for ln in self.lines)
-        stores = [f"{ind}O[0, j] = {self.K[_K_NAN]} if bad else {out_v}"]
-        if out_t:
-            stores.append(f"{ind}bad = bad | ({out_v} != {out_v})")
-        for t, name in enumerate(out_t):
-            src = self.K[_K_ZERO] if name is None else self._v(name)
-            stores.append(f"{ind}O[{1 + t}, j] = {self.K[_K_NAN]} if bad else {src}")
+        outs = [out_v] + [self.K[_K_ZERO] if t is None else self._v(t) for t in out_t]
+        segs = [self.lines[i:i + SEGMENT] for i in range(0, len(self.lines), SEGMENT)] or [[]]
+        if len(segs) == 1:
+            return self._single(segs[0], outs)
+        return self._segmented(segs, outs)
+
+    # -- pieces shared by both layouts -------------------------------------------------
+    def _uniform_loads(self, names: set[str] | None, ind: str) -> list[str]:
+        """Scalar loads of the uniform values (all, or those in ``names``)."""
         U = self.U
-        loads = [f"    u{i} = u[{i}]" for i in range(U)]
-        loads += [f"    k{i} = u[{U + i}]" for i in range(N_EXTRA)]
-        for row, deps in (low.prefix_param_deps().items() if self.wrt else ()):
-            for p in deps:
-                loads.append(f"    du{row - 3}_{p} = du[{row - 3}, {p}]")
-        head = [
+        loads = [(f"u{i}", f"u[{i}]") for i in range(U)]
+        loads += [(f"k{i}", f"u[{U + i}]") for i in range(N_EXTRA)]
+        if self.wrt:
+            for row, deps in self.low.prefix_param_deps().items():
+                loads += [(f"du{row - 3}_{p}", f"du[{row - 3}, {p}]") for p in deps]
+        return [f"{ind}{n} = {src}" for n, src in loads if names is None or n in names]
+
+    def _stores(self, outs: list[str], ind: str) -> list[str]:
+        nan = self.K[_K_NAN]
+        lines = [f"{ind}bad = (x != x) | (y != y) | (z != z)",
+                 f"{ind}O[0, j] = {nan} if bad else {outs[0]}"]
+        if len(outs) > 1:
+            lines.append(f"{ind}bad = bad | ({outs[0]} != {outs[0]})")
+        lines += [f"{ind}O[{c}, j] = {nan} if bad else {o}" for c, o in enumerate(outs) if c]
+        return lines
+
+    def _tail(self) -> list[str]:
+        tail = ["        for j in range(m):", "            out[s + j] = O[0, j]"]
+        if self.spatial:
+            tail += ["        for j in range(m):"]
+            tail += [f"            grad[s + j, {i}] = O[{1 + i}, j]" for i in range(3)]
+        if self.wrt and self.low.n_params:
+            tail += [f"        for c in range({self.low.n_params}):",
+                     "            for j in range(m):",
+                     f"                jac[s + j, c] = O[{1 + self.off} + c, j]"]
+        return tail + [""]
+
+    def _head(self) -> list[str]:
+        return [
             "# generated by csdf.backends.codegen from a validated program; do not edit",
             "import numpy as np",
             "from numba import njit",
             "",
+            "from csdf.backends.scalar_ops import max_, min_, safe_div_, sel_, sign_, step_",
             "",
-            '@njit(nogil=True, cache=True, error_model="numpy", boundscheck=False)',
+        ]
+
+    def _single(self, body: list[str], outs: list[str]) -> str:
+        """Small programs: the whole tape inline, every value in a register."""
+        ind = " " * 12
+        lines = self._head() + [
+            "",
+            _DECOR,
             "def kernel(pts, u, du, out, grad, jac, start, stop):",
             f"    B = {BLOCK}",
             "    X = np.empty(B, pts.dtype)",
             "    Y = np.empty(B, pts.dtype)",
             "    Z = np.empty(B, pts.dtype)",
-            f"    O = np.empty(({n_out}, B), pts.dtype)",
+            f"    O = np.empty(({1 + self.T}, B), pts.dtype)",
             "    d3 = pts.shape[1] == 3",
-            *loads,
+            *self._uniform_loads(None, "    "),
             "    for s in range(start, stop, B):",
             "        m = min(B, stop - s)",
             "        for j in range(m):",
@@ -248,18 +278,76 @@ class _Gen:
             "            x = X[j]",
             "            y = Y[j]",
             "            z = Z[j]",
-            "            bad = (x != x) | (y != y) | (z != z)",
+            *[ind + ln for ln in body],
+            *self._stores(outs, ind),
+            *self._tail(),
         ]
-        tail = ["        for j in range(m):", "            out[s + j] = O[0, j]"]
-        if self.spatial:
-            tail += ["        for j in range(m):"]
-            tail += [f"            grad[s + j, {i}] = O[{1 + i}, j]" for i in range(3)]
-        if self.wrt and low.n_params:
-            tail += [f"        for c in range({low.n_params}):",
-                     "            for j in range(m):",
-                     f"                jac[s + j, c] = O[{1 + self.off} + c, j]"]
-        tail.append("")
-        return "\n".join(head) + "\n" + body + "\n" + "\n".join(stores) + "\n" + "\n".join(tail)
+        return "\n".join(lines)
+
+    def _segmented(self, segs: list[list[str]], outs: list[str]) -> str:
+        """Large programs: the tape split into functions of at most ``SEGMENT`` statements
+        (Numba's compile time and recursion depth grow with function size); values that
+        cross a split live in a small per-block scratch array ``S``."""
+        defined_in: dict[str, int] = {"x": -1, "y": -1, "z": -1}
+        uses: list[set[str]] = []
+        for si, seg in enumerate(segs):
+            used: set[str] = set()
+            for ln in seg:
+                name, expr = ln.split(" = ", 1)
+                used |= set(_NAME.findall(expr))
+                defined_in[name] = si
+            uses.append(used)
+        final_uses = {n for o in outs for n in _NAME.findall(o)} | {"x", "y", "z"}
+        crossing: set[str] = {"x", "y", "z"}
+        for si, used in enumerate(uses):
+            crossing |= {n for n in used if n in defined_in and defined_in[n] < si}
+        crossing |= {n for n in final_uses if n in defined_in}
+        rows = {"x": 0, "y": 1, "z": 2}
+        for n in sorted(crossing - {"x", "y", "z"}, key=lambda n: int(n[1:])):
+            rows[n] = len(rows)
+        lines = self._head()
+        for si, seg in enumerate(segs):
+            used = uses[si]
+            own = {ln.split(" = ", 1)[0] for ln in seg}
+            live_in = sorted(n for n in used if n in rows and n not in own)
+            live_out = sorted(n for n in own if n in rows)
+            lines += [
+                "",
+                _DECOR,
+                f"def seg{si}(S, u, du, m):",
+                *self._uniform_loads(used, "    "),
+                "    for j in range(m):",
+                *[f"        {n} = S[{rows[n]}, j]" for n in live_in],
+                *["        " + ln for ln in seg],
+                *[f"        S[{rows[n]}, j] = {n}" for n in live_out],
+            ]
+        ind = " " * 12
+        lines += [
+            "",
+            _DECOR,
+            "def kernel(pts, u, du, out, grad, jac, start, stop):",
+            f"    B = {BLOCK}",
+            f"    S = np.empty(({len(rows)}, B), pts.dtype)",
+            f"    O = np.empty(({1 + self.T}, B), pts.dtype)",
+            "    d3 = pts.shape[1] == 3",
+            *self._uniform_loads(final_uses | {f"k{_K_ZERO}", f"k{_K_NAN}"}, "    "),
+            "    for s in range(start, stop, B):",
+            "        m = min(B, stop - s)",
+            "        for j in range(m):",
+            "            S[0, j] = pts[s + j, 0]",
+            "            S[1, j] = pts[s + j, 1]",
+            f"            S[2, j] = pts[s + j, 2] if d3 else k{_K_ZERO}",
+            *[f"        seg{si}(S, u, du, m)" for si in range(len(segs))],
+            "        for j in range(m):",
+            *[f"{ind}{n} = S[{rows[n]}, j]" for n in sorted(final_uses & set(rows))],
+            *self._stores(outs, ind),
+            *self._tail(),
+        ]
+        return "\n".join(lines)
+
+
+_DECOR = '@njit(nogil=True, cache=True, error_model="numpy", boundscheck=False)'
+_NAME = re.compile(r"\b(t\d+|x|y|z|u\d+|k\d+|du\d+_\d+)\b")
 
 
 def generate(low, mode: str) -> str:

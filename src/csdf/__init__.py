@@ -15,8 +15,9 @@ from __future__ import annotations
 
 from . import io
 from .compiler import Call, Program
-from .errors import BytecodeError, CsdfError, ParamError, ShapeError
+from .errors import BytecodeError, CsdfError, ModelError, ParamError, ShapeError
 from .expr import Expr, Param, param
+from .lang import dumps, load, loads
 from .mesh import mesh
 from .shapes import *  # noqa: F403
 from .shapes import REGISTRY, Shape
@@ -34,6 +35,7 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
 
 __all__ = [
     "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
-    "CsdfError", "BytecodeError", "ParamError", "ShapeError", "__version__",
+    "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
+    "load", "loads", "dumps",
     *_shape_names,
 ]

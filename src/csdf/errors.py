@@ -6,7 +6,7 @@ was wrong and where (argument name, byte offset, line number, ...).
 
 from __future__ import annotations
 
-__all__ = ["CsdfError", "BytecodeError", "ParamError", "ShapeError"]
+__all__ = ["CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError"]
 
 
 class CsdfError(ValueError):
@@ -27,3 +27,36 @@ class ParamError(CsdfError):
 
 class ShapeError(CsdfError):
     """A shape was built with invalid arguments (wrong vector length, 2D vs 3D, ...)."""
+
+
+class ModelError(CsdfError):
+    """An error in a ``.csdf`` model: where it is, what is wrong, and a hint.
+
+    Attributes:
+        file: the file name (or ``'<string>'``).
+        line, column: 1-based position of the offending text (0 when unknown).
+        message: what is wrong.
+        hint: a suggestion (closest known names, the expected signature, ...), or ''.
+        source_line: the text of the line, for the caret display.
+    """
+
+    def __init__(self, message: str, *, file: str = "<string>", line: int = 0,
+                 column: int = 0, hint: str = "", source_line: str = "", width: int = 1):
+        self.message = message
+        self.file = file
+        self.line = line
+        self.column = column
+        self.hint = hint
+        self.source_line = source_line
+        self.width = max(1, width)
+        super().__init__(self._render())
+
+    def _render(self) -> str:
+        where = f"{self.file}:{self.line}:{self.column}" if self.line else self.file
+        out = f"{where}: {self.message}"
+        if self.source_line:
+            caret = " " * (max(self.column, 1) - 1) + "^" * min(self.width, 60)
+            out += f"\n    {self.source_line.rstrip()}\n    {caret}"
+        if self.hint:
+            out += f"\nhint: {self.hint}"
+        return out

@@ -32,6 +32,13 @@ def _monotone(f, a: Interval) -> Interval:
         return _FULL
 
 
+def _exp(v: float) -> float:
+    try:
+        return math.exp(v)
+    except OverflowError:
+        return math.inf
+
+
 def _sign(v: float) -> float:
     return 0.0 if v == 0 else math.copysign(1.0, v)
 
@@ -72,7 +79,7 @@ def _op_range(op: str, a: Interval, b: Interval | None) -> Interval:
     if op == "atan2":
         return (-math.pi, math.pi)
     if op == "exp":
-        return (math.exp(min(a[0], 700.0)), math.exp(min(a[1], 700.0)))
+        return (_exp(a[0]), _exp(a[1]))
     if op == "log":
         lo = math.log(a[0]) if a[0] > 0 else -math.inf
         return (lo, math.log(a[1]) if a[1] > 0 else -math.inf)
@@ -88,6 +95,11 @@ def _op_range(op: str, a: Interval, b: Interval | None) -> Interval:
         return (max(a[0], b[0]), max(a[1], b[1]))  # type: ignore[index]
     if op == "mod":
         m = max(abs(b[0]), abs(b[1]))  # type: ignore[index]
+        big = max(abs(a[0]), abs(a[1]))
+        lo_b = min(abs(b[0]), abs(b[1]))  # type: ignore[index]
+        # a - b*floor(a/b) stays within |b| only while a/b is exact enough (and finite)
+        if b[0] <= 0.0 <= b[1] or not math.isfinite(big) or big > lo_b * 2.0**50:  # type: ignore[index]
+            return _FULL
         return (-m, m)
     return _FULL  # tan and anything unbounded
 

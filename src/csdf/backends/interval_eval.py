@@ -63,8 +63,9 @@ _NAN = math.nan
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
-# extremum/pole detection widens the argument by this much (relative and absolute),
-# far more than the rounding of the period arithmetic, far less than a period
+# extremum/pole detection widens the argument by this much (relative and absolute):
+# far more than the rounding of the period arithmetic, far less than a period unless
+# |x| > ~1e11 (then sin/cos give [-1, 1] and tan the full line, which is still valid)
 _MARGIN = 1e-12
 # mod: relative size of the rounding error of a - b*floor(a/b) (a few units of 2**-53)
 _MOD_ERR = 2.0**-48
@@ -99,7 +100,7 @@ def _hits(wlo: Arr, whi: Arr, phase: float, period: float) -> Arr:
     return np.floor((whi - phase) / period) >= np.ceil((wlo - phase) / period)
 
 
-def _all_nan_like(x: Arr, value: float) -> Arr:
+def _const_unless_empty(x: Arr, value: float) -> Arr:
     """``value`` where ``x`` is not NaN, NaN where it is (keeps empty intervals empty)."""
     return np.where(np.isnan(x), _NAN, value)
 
@@ -292,12 +293,12 @@ def _mod(alo: Arr, ahi: Arr, blo: Arr, bhi: Arr) -> Pair:
 
 # --- both operands the same slot (same value at every point)
 def _same_sub(alo: Arr, ahi: Arr) -> Pair:
-    z = _all_nan_like(alo, 0.0)  # a - a is 0 (or NaN for infinite a)
+    z = _const_unless_empty(alo, 0.0)  # a - a is 0 (or NaN for infinite a)
     return z, z
 
 
 def _same_div(alo: Arr, ahi: Arr) -> Pair:
-    one = _all_nan_like(alo, 1.0)  # a / a is 1 (or NaN for 0 and infinite a)
+    one = _const_unless_empty(alo, 1.0)  # a / a is 1 (or NaN for 0 and infinite a)
     return one, one
 
 
@@ -577,7 +578,8 @@ def simplify(
 
     Returns:
         A valid :class:`csdf.Program` with the same parameters, the constants of
-        ``prog`` (plus any new ones, appended), dim, exactness and Lipschitz bound,
+        ``prog`` (plus any new ones, appended), dim, exactness and Lipschitz bound
+        (inf if ``prog``'s is NaN),
         whose float64 values at every point of the box, for every parameter value in
         its interval, are bit-identical to ``prog``'s (NaN where ``prog`` gives NaN).
         Outside the box it is a different function, so its exactness and Lipschitz
@@ -736,7 +738,9 @@ def simplify(
         n_regs=n_regs,
         dim=prog.dim,
         exactness=prog.exactness,
-        lipschitz=prog.lipschitz,
+        # a NaN bound (seen from twist/bend with rate 0 of unbounded shapes) is invalid
+        # bytecode; inf claims nothing
+        lipschitz=_INF if math.isnan(prog.lipschitz) else prog.lipschitz,
         calls=tuple(calls),
     )
     validate(result)

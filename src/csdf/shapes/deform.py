@@ -34,6 +34,11 @@ def _radial(b: np.ndarray | None) -> float:
     return float(np.hypot(max(abs(b[0, 0]), abs(b[1, 0])), max(abs(b[0, 1]), abs(b[1, 1]))))
 
 
+def _stretch(rate: float, radius: float) -> float:
+    """``1 + rate * radius``, with a zero rate giving 1 even for an unbounded child."""
+    return 1.0 if rate == 0 else 1.0 + rate * radius
+
+
 def _radial_bounds(b: np.ndarray | None) -> np.ndarray | None:
     if b is None:
         return None
@@ -54,7 +59,7 @@ def twist(shape: Shape, rate) -> Shape:
         c, s = cos(a), sin(a)
         return shape.sdf(Vec((c * p.x - s * p.y, s * p.x + c * p.y, p.z)), ctx)
 
-    lip = shape.lipschitz * (1.0 + mag(k) * _radial(shape.bounds))
+    lip = shape.lipschitz * _stretch(mag(k), _radial(shape.bounds))
     return _derived(shape, "twist", f, args=(rate,), keeps_exact=False, lipschitz=lip,
                     bounds=_radial_bounds(shape.bounds), neither=True)
 
@@ -73,7 +78,7 @@ def bend(shape: Shape, rate) -> Shape:
         return shape.sdf(Vec((c * p.x + s * p.z, p.y, -s * p.x + c * p.z)), ctx)
 
     R = radius_of(shape.bounds)
-    lip = shape.lipschitz * (1.0 + mag(k) * R)
+    lip = shape.lipschitz * _stretch(mag(k), R)
     b = None if not math.isfinite(R) else box_bounds([-R] * 3, [R] * 3)
     return _derived(shape, "bend", f, args=(rate,), keeps_exact=False, lipschitz=lip,
                     bounds=b, neither=True)

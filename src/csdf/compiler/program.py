@@ -287,5 +287,25 @@ class Program:
 
     @property
     def nbytes(self) -> int:
-        """Size of :meth:`to_bytes` in bytes."""
+        """Size of :meth:`to_bytes` in bytes (the expanded tape)."""
         return len(self.to_bytes())
+
+    def compact_nbytes(self) -> int:
+        """Size of the call-level form, in bytes: the same layout as :meth:`to_bytes`, but
+        each primitive is one 8-byte ``call`` instruction (its body is the library's, not
+        the model's) and the call table is not needed; constants used only inside
+        primitive bodies are dropped. This is what the paper's "about 100 bytes" counts.
+        """
+        inside = self._primitive_bodies()
+        n_instr = len(self.code) - len(inside) + len(self.calls)
+        used: set[int] = set()
+        base = 3 + len(self.params)
+        for k, (op, _dst, a, b) in enumerate(self.code.tolist()):
+            if k in inside:
+                continue
+            used.update(s for s in ((a, b) if OPS_BY_CODE[op].arity == 2 else (a,)))
+        for c in self.calls:
+            used.update(s for s in c.inputs if not s & INSTR_REF)
+        n_consts = sum(1 for s in used if base <= s < self.n_fixed)
+        params = sum(1 + len(p.name.encode()) + 24 for p in self.params)
+        return 32 + params + 8 * n_consts + 8 * n_instr + 4

@@ -31,12 +31,13 @@ def _program(shape):
     raise CsdfError(f"mesh expects a Shape or Program, got {type(shape).__name__}")
 
 
-def auto_bounds(prog, params: dict | None = None, extent: float = 1e4, depth: int = 12):
+def auto_bounds(prog, params: dict | None = None, extent: float = 1e4, rel: float = 1 / 128):
     """Bounding box ``(2, 3)`` of a program's zero set found by interval arithmetic.
 
-    Cubes of ``[-extent, extent]^3`` are split ``depth`` times, keeping every cube whose
-    interval may contain the surface (``lo <= 0 <= hi``); the result is the union of the
-    survivors, so it contains the whole surface (intervals are conservative).
+    Cubes of ``[-extent, extent]^3`` are split, keeping every cube whose interval may
+    contain the surface (``lo <= 0 <= hi``), until the cubes are smaller than ``rel``
+    times the box they span; the result is that box, so it contains the whole surface
+    (intervals are conservative) and overshoots it by at most about ``rel``.
 
     Raises:
         CsdfError: nothing found, or the surface reaches the search limit (unbounded
@@ -46,16 +47,16 @@ def auto_bounds(prog, params: dict | None = None, extent: float = 1e4, depth: in
 
     lo = np.full((1, 3), -extent)
     size = 2.0 * extent
-    for _ in range(depth):
+    offs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
+    for _ in range(60):
         size /= 2.0
-        offs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)]) * size
-        lo = (lo[:, None, :] + offs[None]).reshape(-1, 3)
+        lo = (lo[:, None, :] + offs[None] * size).reshape(-1, 3)
         flo, fhi = evaluate_intervals(prog, lo, lo + size, params=params)
-        keep = (flo <= 0) & (fhi >= 0)
-        lo = lo[keep]
+        lo = lo[(flo <= 0) & (fhi >= 0)]
         if len(lo) == 0:
             raise CsdfError(f"the shape has no surface inside +-{extent:g} (empty shape?)")
-        if len(lo) > 200_000:
+        span = (lo + size).max(0) - lo.min(0)
+        if size <= rel * span.max() or len(lo) > 100_000:
             break
     b = np.array([lo.min(0), (lo + size).max(0)])
     if np.any(np.abs(b) >= extent * 0.999):

@@ -1,0 +1,72 @@
+"""The csdf command line: info, mesh, compile; errors exit 2 with file:line:column."""
+
+from __future__ import annotations
+
+import trimesh
+from typer.testing import CliRunner
+
+from csdf.cli import app
+
+MODEL = """\
+# the CSG example
+param r = 1.0 in [0.8, 1.2]
+let c = cylinder(0.5, 3)
+export (sphere(r) & box(1.5)) - c - c.orient("x") - c.orient("y")
+"""
+
+runner = CliRunner()
+
+
+def _model(tmp_path, text=MODEL, name="csg.csdf"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_info(tmp_path):
+    r = runner.invoke(app, ["info", str(_model(tmp_path))])
+    assert r.exit_code == 0, r.output
+    for word in ("83 instructions", "bound", "Lipschitz 1", "[0.8, 1.2]", "expanded",
+                 "primitive", "942"):
+        assert word in r.output
+
+
+def test_mesh_writes_a_watertight_mesh(tmp_path):
+    out = tmp_path / "csg.stl"
+    r = runner.invoke(app, ["mesh", str(_model(tmp_path)), "-o", str(out), "-r", "40",
+                            "--method", "dc", "-p", "r=1.1", "-q"])
+    assert r.exit_code == 0, r.output
+    assert "watertight=True" in r.output
+    m = trimesh.load(out, force="mesh")
+    m.merge_vertices()
+    assert m.is_watertight and m.euler_number == -8
+
+
+def test_compile_then_mesh_bytecode(tmp_path):
+    blob = tmp_path / "csg.csdfb"
+    listing = tmp_path / "csg.csdft"
+    assert runner.invoke(app, ["compile", str(_model(tmp_path)), "-o", str(blob)]).exit_code == 0
+    assert runner.invoke(app, ["compile", str(_model(tmp_path)), "-o", str(listing)]).exit_code == 0
+    assert listing.read_text().startswith("csdf-program 1")
+    for src in (blob, listing):
+        out = tmp_path / f"{src.suffix[1:]}.ply"
+        r = runner.invoke(app, ["mesh", str(src), "-o", str(out), "-r", "24", "-q"])
+        assert r.exit_code == 0, r.output
+        assert trimesh.load(out, force="mesh").faces.shape[0] > 100
+
+
+def test_errors_exit_2_with_location(tmp_path):
+    bad = _model(tmp_path, "export sphere(1)\nexport box(q)\n", "bad.csdf")
+    r = runner.invoke(app, ["info", str(bad)])
+    assert r.exit_code == 2
+    assert "bad.csdf:2:" in r.output
+    r = runner.invoke(app, ["mesh", str(_model(tmp_path)), "-o", str(tmp_path / "x.xyz")])
+    assert r.exit_code == 2 and "mesh format" in r.output
+    assert not (tmp_path / "x.xyz").exists()
+    r = runner.invoke(app, ["mesh", str(_model(tmp_path)), "-o", str(tmp_path / "y.stl"),
+                            "-p", "radius=2"])
+    assert r.exit_code == 2 and "unknown parameter 'radius'" in r.output
+    r = runner.invoke(app, ["info", str(tmp_path / "missing.csdf")])
+    assert r.exit_code == 2 and "cannot read" in r.output
+    r = runner.invoke(app, ["--version"])
+    assert r.exit_code == 0 and "csdf" in r.output

@@ -240,3 +240,13 @@ def test_fuzzing_only_ever_raises_model_error():
         accepted += 1
         assert isinstance(s, csdf.Shape)
     assert accepted > 0
+
+
+def test_documented_example_loads():
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).parent.parent / "docs" / "language.md").read_text()
+    block = re.findall(r"```\n(.*?)```", doc, re.S)[0]
+    shape = csdf.loads(block)
+    assert [p.name for p in shape.params] == ["beam", "radius"]

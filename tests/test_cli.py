@@ -70,3 +70,16 @@ def test_errors_exit_2_with_location(tmp_path):
     assert r.exit_code == 2 and "cannot read" in r.output
     r = runner.invoke(app, ["--version"])
     assert r.exit_code == 0 and "csdf" in r.output
+
+
+def test_export_glsl(tmp_path):
+    r = runner.invoke(app, ["export", "--glsl", str(_model(tmp_path))])
+    assert r.exit_code == 0, r.output
+    assert "void mainImage(out vec4 fragColor, in vec2 fragCoord)" in r.output
+    assert "const float u_r = 1.0" in r.output
+    out = tmp_path / "csg.glsl"
+    r = runner.invoke(app, ["export", "--glsl", "--snippet", str(_model(tmp_path)), "-o",
+                            str(out)])
+    assert r.exit_code == 0 and "uniform float u_r;" in out.read_text()
+    r = runner.invoke(app, ["export", str(_model(tmp_path))])
+    assert r.exit_code == 2 and "--glsl" in r.output

@@ -441,9 +441,9 @@ def test_gradient_and_lipschitz(case: Case, data: Data, shape):
         )
 
 
+@pytest.mark.parametrize("case", [c for c in CASES if c.dim == 2], indirect=True,
+                         ids=[c.id for c in CASES if c.dim == 2])
 def test_2d_input_forms(case: Case, data: Data, shape):
-    if case.dim != 2:
-        pytest.skip("3D shape")
     rng = np.random.default_rng(_seed(case.id + "2d"))
     q2 = data.query
     got2 = _eval(shape, q2)

@@ -14,6 +14,7 @@ Build shapes from primitives and operators, with named parameters::
 from __future__ import annotations
 
 from . import io
+from .backends.glsl import glsl_params, shadertoy, to_glsl
 from .compiler import Call, Program
 from .errors import BytecodeError, CsdfError, ModelError, ParamError, ShapeError
 from .expr import Expr, Param, param
@@ -36,6 +37,6 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
 __all__ = [
     "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
     "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
-    "load", "loads", "dumps",
+    "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params",
     *_shape_names,
 ]

@@ -178,6 +178,35 @@ def compile(  # noqa: A001 - the verb users type
     _run(go)
 
 
+@app.command()
+def export(
+    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    glsl: bool = typer.Option(False, "--glsl", help="A Shadertoy-ready GLSL image shader."),
+    snippet: bool = typer.Option(False, "--snippet", help="With --glsl: only the sdf "
+                                 "function and its uniforms, for your own shader."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="File (default: "
+                                          "standard output)."),
+):
+    """Export a model for other tools (--glsl: Shadertoy)."""
+
+    def go():
+        from .backends.glsl import shadertoy, to_glsl
+        from .io import atomic_path
+
+        if not glsl:
+            raise CsdfError("choose an export format: --glsl")
+        m = _load(model)
+        text = to_glsl(m) if snippet else shadertoy(m)
+        if output is None:
+            sys.stdout.write(text)
+            return
+        with atomic_path(output) as tmp:
+            tmp.write_text(text)
+        err.print(f"{output}: {len(text.splitlines())} lines of GLSL", soft_wrap=True)
+
+    _run(go)
+
+
 def main() -> None:
     """Entry point of the ``csdf`` script."""
     app()

@@ -445,7 +445,7 @@ void mainImage(out vec4 fragColor, in vec2 fragCoord) {{
     // camera orbiting the z axis (csdf's up axis), looking at the shape's centre
     float a = 0.5 * iTime + 0.6;
     float e = 0.45;
-    vec3 ro = CSDF_CENTER + 2.8 * CSDF_RADIUS * vec3(cos(a) * cos(e), sin(a) * cos(e), sin(e));
+    vec3 ro = CSDF_CENTER + 2.2 * CSDF_RADIUS * vec3(cos(a) * cos(e), sin(a) * cos(e), sin(e));
     vec3 ww = normalize(CSDF_CENTER - ro);
     vec3 uu = normalize(cross(ww, vec3(0.0, 0.0, 1.0)));
     vec3 vv = cross(uu, ww);

@@ -18,6 +18,7 @@ from .backends.glsl import glsl_params, shadertoy, to_glsl
 from .compiler import Call, Program
 from .errors import BytecodeError, CsdfError, ModelError, ParamError, ShapeError
 from .expr import Expr, Param, param
+from .fit import FitResult, fit, icp
 from .lang import dumps, load, loads
 from .mesh import mesh
 from .shapes import *  # noqa: F403
@@ -37,6 +38,6 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
 __all__ = [
     "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
     "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
-    "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params",
+    "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit", "icp", "FitResult",
     *_shape_names,
 ]

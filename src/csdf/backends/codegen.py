@@ -22,7 +22,7 @@ from ..ops import OPS_BY_CODE
 
 __all__ = ["generate", "structure_key", "CODEGEN_VERSION"]
 
-CODEGEN_VERSION = 4
+CODEGEN_VERSION = 5
 BLOCK = 256
 SEGMENT = 2000  # statements per generated function
 
@@ -127,7 +127,10 @@ class _Gen:
         K = self.K
         c = None
         if op == "min" or op == "max":
-            cmp = "<=" if op == "min" else ">="
+            ta_zero = all(t is None for t in self.tan[a])
+            tb_zero = all(t is None for t in self.tan[b]) if b is not None else True
+            strict = bool(self.T) and ta_zero and not tb_zero  # ties follow b then
+            cmp = ("<" if strict else "<=") if op == "min" else (">" if strict else ">=")
             c = self.emit(f"{va} {cmp} {vb}")
             v = self.emit(f"{op}_({va}, {vb})")
         elif op == "step":

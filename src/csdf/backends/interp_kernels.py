@@ -213,7 +213,10 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
         for j in range(B):
             a = R[ia, j]
             b = R[ib, j]
-            pick_a = a <= b if op == MIN else a >= b
+            if (flags & 2) and not (flags & 1):  # only a has no tangent: ties follow b
+                pick_a = a < b if op == MIN else a > b
+            else:
+                pick_a = a <= b if op == MIN else a >= b
             if not pick_a:
                 for t in range(T):
                     D[d, t, j] = D[ib, t, j]

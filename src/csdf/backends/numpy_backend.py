@@ -8,8 +8,8 @@ where the T seeds are x, y, z (gradient), the parameters (Jacobian), or both.
 
 Where a value is NaN (a NaN coordinate or parameter, or a NaN made inside the tape)
 its derivatives are NaN too. Derivative conventions at non-differentiable
-points: ``min``/``max`` follow the
-first operand on ties, ``abs``/``sign``/``step``/``floor`` have derivative ``sign(a)``
+points: ``min``/``max`` follow the first operand on ties (the second when only the first
+is a constant), ``abs``/``sign``/``step``/``floor`` have derivative ``sign(a)``
 / 0 / 0 / 0, ``sqrt`` at 0 has derivative 0, ``atan2`` at the origin 0.
 """
 
@@ -75,7 +75,13 @@ def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype):
     if op == "square":
         return _sc(2 * a, da)
     if op in ("min", "max"):
-        mask = a <= b if op == "min" else a >= b
+        # ties follow a, unless only a has no tangent (a constant): then b, whose
+        # one-sided derivative is the informative one (a box's face normal at f = 0)
+        strict = da is None and db is not None
+        if op == "min":
+            mask = a < b if strict else a <= b
+        else:
+            mask = a > b if strict else a >= b
         return _select(mask, da, db, n, t, dtype)
     if op in ("floor", "step", "sign"):
         return None

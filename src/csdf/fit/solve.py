@@ -1,0 +1,456 @@
+"""Recover pose, scale and shape parameters from a point cloud (paper §4.5, Eq. 12-13).
+
+Convention: the object sits in the scene at ``p = s R q + t`` (``q`` in the model's frame,
+``p`` in the cloud's frame); :attr:`FitResult.transform` is that 4x4 map. The residual of a
+scene point is its signed distance to the posed model, in scene units::
+
+    r(p) = s * f(R^T (p - t) / s; c)        (uniform scaling keeps distances, Eq. 10)
+
+No nearest-neighbour search is needed: the model gives the distance and its gradient.
+The unknowns are a rotation increment ``w`` (the Lie algebra of SO(3), applied on the
+left of the current rotation and re-centred after every solve), ``t``, ``log s`` and the
+parameters ``c``; their Jacobian is exact: the spatial gradient and the parameter
+derivatives come from one forward-mode pass (:meth:`csdf.Program.value_grad_param_jacobian`)
+and the rotation block uses the left Jacobian of SO(3). SciPy's ``least_squares`` (trust
+region reflective) supplies robust losses and parameter bounds.
+
+Scale and size parameters: if a parameter scales the whole shape (a sphere's radius),
+``s`` and that parameter describe the same change and the problem is singular. When both
+are estimated csdf adds a weak prior pulling ``log s`` to 0, so size is explained by the
+parameters when the data cannot tell them apart; the result lists such pairs in
+:attr:`FitResult.notes` (detected from nearly collinear Jacobian columns).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import CsdfError, ParamError
+from .lie import exp_so3, left_jacobian
+
+__all__ = ["FitResult", "fit", "Problem", "prepare"]
+
+ESTIMATES = ("pose", "scale", "params")
+LOSSES = ("linear", "huber", "soft_l1", "cauchy", "arctan")
+
+
+@dataclass
+class FitResult:
+    """The recovered object pose, scale and parameters, with quality measures.
+
+    Attributes:
+        rotation: (3, 3) object-to-scene rotation ``R``.
+        translation: (3,) object origin in the scene ``t`` (scene units).
+        scale: uniform scale ``s`` (``p = s R q + t``).
+        params: all parameter values ``{name: value}`` (estimated and fixed).
+        rmse: root mean square of the residuals of the inliers (scene units).
+        inlier_fraction: fraction of points with ``|r| <= inlier_threshold``.
+        inlier_threshold: the threshold used (scene units).
+        converged: the optimiser met a convergence test (not the iteration limit).
+        iterations: residual evaluations used.
+        seconds: wall time.
+        cost: final robust cost.
+        method: ``'csdf'`` (SDF-to-cloud least squares) or ``'icp'``.
+        notes: remarks such as scale/parameter ambiguity.
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float
+    params: dict[str, float]
+    rmse: float
+    inlier_fraction: float
+    inlier_threshold: float
+    converged: bool
+    iterations: int
+    seconds: float
+    cost: float = math.nan
+    method: str = "csdf"
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def transform(self) -> np.ndarray:
+        """(4, 4) object-to-scene transform ``[[s R, t], [0, 1]]``."""
+        T = np.eye(4)
+        T[:3, :3] = self.scale * self.rotation
+        T[:3, 3] = self.translation
+        return T
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary."""
+        return {
+            "method": self.method, "transform": self.transform.tolist(),
+            "rotation": self.rotation.tolist(), "translation": self.translation.tolist(),
+            "scale": self.scale, "params": dict(self.params), "rmse": self.rmse,
+            "inlier_fraction": self.inlier_fraction, "inlier_threshold": self.inlier_threshold,
+            "converged": self.converged, "iterations": self.iterations,
+            "seconds": self.seconds, "cost": self.cost, "notes": list(self.notes),
+        }
+
+
+def _as_points(points) -> np.ndarray:
+    try:
+        P = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CsdfError("points must be an (N, 3) array of numbers") from None
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise CsdfError(f"points must have shape (N, 3); got {P.shape}")
+    if len(P) == 0:
+        raise CsdfError("the point cloud is empty")
+    bad = ~np.isfinite(P).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        raise CsdfError(f"{len(rows)} point(s) contain NaN or inf (rows {rows[:5].tolist()}"
+                        f"{' ...' if len(rows) > 5 else ''}); remove them first")
+    return P
+
+
+@dataclass
+class Problem:
+    """Everything a fit needs, validated: program, points, what to estimate, start."""
+
+    prog: object
+    points: np.ndarray
+    pose: bool
+    scale: bool
+    names: list[str]  # parameters to estimate
+    values: np.ndarray  # all parameter values (P,), current
+    R: np.ndarray
+    t: np.ndarray
+    s: float
+    centre: np.ndarray  # object-frame centre of the model (for initial translation)
+    size: float  # object size (bounding diagonal), model units
+    f_scale: float
+    loss: str
+    backend: str
+
+
+def _parse_estimate(estimate) -> tuple[str, ...]:
+    if isinstance(estimate, str):
+        estimate = tuple(e.strip() for e in estimate.split(",") if e.strip())
+    est = tuple(estimate)
+    bad = [e for e in est if e not in ESTIMATES]
+    if bad or not est:
+        raise CsdfError(f"estimate must be a subset of {ESTIMATES}, got {estimate!r}")
+    return est
+
+
+def _init_pose(init, prob_params: dict) -> tuple:
+    """``(R, t, s, params)`` from an init of any supported kind (None: identity)."""
+    if init is None:
+        return None, None, None, {}
+    if isinstance(init, FitResult):
+        return init.rotation, init.translation, init.scale, dict(init.params)
+    if isinstance(init, dict):
+        R = np.asarray(init.get("rotation", np.eye(3)), dtype=float)
+        t = init.get("translation")
+        return R, None if t is None else np.asarray(t, dtype=float), \
+            float(init.get("scale", 1.0)), dict(init.get("params", {}))
+    M = np.asarray(init, dtype=float)
+    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+        raise CsdfError("init must be a (4, 4) transform, a FitResult, a dict or None")
+    A = M[:3, :3]
+    s = float(np.cbrt(np.linalg.det(A)))
+    if not s > 0:
+        raise CsdfError("init transform must have a positive determinant")
+    U, _, Vt = np.linalg.svd(A / s)
+    return U @ Vt, M[:3, 3].copy(), s, {}
+
+
+def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
+            f_scale=None, backend="auto") -> Problem:
+    """Validate the inputs of :func:`fit` and build the starting state."""
+    from ..compiler.program import Program
+    from ..shapes.base import Shape
+
+    if isinstance(shape, Shape):
+        prog = shape.compile()
+        bounds = shape.bounds
+    elif isinstance(shape, Program):
+        prog, bounds = shape, None
+    else:
+        raise CsdfError(f"fit expects a Shape or Program, got {type(shape).__name__}")
+    if prog.dim != 3:
+        raise CsdfError("fit needs a 3D shape")
+    P = _as_points(points)
+    est = _parse_estimate(estimate)
+    if loss not in LOSSES:
+        raise CsdfError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
+    known = [p.name for p in prog.params]
+    if "params" in est:
+        names = list(known) if params is None else list(params)
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise ParamError(f"unknown parameter(s) {unknown}; this shape's parameters: "
+                             f"{', '.join(known) or 'none'}")
+    else:
+        if params:
+            raise CsdfError("params names were given but 'params' is not in estimate")
+        names = []
+    R0, t0, s0, p0 = _init_pose(init, {})
+    values = prog.param_values(p0)  # validates names of the initial values
+    if bounds is None:
+        from ..mesh.api import auto_bounds
+
+        try:
+            bounds = auto_bounds(prog, dict(zip(known, values)))
+        except CsdfError:
+            bounds = np.array([[-1.0] * 3, [1.0] * 3])
+    centre = 0.5 * (bounds[0] + bounds[1])
+    size = float(np.linalg.norm(bounds[1] - bounds[0]))
+    n_unknowns = (6 if "pose" in est else 0) + ("scale" in est) + len(names)
+    if len(P) < max(n_unknowns, 1):
+        raise CsdfError(f"{len(P)} point(s) cannot determine {n_unknowns} unknowns; "
+                        "give at least as many points as unknowns")
+    s = 1.0 if s0 is None else s0
+    R = np.eye(3) if R0 is None else R0
+    t = (P.mean(axis=0) - s * R @ centre) if t0 is None else t0
+    fs = 0.01 * size * s if f_scale is None else float(f_scale)
+    if not fs > 0:
+        raise CsdfError(f"f_scale must be positive, got {f_scale}")
+    return Problem(prog, P, "pose" in est, "scale" in est, names, values, R, t, s, centre,
+                   size, fs, loss, backend)
+
+
+class _Residuals:
+    """Residuals and exact Jacobian for one linearisation rotation ``R0``."""
+
+    def __init__(self, prob: Problem, R0: np.ndarray, weight_prior: float):
+        self.p = prob
+        self.R0 = R0
+        self.idx = [i for i, p in enumerate(prob.prog.params) if p.name in prob.names]
+        self.prior = weight_prior
+        self._cache_x = None
+        self._cache = None
+
+    def unpack(self, x: np.ndarray):
+        p = self.p
+        k = 0
+        w = np.zeros(3)
+        t = p.t
+        if p.pose:
+            w, t = x[0:3], x[3:6]
+            k = 6
+        sigma = math.log(p.s)
+        if p.scale:
+            sigma = x[k]
+            k += 1
+        values = p.values.copy()
+        values[self.idx] = x[k:k + len(self.idx)]
+        return w, t, sigma, values
+
+    def pack(self) -> np.ndarray:
+        p = self.p
+        parts = []
+        if p.pose:
+            parts += [np.zeros(3), p.t]
+        if p.scale:
+            parts.append([math.log(p.s)])
+        parts.append(p.values[self.idx])
+        return np.concatenate([np.ravel(a) for a in parts])
+
+    def _eval(self, x: np.ndarray):
+        if self._cache_x is not None and np.array_equal(x, self._cache_x):
+            return self._cache
+        p = self.p
+        w, t, sigma, values = self.unpack(x)
+        R = exp_so3(w) @ self.R0
+        s = math.exp(sigma)
+        a = p.points - t
+        q = (a @ R) / s  # rows: R^T a / s
+        pv = dict(zip((q_.name for q_ in p.prog.params), values))
+        f, g, J = p.prog.value_grad_param_jacobian(q, pv, backend=p.backend)
+        self._cache_x = x.copy()
+        self._cache = (R, s, a, q, f, g, J)
+        return self._cache
+
+    def fun(self, x: np.ndarray) -> np.ndarray:
+        R, s, a, q, f, g, J = self._eval(x)
+        r = s * f
+        if self.prior:
+            r = np.append(r, self.prior * self.unpack(x)[2])
+        return r
+
+    def jac(self, x: np.ndarray) -> np.ndarray:
+        p = self.p
+        R, s, a, q, f, g, J = self._eval(x)
+        w = self.unpack(x)[0]
+        cols = []
+        if p.pose:
+            gw = g @ R.T  # world-frame gradient directions (N, 3)
+            cols.append(np.cross(gw, a) @ left_jacobian(w))
+            cols.append(-gw)
+        if p.scale:
+            cols.append((s * (f - np.sum(g * q, axis=1)))[:, None])
+        if self.idx:
+            cols.append(s * J[:, self.idx])
+        Jm = np.concatenate(cols, axis=1) if cols else np.zeros((len(f), 0))
+        if self.prior:
+            row = np.zeros((1, Jm.shape[1]))
+            row[0, 6 if p.pose else 0] = self.prior
+            Jm = np.vstack([Jm, row])
+        return Jm
+
+    def x_scale(self, x0: np.ndarray) -> np.ndarray | str:
+        """Scale of each unknown: the inverse norm of its Jacobian column at the start
+        (like ``x_scale='jac'``), except for unknowns the data hardly sees (the rotation
+        of a sphere), which get a typical size instead of a huge scale."""
+        typical = self._typical()
+        norms = np.linalg.norm(self.jac(x0)[: len(self.p.points)], axis=0)
+        ok = norms > 1e-6 * max(norms.max(initial=0.0), 1e-300)
+        if ok.all():
+            return "jac"  # every unknown is observed: SciPy's adaptive scaling
+        return np.where(ok, 1.0 / np.where(ok, norms, 1.0), typical)
+
+    def _typical(self) -> np.ndarray:
+        """Typical size of each unknown: radians, the model size, 1 for log-scale, a
+        tenth of a parameter's range (or its magnitude)."""
+        p = self.p
+        sc = []
+        if p.pose:
+            sc += [1.0] * 3 + [p.size * p.s] * 3
+        if p.scale:
+            sc.append(1.0)
+        for i in self.idx:
+            q = p.prog.params[i]
+            span = q.hi - q.lo
+            sc.append(span / 10 if np.isfinite(span) and span > 0
+                      else max(abs(q.default), 0.01 * p.size))
+        return np.array(sc)
+
+    def bounds(self):
+        p = self.p
+        n = (6 if p.pose else 0) + (1 if p.scale else 0)
+        lo = [-np.inf] * n + [p.prog.params[i].lo for i in self.idx]
+        hi = [np.inf] * n + [p.prog.params[i].hi for i in self.idx]
+        return np.array(lo), np.array(hi)
+
+
+def _ambiguity_notes(res: _Residuals, x: np.ndarray) -> list[str]:
+    p = res.p
+    if not (p.scale and p.names):
+        return []
+    Jm = res.jac(x)[: len(p.points)]
+    k = 6 if p.pose else 0
+    sc = Jm[:, k]
+    notes = []
+    for j, name in enumerate(p.names):
+        col = Jm[:, k + 1 + j]
+        den = np.linalg.norm(sc) * np.linalg.norm(col)
+        if den > 0 and abs(sc @ col) / den > 0.98:
+            notes.append(f"scale and parameter {name!r} are nearly ambiguous (both resize the "
+                         "shape); a weak prior keeps the scale near its start")
+    return notes
+
+
+def solve(prob: Problem, max_iter: int = 100, rounds: int = 4) -> tuple[Problem, dict]:
+    """Run the least-squares refinement in place; returns the problem and statistics."""
+    nfev = 0
+    converged = False
+    cost = math.nan
+    n = len(prob.points)
+    prior = 0.05 * prob.f_scale * math.sqrt(n) if (prob.scale and prob.names) else 0.0
+    notes: list[str] = []
+    for rnd in range(rounds):
+        res = _Residuals(prob, prob.R, prior)
+        x0 = res.pack()
+        lo, hi = res.bounds()
+        x0 = np.clip(x0, lo, hi)
+        if len(x0) == 0:
+            break
+        out = least_squares(res.fun, x0, jac=res.jac, bounds=(lo, hi), method="trf",
+                            loss=prob.loss, f_scale=prob.f_scale, max_nfev=max_iter,
+                            x_scale=res.x_scale(x0))
+        nfev += out.nfev
+        cost = float(out.cost)
+        w, t, sigma, values = res.unpack(out.x)
+        prob.R = exp_so3(w) @ prob.R
+        prob.t, prob.s, prob.values = np.asarray(t, dtype=float), math.exp(sigma), values
+        if rnd == 0:
+            notes = _ambiguity_notes(res, out.x)
+        converged = out.status > 0
+        if np.linalg.norm(w) < 1e-3 or not converged:
+            break
+    U, _, Vt = np.linalg.svd(prob.R)
+    prob.R = U @ Vt
+    return prob, {"nfev": nfev, "converged": converged, "cost": cost, "notes": notes}
+
+
+def residuals(prob: Problem, R, t, s, values) -> np.ndarray:
+    """Signed distances (scene units) of the points to the posed model."""
+    q = ((prob.points - t) @ R) / s
+    pv = dict(zip((p.name for p in prob.prog.params), values))
+    return s * prob.prog(q, pv, backend=prob.backend)
+
+
+def make_result(prob: Problem, stats: dict, seconds: float, method: str,
+                inlier_threshold: float | None) -> FitResult:
+    r = residuals(prob, prob.R, prob.t, prob.s, prob.values)
+    thr = 3.0 * prob.f_scale if inlier_threshold is None else float(inlier_threshold)
+    inl = np.abs(r) <= thr
+    rmse = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else math.inf
+    return FitResult(
+        rotation=prob.R.copy(), translation=prob.t.copy(), scale=float(prob.s),
+        params={p.name: float(v) for p, v in zip(prob.prog.params, prob.values)},
+        rmse=rmse, inlier_fraction=float(inl.mean()), inlier_threshold=thr,
+        converged=bool(stats["converged"]), iterations=int(stats["nfev"]), seconds=seconds,
+        cost=float(stats.get("cost", math.nan)), method=method, notes=list(stats["notes"]),
+    )
+
+
+def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
+        f_scale=None, multistart=False, seed=None, max_iter=100, inlier_threshold=None,
+        backend="auto") -> FitResult:
+    """Fit a model to a point cloud: pose, optionally scale and shape parameters.
+
+    Args:
+        shape: a :class:`csdf.Shape` (or compiled :class:`csdf.Program`).
+        points: ``(N, 3)`` scene points (metres, or the model's units).
+        init: starting pose: None (identity rotation, centroids aligned), a (4, 4)
+            transform ``[[s R, t], [0, 1]]``, a :class:`FitResult`, or a dict with
+            ``rotation``, ``translation``, ``scale``, ``params``.
+        estimate: any of ``'pose'``, ``'scale'``, ``'params'`` (tuple or comma string).
+        params: names of the parameters to estimate (default: all); others stay at their
+            values in ``init`` (or defaults).
+        loss: robust loss of ``scipy.optimize.least_squares`` (``'huber'``,
+            ``'cauchy'``, ``'soft_l1'``, ``'arctan'``, ``'linear'``).
+        f_scale: residual scale of the loss (scene units); default 1% of the model size.
+        multistart: search many initial rotations first (see
+            :func:`csdf.fit.init.multistart`); needed for large initial errors.
+        seed: seeds the multistart subsampling (results are reproducible).
+        max_iter: residual evaluations per refinement round.
+        inlier_threshold: ``|r|`` counted as inlier (default ``3 * f_scale``).
+        backend: evaluator backend.
+
+    Returns:
+        :class:`FitResult`.
+
+    Raises:
+        CsdfError: empty cloud, NaNs, bad options, fewer points than unknowns;
+        ParamError: unknown parameter names.
+    """
+    t0 = time.perf_counter()
+    prob = prepare(shape, points, init, estimate, params, loss, f_scale, backend)
+    if multistart:
+        from .init import multistart as _ms
+
+        _ms(prob, seed=seed)
+    if prob.pose and (prob.scale or prob.names):
+        # staged: the pose alone first (scale and shape held), then everything jointly;
+        # starting the joint problem near the right pose keeps scale and size parameters
+        # from shrinking the model onto a wrong alignment
+        scale, names = prob.scale, prob.names
+        prob.scale, prob.names = False, []
+        prob, first = solve(prob, max_iter=max_iter)
+        prob.scale, prob.names = scale, names
+    else:
+        first = {"nfev": 0}
+    prob, stats = solve(prob, max_iter=max_iter)
+    stats["nfev"] += first["nfev"]
+    return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)
+

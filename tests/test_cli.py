@@ -83,3 +83,28 @@ def test_export_glsl(tmp_path):
     assert r.exit_code == 0 and "uniform float u_r;" in out.read_text()
     r = runner.invoke(app, ["export", str(_model(tmp_path))])
     assert r.exit_code == 2 and "--glsl" in r.output
+
+
+def test_fit_recovers_a_translated_model(tmp_path):
+    import json
+
+    import numpy as np
+
+    from csdf.pointio import write_points
+
+    box = tmp_path / "box.csdf"
+    box.write_text("param w = 0.4 in [0.2, 0.8]\nexport box((w, 0.3, 0.2))\n")
+    rng = np.random.default_rng(0)
+    # points on the faces of the box, moved by (0.1, 0.2, 0.3)
+    u = rng.uniform(-1, 1, (3000, 3)) * np.array([0.2, 0.15, 0.1])
+    axis = rng.integers(0, 3, 3000)
+    u[np.arange(3000), axis] = np.sign(rng.uniform(-1, 1, 3000)) * np.array([0.2, 0.15, 0.1])[axis]
+    scan = tmp_path / "scan.ply"
+    write_points(scan, u + np.array([0.1, 0.2, 0.3]))
+    out = tmp_path / "fit.json"
+    r = runner.invoke(app, ["fit", str(box), str(scan), "-o", str(out), "--estimate",
+                            "pose,params"])
+    assert r.exit_code == 0, r.output
+    res = json.loads(out.read_text())
+    np.testing.assert_allclose(res["translation"], [0.1, 0.2, 0.3], atol=1e-6)
+    assert abs(res["params"]["w"] - 0.4) < 1e-6

@@ -207,6 +207,44 @@ def export(
     _run(go)
 
 
+@app.command()
+def fit(
+    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    scan: Path = typer.Argument(..., help="The point cloud (.ply)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Result file (.json)."),
+    estimate: str = typer.Option("pose", "--estimate", help="pose, pose,scale or "
+                                 "pose,scale,params"),
+    multistart: bool = typer.Option(False, "--multistart", help="Search all rotations "
+                                    "first (for large initial errors)."),
+    loss: str = typer.Option("huber", "--loss", help="huber, cauchy, soft_l1, arctan, linear"),
+    seed: int = typer.Option(0, "--seed", help="Seed of the multistart subsampling."),
+    param: list[str] = typer.Option([], "--param", "-p", help="Initial name=value "
+                                    "(repeatable)."),
+):
+    """Recover the model's pose (and scale, parameters) from a point cloud."""
+
+    def go():
+        import json
+
+        from .fit import fit as fit_fn
+        from .io import atomic_path
+        from .pointio import read_points
+
+        m = _load(model)
+        pts, _ = read_points(scan)
+        res = fit_fn(m, pts, init={"params": _params(param)} if param else None,
+                     estimate=estimate, multistart=multistart, loss=loss, seed=seed)
+        with atomic_path(output) as tmp:
+            tmp.write_text(json.dumps(res.to_dict(), indent=2))
+        out.print(f"{output}: rmse {res.rmse:.3g}, inliers {res.inlier_fraction:.1%}, "
+                  f"scale {res.scale:.4g}, {res.iterations} evaluations, "
+                  f"{res.seconds * 1e3:.0f} ms, converged={res.converged}", soft_wrap=True)
+        for note in res.notes:
+            out.print(f"note: {note}", soft_wrap=True)
+
+    _run(go)
+
+
 def main() -> None:
     """Entry point of the ``csdf`` script."""
     app()

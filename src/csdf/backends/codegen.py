@@ -127,9 +127,11 @@ class _Gen:
         K = self.K
         c = None
         if op == "min" or op == "max":
-            ta_zero = all(t is None for t in self.tan[a])
-            tb_zero = all(t is None for t in self.tan[b]) if b is not None else True
-            strict = bool(self.T) and ta_zero and not tb_zero  # ties follow b then
+            strict = False
+            if self.T:  # ties follow b when only a has no tangent (see numpy_backend)
+                ta_zero = all(t is None for t in self.tan[a])
+                tb_zero = all(t is None for t in self.tan[b]) if b is not None else True
+                strict = ta_zero and not tb_zero
             cmp = ("<" if strict else "<=") if op == "min" else (">" if strict else ">=")
             c = self.emit(f"{va} {cmp} {vb}")
             v = self.emit(f"{op}_({va}, {vb})")

@@ -21,9 +21,12 @@ from .expr import Expr, Param, param
 from .fit import FitResult, fit, icp
 from .lang import dumps, load, loads
 from .mesh import mesh
+from .sample import sample_surface, sample_volume
 from .shapes import *  # noqa: F403
 from .shapes import REGISTRY, Shape
 from .shapes import __all__ as _shape_names
+from .slicing import save_slice
+from .slicing import slice as slice  # noqa: A004 - public name csdf.slice (not in __all__)
 
 __version__ = "0.1.0"
 
@@ -38,6 +41,7 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
 __all__ = [
     "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
     "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
+    "sample_surface", "sample_volume", "save_slice",
     "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit", "icp", "FitResult",
     *_shape_names,
 ]

@@ -245,6 +245,71 @@ def fit(
     _run(go)
 
 
+@app.command()
+def sample(
+    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Point cloud file (.ply)."),
+    count: int = typer.Option(100_000, "-n", "--count", help="Number of points."),
+    volume: bool = typer.Option(False, "--volume", help="Points in and around the shape "
+                                "with a 'distance' property (default: surface points "
+                                "with normals)."),
+    near: float = typer.Option(0.5, "--near", help="With --volume: fraction of points "
+                               "near the surface."),
+    sigma: float | None = typer.Option(None, "--sigma", help="With --volume: offset "
+                                       "standard deviation (default 1% of the "
+                                       "bounding-box diagonal)."),
+    seed: int | None = typer.Option(None, "--seed", help="Random seed."),
+    ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),
+    param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+):
+    """Sample points uniformly on a model's surface (with normals), or in its volume
+    (with field values)."""
+
+    def go():
+        from .io import write_points
+        from .sample import sample_surface, sample_volume
+
+        if output.suffix.lower() != ".ply":
+            raise CsdfError(f"{output}: the output must end in .ply")
+        m = _load(model)
+        t0 = time.perf_counter()
+        if volume:
+            pts, d = sample_volume(m, count, near_surface=near, sigma=sigma, seed=seed,
+                                   params=_params(param))
+            write_points(output, pts, scalars={"distance": d}, ascii=ascii_)
+        else:
+            pts, nrm = sample_surface(m, count, seed=seed, params=_params(param))
+            write_points(output, pts, nrm, ascii=ascii_)
+        out.print(f"{output}: {len(pts):,} {'volume' if volume else 'surface'} points, "
+                  f"{time.perf_counter() - t0:.2f} s", soft_wrap=True)
+
+    _run(go)
+
+
+@app.command(name="slice")
+def slice_(
+    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Image: .png .pdf .svg"),
+    axis: str = typer.Option("z", "--axis", help="Normal of the plane: x, y or z."),
+    at: float = typer.Option(0.0, "--at", help="Coordinate of the plane along the axis."),
+    resolution: int = typer.Option(400, "--resolution", "-r",
+                                   help="Samples along the longer side."),
+    gradient_error: bool = typer.Option(False, "--gradient-error",
+                                        help="Add a panel of |grad f| - 1."),
+    param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+):
+    """Plot the distance field on a plane: filled values, isolines, the surface in bold."""
+
+    def go():
+        from .slicing import save_slice
+
+        save_slice(_load(model), output, axis=axis, at=at, resolution=resolution,
+                   show_gradient_error=gradient_error, params=_params(param))
+        out.print(f"{output}: slice {axis} = {at:g}", soft_wrap=True)
+
+    _run(go)
+
+
 def main() -> None:
     """Entry point of the ``csdf`` script."""
     app()

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from .errors import CsdfError
 
-__all__ = ["atomic_path", "write_mesh", "MESH_FORMATS"]
+__all__ = ["atomic_path", "write_mesh", "MESH_FORMATS", "read_points", "write_points",
+           "read_point_properties"]
 
 MESH_FORMATS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".glb": "glb"}
 
@@ -30,6 +31,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise CsdfError(f"cannot write {target}: folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{target.name}.", suffix=".tmp")
     os.close(fd)
+    umask = os.umask(0)  # mkstemp makes 0600 files: give the usual permissions instead
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
@@ -64,3 +68,6 @@ def write_mesh(mesh, path: str | os.PathLike) -> Path:
             data = data.encode()
         tmp.write_bytes(data)
     return target
+
+
+from .pointio import read_point_properties, read_points, write_points  # noqa: E402

@@ -49,6 +49,7 @@ TARGET_SCALING = 4.5  # time(2N) / time(N), csdf, 256 -> 512 and 512 -> 1024
 SHAPE_DESC = ("`(sphere(1.0) & box(1.5)) - c - c.orient('x') - c.orient('y')`, "
               "c = cylinder(0.5, 3.0)")
 MB = 1e6  # memory is reported in MB = 10^6 bytes
+MEMORY_GUARD = 0.85  # skip a run projected to need more than this share of MemAvailable
 
 
 # ---------------------------------------------------------------------------- the workload
@@ -251,10 +252,16 @@ def machine_info() -> dict[str, str]:
         numba_v = f"{numba.__version__} (NUMBA_NUM_THREADS = {numba.config.NUMBA_NUM_THREADS})"
     except Exception as exc:
         numba_v = f"unavailable ({type(exc).__name__})"
-    commit = "unknown"
     try:
+        import csdf
+
+        csdf_v, csdf_dir = csdf.__version__, Path(csdf.__file__).resolve().parent
+    except Exception as exc:
+        csdf_v, csdf_dir = f"unavailable ({type(exc).__name__})", HERE.parent
+    commit = "unknown"
+    try:  # the checkout that the imported csdf comes from
         commit = subprocess.run(
-            ["git", "-C", str(HERE.parent), "describe", "--always", "--dirty"],
+            ["git", "-C", str(csdf_dir), "describe", "--always", "--dirty"],
             capture_output=True, text=True, timeout=10, check=False,
         ).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
@@ -270,7 +277,7 @@ def machine_info() -> dict[str, str]:
         "Numba": numba_v,
         "scikit-image": _version("skimage"),
         "trimesh": _version("trimesh"),
-        "csdf": f"{_version('csdf')} (git {commit})",
+        "csdf": f"{csdf_v} (git {commit}, imported from {csdf_dir})",
         "load average at start": _loadavg(),
     }
 
@@ -315,6 +322,7 @@ class Config:
     methods: list[str]
     runs_small: int  # runs at resolutions <= 256
     runs_large: int  # runs at resolutions > 256
+    memory_guard: bool
     output: Path
     command: str
 
@@ -336,6 +344,7 @@ class Series:
     resolution: int
     records: list[dict] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
+    skipped: str = ""  # why the runs were not started (memory guard)
 
     @property
     def label(self) -> str:
@@ -366,10 +375,19 @@ def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
         log(f"\n== resolution {n} ({runs} run{'s' if runs > 1 else ''} each, fresh "
             "subprocesses) ==")
         for kind, method in kinds:
-            series[(kind, method, n)] = Series(kind, method, n)
+            s = series[(kind, method, n)] = Series(kind, method, n)
+            need = projected_mb(series, kind, method, n)
+            avail = mem_available_mb()
+            if cfg.memory_guard and need is not None and avail is not None \
+                    and need > MEMORY_GUARD * avail:
+                s.skipped = (f"skipped: projected memory {fmt_mb(need)} > {MEMORY_GUARD:.0%} "
+                             f"of the available {fmt_mb(avail)} (--no-memory-guard runs it)")
+                log(f"  {s.label:20s} {s.skipped}")
         for i in range(runs):
             for kind, method in kinds:
                 s = series[(kind, method, n)]
+                if s.skipped:
+                    continue
                 args = ["--child", kind, "--resolution", str(n), "--method", method]
                 timeout = 3600.0 if n >= 1024 else 1800.0
                 rec, wall, err = run_child(args, timeout)
@@ -387,6 +405,31 @@ def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
     return series
 
 
+def mem_available_mb() -> float | None:
+    for line in _read("/proc/meminfo").splitlines():
+        if line.startswith("MemAvailable:"):
+            return int(line.split()[1]) * 1024 / MB
+    return None
+
+
+def projected_mb(series: dict, kind: str, method: str, n: int) -> float | None:
+    """Projected RSS (MB) of a child at resolution ``n``: its RSS before the call plus the
+    peak of the largest smaller resolution grown by the observed growth per doubling
+    (at least 4x, as for a surface; 8x per doubling before two resolutions are known)."""
+    done = sorted((r, s) for (k, m, r), s in series.items()
+                  if k == kind and m == method and r < n and s.peak is not None)
+    if not done:
+        return None
+    n1, s1 = done[-1]
+    growth = 8.0
+    if len(done) >= 2:
+        n0, s0 = done[-2]
+        if s0.peak:
+            growth = max(4.0, (s1.peak / s0.peak) ** (1.0 / math.log2(n1 / n0)))
+    rss = statistics.median(r["rss_before_kib"] for r in s1.records) * 1024 / MB
+    return rss + s1.peak * growth ** math.log2(n / n1)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true",
@@ -399,6 +442,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="runs per measurement at resolutions <= 256 (default 3; 1 with --quick)")
     p.add_argument("--runs-large", type=int, default=2,
                    help="runs per measurement at resolutions > 256 (default 2)")
+    p.add_argument("--no-memory-guard", action="store_true",
+                   help="run a measurement even when its projected memory exceeds "
+                   f"{MEMORY_GUARD:.0%} of MemAvailable")
     p.add_argument("--output", type=Path, default=HERE / "MESH_RESULTS.md",
                    help="Markdown results file (default benchmarks/MESH_RESULTS.md)")
     p.add_argument("--child", choices=("csdf", "dense"), help=argparse.SUPPRESS)
@@ -422,6 +468,8 @@ def main(argv: list[str] | None = None) -> int:
     if Path(python).is_relative_to(Path.cwd()):
         python = os.path.relpath(python)
     script = sys.argv[0] if argv is None else "benchmarks/bench_mesh.py"
+    env = "".join(f"{k}={shlex.quote(os.environ[k])} " for k in ("PYTHONPATH", "NUMBA_NUM_THREADS")
+                  if os.environ.get(k))
     cfg = Config(
         resolutions=[128, 256] if a.quick else [256, 512],
         scaling_resolution=None if a.quick else 1024,
@@ -429,8 +477,9 @@ def main(argv: list[str] | None = None) -> int:
         methods=list(dict.fromkeys(a.methods)),
         runs_small=runs_small,
         runs_large=a.runs_large,
+        memory_guard=not a.no_memory_guard,
         output=a.output,
-        command=shlex.join([python, script, *(sys.argv[1:] if argv is None else argv)]),
+        command=env + shlex.join([python, script, *(sys.argv[1:] if argv is None else argv)]),
     )
     return run(cfg)
 
@@ -488,15 +537,19 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
         f"* Runs per measurement (resolution: runs): {runs_text}; the tables give the "
         f"**median** over the runs (every run is under *Raw samples*). The runs of one "
         f"resolution are interleaved (csdf methods, then dense, repeated).\n"
-        f"* Targets use method `{primary}`; other methods are extra rows.\n")
+        f"* Targets use method `{primary}`; other methods are extra rows.\n"
+        f"* Memory guard{'' if cfg.memory_guard else ' (off in this run)'}: a measurement "
+        f"whose projected memory (the previous resolution's peak grown by the observed "
+        f"growth per doubling, at least 4x) exceeds {MEMORY_GUARD:.0%} of MemAvailable is "
+        f"skipped, not run into the OOM killer.\n")
 
     L.append("## Results\n")
     rows = []
     for (kind, _method, n), s in series.items():
         r0 = s.records[0] if s.records else None
         if r0 is None:
-            rows.append([str(n), s.label, "-", "0", "-", "-", "-", "-", "-",
-                         "; ".join(s.errors)])
+            rows.append([str(n), s.label, "-", "0", "-", "-", "-", "-", "-", "-",
+                         s.skipped or "; ".join(s.errors)])
             continue
         peaks = [peak_mb(r) for r in s.records]
         parts = (f"eval {fmt_s(s.med(lambda r: r['eval_seconds']))} + MC "

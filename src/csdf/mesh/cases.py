@@ -140,11 +140,11 @@ def _build_tables():
                 comp[e] = ci
         comp_lists.append(comp)
     max_tris = max(len(t) for t in tri_lists)
-    tri = np.full((256, max_tris, 3), -1, dtype=np.int64)
+    tri = np.full((256, max_tris, 3), -1, dtype=np.int8)
     for c, tris in enumerate(tri_lists):
         if tris:
             tri[c, : len(tris)] = tris
-    comp = np.array(comp_lists, dtype=np.int64)
+    comp = np.array(comp_lists, dtype=np.int8)
     return tri, comp, max_tris, int(comp.max()) + 1
 
 

@@ -168,13 +168,15 @@ def extract(
     if progress:
         progress("samples", len(bricks), len(bricks))
     B = BRICK
-    inside = vals < 0
-    case = np.zeros((len(bricks), B, B, B), dtype=np.int64)
+    inside = (vals < 0).view(np.uint8)
+    case = np.zeros((len(bricks), B, B, B), dtype=np.uint8)
     for c, (dx, dy, dz) in enumerate(CORNERS.tolist()):
-        case |= inside[:, dx:dx + B, dy:dy + B, dz:dz + B].astype(np.int64) << c
+        case |= inside[:, dx:dx + B, dy:dy + B, dz:dz + B] << np.uint8(c)
+    del inside
     kb, vi, vj, vk = np.nonzero((case != 0) & (case != 255))
     vox = bricks[kb] + np.stack([vi, vj, vk], axis=1)  # (A, 3) voxel index (lower corner)
-    vcase = case[kb, vi, vj, vk]
+    vcase = case[kb, vi, vj, vk].astype(np.intp)
+    del case
     # crossed edges of every active voxel
     comp = COMPONENT_TABLE[vcase]  # (A, 12)
     av, ae = np.nonzero(comp >= 0)
@@ -199,10 +201,10 @@ def extract(
     if method == "mc":
         tri = TRI_TABLE[vcase]  # (A, T, 3) local edges
         # map (active voxel, local edge) -> unique edge id
-        lut = np.full((len(vox), 12), -1, dtype=np.int64)
+        lut = np.full((len(vox), 12), -1, dtype=np.int32)
         lut[av, ae] = inv
         a_idx, t_idx = np.nonzero(tri[:, :, 0] >= 0)
-        faces = lut[a_idx[:, None], tri[a_idx, t_idx]]
+        faces = lut[a_idx[:, None], tri[a_idx, t_idx]].astype(np.int64)
         return roots, faces
     return _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, axis[first], ukeys, dims,
                          gradients, on_box, values)

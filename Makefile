@@ -18,6 +18,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_eval.py
+	$(PY) benchmarks/bench_mesh.py
+	@for b in render fit; do \
+	  if [ -f benchmarks/bench_$$b.py ]; then $(PY) benchmarks/bench_$$b.py || exit 1; fi; \
+	done
 
 demo: $(STAMP)
 	$(PY) -m csdf.demo

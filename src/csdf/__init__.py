@@ -21,7 +21,9 @@ from .expr import Expr, Param, param
 from .fit import FitResult, fit, icp
 from .lang import dumps, load, loads
 from .mesh import mesh
+from .render import Camera, Render, render
 from .sample import sample_surface, sample_volume
+from .scan import scan
 from .shapes import *  # noqa: F403
 from .shapes import REGISTRY, Shape
 from .shapes import __all__ as _shape_names
@@ -41,7 +43,7 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
 __all__ = [
     "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
     "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
-    "sample_surface", "sample_volume", "save_slice",
+    "sample_surface", "sample_volume", "save_slice", "Camera", "Render", "render", "scan",
     "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit", "icp", "FitResult",
     *_shape_names,
 ]

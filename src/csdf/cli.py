@@ -310,6 +310,112 @@ def slice_(
     _run(go)
 
 
+def _size(text: str) -> tuple[int, int]:
+    w, sep, h = text.lower().partition("x")
+    try:
+        if not sep:
+            raise ValueError
+        return int(w), int(h)
+    except ValueError:
+        raise CsdfError(f"--size expects WIDTHxHEIGHT (e.g. 640x480), got {text!r}") from None
+
+
+def _vec3(text: str | None, flag: str) -> tuple[float, float, float] | None:
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        x, y, z = (float(p) for p in parts)
+    except ValueError:
+        raise CsdfError(f"{flag} expects x,y,z (three numbers), got {text!r}") from None
+    return x, y, z
+
+
+def _view(m, size: str, eye: str | None, target: str | None, fov: float, params: dict):
+    from .render import auto_camera
+
+    w, h = _size(size)
+    return auto_camera(m, w, h, fov=fov, eye=_vec3(eye, "--eye"),
+                       target=_vec3(target, "--target"), params=params)
+
+
+_EYE_HELP = "Camera position x,y,z (default: looking at the model from the +x -y +z octant)."
+_TARGET_HELP = "Point looked at, x,y,z (default: the centre of the model's bounding box)."
+
+
+@app.command(name="render")
+def render_(
+    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Image file (.png)."),
+    size: str = typer.Option("640x480", "--size", help="WIDTHxHEIGHT in pixels."),
+    eye: str | None = typer.Option(None, "--eye", help=_EYE_HELP),
+    target: str | None = typer.Option(None, "--target", help=_TARGET_HELP),
+    fov: float = typer.Option(40.0, "--fov", help="Vertical field of view in degrees."),
+    shadows: bool = typer.Option(False, "--shadows", help="Soft shadows."),
+    ao: bool = typer.Option(False, "--ao", help="Ambient occlusion."),
+    param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+):
+    """Render a model to a PNG by sphere tracing (exact normals, Lambert shading)."""
+
+    def go():
+        from .render import render
+
+        if output.suffix.lower() != ".png":
+            raise CsdfError(f"{output}: the output must end in .png")
+        m = _load(model)
+        params = _params(param)
+        cam = _view(m, size, eye, target, fov, params)
+        r = render(m, cam, params=params, shadows=shadows, ao=ao)
+        r.save(output)
+        out.print(f"{output}: {cam.width}x{cam.height}, {r.mask.mean():.0%} of the pixels "
+                  f"on the surface, {r.stats['seconds']:.2f} s", soft_wrap=True)
+
+    _run(go)
+
+
+@app.command(name="scan")
+def scan_(
+    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Point cloud file (.ply)."),
+    size: str = typer.Option("640x480", "--size", help="Sensor WIDTHxHEIGHT in pixels."),
+    eye: str | None = typer.Option(None, "--eye", help=_EYE_HELP),
+    target: str | None = typer.Option(None, "--target", help=_TARGET_HELP),
+    fov: float = typer.Option(40.0, "--fov", help="Vertical field of view in degrees."),
+    noise: float = typer.Option(0.0, "--noise", help="Range noise standard deviation "
+                                "(model units, along the ray)."),
+    outliers: float = typer.Option(0.0, "--outliers", help="Fraction of points replaced "
+                                   "by outliers in the view frustum."),
+    seed: int | None = typer.Option(None, "--seed", help="Random seed."),
+    world: bool = typer.Option(False, "--world", help="Write world coordinates (default: "
+                               "the camera frame, OpenCV: x right, y down, z forward)."),
+    ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),
+    param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+):
+    """Simulate a depth sensor: the visible surface points of a model, with normals."""
+
+    def go():
+        from .io import write_points
+        from .scan import scan
+
+        if output.suffix.lower() != ".ply":
+            raise CsdfError(f"{output}: the output must end in .ply")
+        m = _load(model)
+        params = _params(param)
+        cam = _view(m, size, eye, target, fov, params)
+        t0 = time.perf_counter()
+        pts, nrm = scan(m, cam, noise=noise, outliers=outliers, seed=seed, params=params)
+        if world:
+            pts, nrm = cam.camera_to_world(pts), nrm @ cam.R.T
+        write_points(output, pts, nrm, ascii=ascii_)
+        frame = "world" if world else "camera"
+        out.print(f"{output}: {len(pts):,} points ({frame} frame), "
+                  f"{time.perf_counter() - t0:.2f} s", soft_wrap=True)
+
+    _run(go)
+
+
 def main() -> None:
     """Entry point of the ``csdf`` script."""
     app()

@@ -22,7 +22,7 @@ from ..ops import OPS_BY_CODE
 
 __all__ = ["generate", "structure_key", "CODEGEN_VERSION"]
 
-CODEGEN_VERSION = 5
+CODEGEN_VERSION = 6
 BLOCK = 256
 SEGMENT = 2000  # statements per generated function
 
@@ -127,11 +127,9 @@ class _Gen:
         K = self.K
         c = None
         if op == "min" or op == "max":
-            strict = False
-            if self.T:  # ties follow b when only a has no tangent (see numpy_backend)
-                ta_zero = all(t is None for t in self.tan[a])
-                tb_zero = all(t is None for t in self.tan[b]) if b is not None else True
-                strict = ta_zero and not tb_zero
+            # ties follow b when a is a constant (see numpy_backend)
+            P, C = self.low.n_params, self.low.n_consts
+            strict = bool(self.T) and 3 + P <= a < 3 + P + C
             cmp = ("<" if strict else "<=") if op == "min" else (">" if strict else ">=")
             c = self.emit(f"{va} {cmp} {vb}")
             v = self.emit(f"{op}_({va}, {vb})")

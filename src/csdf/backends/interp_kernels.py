@@ -213,7 +213,7 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
         for j in range(B):
             a = R[ia, j]
             b = R[ib, j]
-            if (flags & 2) and not (flags & 1):  # only a has no tangent: ties follow b
+            if flags & 8:  # a is a constant: ties follow b
                 pick_a = a < b if op == MIN else a > b
             else:
                 pick_a = a <= b if op == MIN else a >= b

@@ -153,7 +153,8 @@ class Lowered:
 
     def flagged_code(self, zero_uniform: np.ndarray) -> np.ndarray:
         """Instructions with flag bits: 1 = ``b``'s tangent is structurally zero, 2 = ``a``'s,
-        4 = the result's (as the reference treats it: no tangent, not ``0 * factor``)."""
+        4 = the result's (as the reference treats it: no tangent, not ``0 * factor``),
+        8 = ``a`` is a constant (``min``/``max`` ties then follow ``b``)."""
         code = self.code.copy()
         if len(code) == 0:
             return code
@@ -166,7 +167,9 @@ class Lowered:
             za = bool(zero[a])
             zb = bool(zero[b]) if binary else True
             zd = (za and zb) or info.name in ("floor", "step", "sign")
-            code[k, 4] = (1 if (binary and zb) else 0) | (2 if za else 0) | (4 if zd else 0)
+            a_const = 3 + self.n_params <= a < 3 + self.n_params + self.n_consts
+            code[k, 4] = ((1 if (binary and zb) else 0) | (2 if za else 0) | (4 if zd else 0)
+                          | (8 if a_const else 0))
             zero[d] = zd
         return code
 

@@ -59,8 +59,9 @@ def _select(mask, da, db, n: int, t: int, dtype):
     return np.where(mask[:, None], za, zb)
 
 
-def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype):
-    """Tangent of ``out = op(a, b)`` given tangents ``da``, ``db``."""
+def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype, a_const: bool = False):
+    """Tangent of ``out = op(a, b)`` given tangents ``da``, ``db``; ``a_const``: operand
+    ``a`` is a constant (for the tie rule of ``min``/``max``)."""
     one = dtype.type(1)
     if op == "add":
         return _add(da, db)
@@ -75,9 +76,9 @@ def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype):
     if op == "square":
         return _sc(2 * a, da)
     if op in ("min", "max"):
-        # ties follow a, unless only a has no tangent (a constant): then b, whose
-        # one-sided derivative is the informative one (a box's face normal at f = 0)
-        strict = da is None and db is not None
+        # ties follow a, unless a is a constant: then b, whose one-sided derivative is
+        # the informative one (a box's face normal exactly on the surface)
+        strict = a_const
         if op == "min":
             mask = a < b if strict else a <= b
         else:
@@ -152,6 +153,7 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
             for op, dst, a, b in prog.code.tolist()]
     fns = {name: numpy_impl(name) for name, *_ in code}
     n_slots = prog.n_slots
+    c_lo, c_hi = 3 + P, 3 + P + len(prog.consts)  # constant slots
     chunk = CHUNK if T == 0 else max(1024, (1 << 20) // max(T, 1) // 4)
 
     seeds: list = [None] * n_slots
@@ -185,7 +187,8 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
                 out = fns[name](va, vb) if arity == 2 else fns[name](va)
                 if T:
                     tans[dst] = _tangent(name, va, vb, out, tans[a],
-                                         tans[b] if arity == 2 else None, m, T, dtype)
+                                         tans[b] if arity == 2 else None, m, T, dtype,
+                                         c_lo <= a < c_hi)
                 vals[dst] = out
         v = vals[prog.output]
         res["value"][start:stop] = v
@@ -236,7 +239,7 @@ def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int):
             va, vb = vals[a], (vals[b] if info.arity == 2 else None)
             v = numpy_impl(info.name)(va, vb) if info.arity == 2 else numpy_impl(info.name)(va)
             t = _tangent(info.name, va, vb, v, tans[a], tans[b] if info.arity == 2 else None,
-                         1, P, dtype)
+                         1, P, dtype, 3 + P <= a < 3 + P + len(prog.consts))
             vals[dst], tans[dst] = v, t
             out_v.append(float(v))
             out_d.append(np.zeros(P) if t is None else np.asarray(t, dtype=np.float64))

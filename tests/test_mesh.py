@@ -117,6 +117,17 @@ def test_case_table_is_consistent():
         assert crossed == {e for e in range(12) if COMPONENT_TABLE[case, e] >= 0}
         used = {e for t in TRI_TABLE[case] for e in t if e >= 0}
         assert used == crossed
+    # no fan diagonal joins two edges of one cube face (a neighbour could repeat it)
+    from csdf.mesh.cases import _FACES_OF_EDGE
+
+    for case in range(256):
+        polys = cube_components([bool(case >> i & 1) for i in range(8)])
+        diag = {tuple(sorted((int(a), int(b)))) for t in TRI_TABLE[case] if t[0] >= 0
+                for a, b in ((t[0], t[2]),) }
+        boundary = {tuple(sorted((p[k], p[(k + 1) % len(p)]))) for p in polys
+                    for k in range(len(p))}
+        for a, b in diag - boundary:
+            assert not (_FACES_OF_EDGE[a] & _FACES_OF_EDGE[b]), (case, a, b)
     # complementary patterns give the same number of triangles
     counts = (TRI_TABLE[:, :, 0] >= 0).sum(axis=1)
     assert counts[0] == counts[255] == 0

@@ -416,6 +416,41 @@ def scan_(
     _run(go)
 
 
+zoo_app = typer.Typer(help="The model zoo: parametric furniture, parts, vehicles, buildings.",
+                      no_args_is_help=True)
+app.add_typer(zoo_app, name="zoo")
+
+
+@zoo_app.command("list")
+def zoo_list():
+    """List the zoo's models with their parameters."""
+
+    def go():
+        from . import zoo
+
+        t = Table("model", "parameters", "description")
+        for name in zoo.names():
+            info = zoo.info(name)
+            t.add_row(name, ", ".join(p.name for p, _ in info.params), info.title)
+        out.print(t)
+
+    _run(go)
+
+
+@zoo_app.command("show")
+def zoo_show(name: str = typer.Argument(..., help="Model name (see csdf zoo list).")):
+    """Print a zoo model's .csdf source."""
+
+    def go():
+        from . import zoo
+
+        if name not in zoo.names():
+            raise CsdfError(f"unknown zoo model {name!r}; models: {', '.join(zoo.names())}")
+        sys.stdout.write(zoo.source(name))
+
+    _run(go)
+
+
 def main() -> None:
     """Entry point of the ``csdf`` script."""
     app()

@@ -137,11 +137,17 @@ def mesh(
         )
     grid = Grid(origin=origin, h=h, dims=dims)
 
+    # one backend for the whole mesh: a sample shared by two bricks must get the same
+    # value (and sign) whichever chunk evaluates it; backends differ in the last bits
+    from ..backends import fast
+
+    backend = "fast" if fast.available() else "numpy"
+
     def values(p):
-        return prog(p, pv, backend="auto")
+        return prog(p, pv, backend=backend)
 
     def gradients(p):
-        return prog.gradient(p, pv, backend="auto")
+        return prog.gradient(p, pv, backend=backend)
 
     def intervals(lo, hi):
         return evaluate_intervals(prog, lo, hi, params=pv)

@@ -12,7 +12,8 @@ polygons that separate inside from outside:
 3. every crossed edge lies on two faces, so the pairs link the crossed edges into
    disjoint cycles: the polygons (one per surface component inside the cube);
 4. each polygon is oriented so its normal points from inside to outside, and
-   triangulated as a fan.
+   triangulated as a fan from an apex whose diagonals stay off the cube's faces (a
+   diagonal on a face could be repeated by the neighbouring cube).
 
 The same components give manifold dual contouring one vertex per component.
 
@@ -123,6 +124,32 @@ def _orient(poly: list[int], inside: list[bool]) -> list[int]:
     return poly if normal @ outward > 0 else poly[::-1]
 
 
+def _edge_faces() -> dict[int, set[int]]:
+    faces: dict[int, set[int]] = {}
+    for fi, cyc in enumerate(_FACES):
+        for k in range(4):
+            faces.setdefault(_EDGE_OF[(cyc[k], cyc[(k + 1) % 4])], set()).add(fi)
+    return faces
+
+
+_FACES_OF_EDGE = _edge_faces()
+
+
+def _fan_apex(poly: list[int]) -> int:
+    """A fan apex whose diagonals never join two edges of one cube face.
+
+    Such a diagonal could also be drawn by the neighbouring cube across that face (an
+    ambiguous face), leaving a mesh edge shared by four triangles. Every polygon of the
+    table has such an apex.
+    """
+    n = len(poly)
+    for a in range(n):
+        if all(not (_FACES_OF_EDGE[poly[a]] & _FACES_OF_EDGE[poly[j]])
+               for j in range(n) if j not in (a, (a - 1) % n, (a + 1) % n)):
+            return a
+    raise AssertionError(f"no fan apex for polygon {poly}")  # pragma: no cover
+
+
 def _build_tables():
     tri_lists = []
     comp_lists = []
@@ -131,8 +158,10 @@ def _build_tables():
         polys = cube_components(inside)
         tris = []
         for p in polys:
-            for k in range(1, len(p) - 1):
-                tris.append((p[0], p[k], p[k + 1]))
+            a = _fan_apex(p)
+            q = p[a:] + p[:a]
+            for k in range(1, len(q) - 1):
+                tris.append((q[0], q[k], q[k + 1]))
         tri_lists.append(tris)
         comp = [-1] * 12
         for ci, p in enumerate(polys):

@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: test demo bench lint clean
+.PHONY: test demo bench gallery lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -25,6 +25,9 @@ bench: $(STAMP)
 
 demo: $(STAMP)
 	$(PY) -m csdf.demo
+
+gallery: $(STAMP)
+	$(PY) docs/make_gallery.py docs/gallery.png
 
 lint: $(STAMP)
 	$(PY) -m ruff check src tests examples benchmarks

@@ -438,15 +438,35 @@ def zoo_list():
 
 
 @zoo_app.command("show")
-def zoo_show(name: str = typer.Argument(..., help="Model name (see csdf zoo list).")):
-    """Print a zoo model's .csdf source."""
+def zoo_show(
+    name: str = typer.Argument(..., help="Model name (see csdf zoo list)."),
+    source: bool = typer.Option(False, "--source", help="Print the .csdf source only."),
+):
+    """Describe a zoo model: parameters with ranges, sizes; or print its source."""
 
     def go():
+        import difflib
+
         from . import zoo
 
-        if name not in zoo.names():
-            raise CsdfError(f"unknown zoo model {name!r}; models: {', '.join(zoo.names())}")
-        sys.stdout.write(zoo.source(name))
+        names = zoo.names()
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=3)
+            hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+            raise CsdfError(f"unknown zoo model {name!r}{hint} (models: {', '.join(names)})")
+        if source:
+            sys.stdout.write(zoo.source(name))
+            return
+        info = zoo.info(name)
+        prog = zoo.load(name).compile()
+        out.print(f"[bold]{name}[/]: {info.description}", soft_wrap=True)
+        t = Table("parameter", "default", "range", "meaning")
+        for p, doc in info.params:
+            t.add_row(p.name, f"{p.default:g}", f"[{p.lo:g}, {p.hi:g}]", doc)
+        out.print(t)
+        out.print(f"{prog.exactness}, Lipschitz {prog.lipschitz:g}; compact "
+                  f"{prog.compact_nbytes()} bytes, expanded {prog.nbytes} bytes; "
+                  f"{info.path}", soft_wrap=True)
 
     _run(go)
 

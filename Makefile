@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: test demo bench gallery lint clean
+.PHONY: test demo bench gallery storage lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 test: $(STAMP)
-	$(PY) -m ruff check src tests examples benchmarks
+	$(PY) -m ruff check src tests examples benchmarks docs
 	$(PY) -m pytest
 
 bench: $(STAMP)
@@ -26,11 +26,14 @@ bench: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m csdf.demo
 
+storage: $(STAMP)
+	$(PY) docs/storage_table.py
+
 gallery: $(STAMP)
 	$(PY) docs/make_gallery.py docs/gallery.png
 
 lint: $(STAMP)
-	$(PY) -m ruff check src tests examples benchmarks
+	$(PY) -m ruff check src tests examples benchmarks docs
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .hypothesis

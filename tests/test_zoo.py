@@ -157,14 +157,11 @@ def test_cross_shaft_is_small():
 
 
 def test_cli_zoo_list_and_show():
-    """`csdf zoo list` and `csdf zoo show NAME` (skipped until csdf.cli has them)."""
-    import typer
+    """`csdf zoo list` and `csdf zoo show NAME [--source]`."""
     from typer.testing import CliRunner
 
     from csdf.cli import app
 
-    if "zoo" not in typer.main.get_command(app).commands:
-        pytest.skip("the `csdf zoo` verbs are not wired into csdf.cli yet")
     runner = CliRunner()
     r = runner.invoke(app, ["zoo", "list"])
     assert r.exit_code == 0, r.output

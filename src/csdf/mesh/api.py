@@ -106,8 +106,20 @@ def mesh(
     pv = dict(params or {})
     prog.param_values(pv)  # validates names now
     if bounds is None:
-        b = shp.bounds if shp is not None and shp.bounds is not None and not pv else None
-        b = auto_bounds(prog, pv) if b is None else b
+        known = shp.bounds if shp is not None and shp.bounds is not None else None
+        if known is not None and not np.all(np.isfinite(known)):
+            known = None
+        b = known if not pv else None
+        if b is None:
+            try:
+                b = auto_bounds(prog, pv)
+            except CsdfError:
+                # interval arithmetic can be too loose to find the box (polygons' winding
+                # sign, blends); a shape's own bounds hold for every parameter value
+                # inside the declared ranges, so use them when the given values are
+                if known is None or not _in_ranges(prog, pv):
+                    raise
+                b = known
     else:
         try:
             b = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
@@ -165,6 +177,13 @@ def mesh(
         "method": method, "voxel_size": h, "dims": dims, "seconds": time.perf_counter() - t0,
     }
     return m
+
+
+def _in_ranges(prog, pv: dict) -> bool:
+    """Every given parameter value lies inside its declared range (both ends finite)."""
+    decl = {p.name: p for p in prog.params}
+    return all(math.isfinite(decl[k].lo) and math.isfinite(decl[k].hi)
+               and decl[k].lo <= float(v) <= decl[k].hi for k, v in pv.items())
 
 
 class _Progress:

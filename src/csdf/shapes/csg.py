@@ -60,7 +60,9 @@ def _smooth(ds: list[Expr], k: Expr, n: int) -> Expr:
     for d in ds:
         h = maximum(k - (d - m), 0.0) / k
         total = total + h * h
-    return m - k * 0.25 * (total - 1.0)
+    # every h <= 1 (d >= m), so total <= len(ds) and the cap changes no value; it keeps
+    # interval arithmetic, which does not know d >= m, from making h huge on large boxes
+    return m - k * 0.25 * (minimum(total, float(len(ds))) - 1.0)
 
 
 def _exponential(ds: list[Expr], k: Expr, n: int) -> Expr:
@@ -68,7 +70,7 @@ def _exponential(ds: list[Expr], k: Expr, n: int) -> Expr:
     total: Expr | float = 0.0
     for d in ds:
         total = total + exp(-(d - m) / k)
-    return m - k * log(total)
+    return m - k * log(minimum(total, float(len(ds))))  # each term <= 1: same cap
 
 
 def _chamfer2(a: Expr, b: Expr, k: Expr, n: int) -> Expr:

@@ -97,8 +97,8 @@ def axis_vector(axis) -> np.ndarray:
 
 
 def _rotated_bounds(b: np.ndarray | None, R: np.ndarray) -> np.ndarray | None:
-    if b is None:
-        return None
+    if b is None or not np.all(np.isfinite(b)):
+        return None  # unknown (inf * 0 would make NaN bounds)
     corners = np.array(
         [[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
     )

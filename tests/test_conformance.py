@@ -123,6 +123,14 @@ def test_random_expression_dags(backend):
         pts = np.random.default_rng(seed).uniform(-3, 3, (257, 3))
         ref = prog.value_grad_param_jacobian(pts, backend="numpy")
         got = prog.value_grad_param_jacobian(pts, backend=backend)
+        # ill-conditioned points (tan(exp(exp(x))) at x = 3: tan of 5e8) turn one-ulp
+        # differences between math libraries into large ones; compare where a one-ulp
+        # nudge of the input moves the reference by less than the tolerance
+        nudged = prog(np.nextafter(pts, np.inf), backend="numpy")
+        with np.errstate(invalid="ignore"):
+            stable = ~(np.abs(nudged - ref[0]) > 1e-11 * (1 + np.abs(ref[0])))
+        ref = tuple(r[stable] for r in ref)
+        got = tuple(g[stable] for g in got)
         finite = np.isfinite(ref[0])
         for what, g, r in zip(("value", "gradient", "jacobian"), got, ref):
             if what != "value":  # derivatives where the value is finite (NaN -> NaN)

@@ -115,6 +115,32 @@ class _Printer:
         return f"{s.name}({', '.join(parts)})"
 
 
+def _all_params(shape: Shape) -> list:
+    """Parameters used anywhere in the call tree (also those a simplification removed
+    from the expression, e.g. ``0 * r``), sorted by name."""
+    from ..expr import expr_params
+
+    exprs = []
+    stack, seen = [shape], set()
+    while stack:
+        s = stack.pop()
+        if id(s) in seen:
+            continue
+        seen.add(id(s))
+        stack.extend(s.children)
+        vals = list(s.args) + list(s.kwargs.values())
+        while vals:
+            v = vals.pop()
+            if isinstance(v, Expr):
+                exprs.append(v)
+            elif isinstance(v, (tuple, list)):
+                vals.extend(v)
+    found = {p.name: p for e in exprs for p in expr_params(e)}
+    for p in shape.params:
+        found[p.name] = p
+    return [found[k] for k in sorted(found)]
+
+
 def dumps(shape: Shape) -> str:
     """``.csdf`` text of a shape; :func:`csdf.loads` of it compiles to identical bytecode.
 
@@ -124,7 +150,7 @@ def dumps(shape: Shape) -> str:
     if not isinstance(shape, Shape):
         raise CsdfError(f"dumps expects a Shape, got {type(shape).__name__}")
     lines = ["# written by csdf.dumps"]
-    for p in shape.params:
+    for p in _all_params(shape):
         rng = ""
         if not (math.isinf(p.lo) and math.isinf(p.hi)):
             rng = f" in [{_num(p.lo)}, {_num(p.hi)}]"

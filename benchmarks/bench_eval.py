@@ -19,10 +19,8 @@ peak-memory measurements (``--child startup|memory``, not meant to be used by ha
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import os
-import platform
 import resource
 import shlex
 import statistics
@@ -34,6 +32,9 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import loadavg, machine_info, md_table, read_text  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 MODELS = ("sphere", "csg", "union20")
@@ -231,68 +232,10 @@ def max_abs_diff(a, b) -> float | None:
 
 
 # ---------------------------------------------------------------------------- machine info
-def _read(path: str) -> str:
-    try:
-        return Path(path).read_text()
-    except OSError:
-        return ""
-
-
-def machine_info() -> dict[str, str]:
-    cpu = "unknown"
-    for line in _read("/proc/cpuinfo").splitlines():
-        if line.lower().startswith("model name"):
-            cpu = line.split(":", 1)[1].strip()
-            break
-    ram = "unknown"
-    for line in _read("/proc/meminfo").splitlines():
-        if line.startswith("MemTotal:"):
-            ram = f"{int(line.split()[1]) / 2**20:.1f} GiB"
-            break
-    logical = os.cpu_count() or 0
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else logical
-    try:
-        import numba
-
-        numba_v = numba.__version__
-        threads = str(numba.config.NUMBA_NUM_THREADS)
-    except Exception:
-        numba_v, threads = "not installed", "-"
-    import csdf
-
-    commit = "unknown"
-    try:
-        commit = subprocess.run(
-            ["git", "-C", str(HERE.parent), "describe", "--always", "--dirty"],
-            capture_output=True, text=True, timeout=10, check=False,
-        ).stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {
-        "date": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
-        "CPU": cpu,
-        "cores": f"{logical} logical, {usable} usable by this process",
-        "RAM": ram,
-        "OS": f"{platform.system()} {platform.release()} ({platform.machine()})",
-        "Python": f"{platform.python_version()} ({sys.executable})",
-        "NumPy": np.__version__,
-        "Numba": f"{numba_v} (NUMBA_NUM_THREADS = {threads})",
-        "csdf": f"{csdf.__version__} (git {commit})",
-        "load average at start": _loadavg(),
-    }
-
-
-def _loadavg() -> str:
-    try:
-        return " ".join(f"{v:.2f}" for v in os.getloadavg()) + " (1, 5, 15 min)"
-    except OSError:
-        return "unknown"
-
-
 # ---------------------------------------------------------------------------- children
 def _status_kib(field: str) -> int:
     """A ``/proc/self/status`` field in KiB (``VmRSS``: now, ``VmHWM``: peak); -1 if none."""
-    for line in _read("/proc/self/status").splitlines():
+    for line in read_text("/proc/self/status").splitlines():
         if line.startswith(field + ":"):
             return int(line.split()[1])
     return -1
@@ -433,12 +376,6 @@ def fmt_s(t: float | None) -> str:
 def fmt_n(n: int) -> str:
     e = int(round(np.log10(n)))
     return f"10^{e}" if 10**e == n else f"{n:,}"
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(out)
 
 
 def status(ok: bool | None) -> str:
@@ -703,7 +640,7 @@ def report(cfg, info, progs, boxes, backends_ok, kw_ok, results, diffs, copy_tim
     L.append(f"Command: `{cfg.command}`  \nTotal benchmark time: {elapsed:.0f} s\n")
     L.append("## Machine\n")
     L.append(md_table(["", ""], [[k, v] for k, v in info.items()]
-                      + [["load average at end", _loadavg()]]) + "\n")
+                      + [["load average at end", loadavg()]]) + "\n")
     for b, err in backends_ok.items():
         if err is not None:
             L.append(f"**backend `{b}` unavailable**: `{err}`\n")

@@ -22,13 +22,9 @@ See ``benchmarks/README.md``.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import math
-import os
-import platform
 import shlex
 import statistics
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -36,6 +32,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import loadavg, machine_info, md_table  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 
@@ -97,66 +96,6 @@ def err_text(exc: BaseException, limit: int = 160) -> str:
 
 
 # ---------------------------------------------------------------------------- machine info
-def _read(path: str) -> str:
-    try:
-        return Path(path).read_text()
-    except OSError:
-        return ""
-
-
-def _loadavg() -> str:
-    try:
-        return " ".join(f"{v:.2f}" for v in os.getloadavg()) + " (1, 5, 15 min)"
-    except OSError:
-        return "unknown"
-
-
-def machine_info(o3d_version: str) -> dict[str, str]:
-    cpu = "unknown"
-    for line in _read("/proc/cpuinfo").splitlines():
-        if line.lower().startswith("model name"):
-            cpu = line.split(":", 1)[1].strip()
-            break
-    ram = "unknown"
-    for line in _read("/proc/meminfo").splitlines():
-        if line.startswith("MemTotal:"):
-            ram = f"{int(line.split()[1]) / 2**20:.1f} GiB"
-            break
-    logical = os.cpu_count() or 0
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else logical
-    try:
-        import numba
-
-        numba_v = f"{numba.__version__} (NUMBA_NUM_THREADS = {numba.config.NUMBA_NUM_THREADS})"
-    except Exception:
-        numba_v = "not installed"
-    import scipy
-
-    import csdf
-
-    commit = "unknown"
-    try:
-        commit = subprocess.run(
-            ["git", "-C", str(HERE.parent), "describe", "--always", "--dirty"],
-            capture_output=True, text=True, timeout=10, check=False,
-        ).stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {
-        "date": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
-        "CPU": cpu,
-        "cores": f"{logical} logical, {usable} usable by this process",
-        "RAM": ram,
-        "OS": f"{platform.system()} {platform.release()} ({platform.machine()})",
-        "Python": f"{platform.python_version()} ({sys.executable})",
-        "NumPy / SciPy": f"{np.__version__} / {scipy.__version__}",
-        "Numba": numba_v,
-        "Open3D": o3d_version,
-        "csdf": f"{csdf.__version__} (git {commit})",
-        "load average at start": _loadavg(),
-    }
-
-
 # ---------------------------------------------------------------------------- models
 def local_models() -> dict:
     """Stand-ins used when ``csdf.zoo`` cannot be imported: two small parametric parts."""
@@ -749,12 +688,6 @@ def median_or_none(xs) -> float | None:
     return statistics.median(xs) if xs else None
 
 
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(out)
-
-
 def status(ok: bool | None) -> str:
     return "n/a" if ok is None else ("PASS" if ok else "FAIL")
 
@@ -895,7 +828,7 @@ def report(args, command, info, models, model_note, scan_note, o3d_note, cells, 
     L.append(f"Command: `{command}`  \nTotal benchmark time: {elapsed:.0f} s\n")
     L.append("## Machine\n")
     L.append(md_table(["", ""], [[k, v] for k, v in info.items()]
-                      + [["load average at end", _loadavg()]]) + "\n")
+                      + [["load average at end", loadavg()]]) + "\n")
     L.append("Timings are wall-clock medians of single calls on this machine. Other jobs "
              "running at the same time (see the load averages) inflate them, not necessarily "
              "every method alike (csdf.fit uses both cores through Numba); the methods of a "
@@ -1083,7 +1016,10 @@ def main(argv: list[str] | None = None) -> int:
             o3d_note = (f"Open3D is not importable ({err_text(exc)}): its rows are skipped "
                         "(install it with `pip install open3d`, or the `bench` extra).")
             log(o3d_note)
-    info = machine_info(o3d.__version__ if o3d is not None else "not used")
+    import scipy
+
+    info = machine_info({"SciPy": scipy.__version__,
+                         "Open3D": o3d.__version__ if o3d is not None else "not used"})
     for k, v in info.items():
         log(f"{k}: {v}")
 

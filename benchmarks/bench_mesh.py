@@ -20,12 +20,10 @@ writes everything (with the exact command line and the machine) to a Markdown fi
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import gc
 import json
 import math
 import os
-import platform
 import resource
 import shlex
 import statistics
@@ -36,6 +34,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import loadavg, machine_info, md_table, read_text  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 METHODS = ("mc", "dc")
@@ -106,16 +107,9 @@ def dense_mesh(shape, resolution: int) -> tuple[np.ndarray, np.ndarray, dict[str
 
 
 # ---------------------------------------------------------------------------- children
-def _read(path: str) -> str:
-    try:
-        return Path(path).read_text()
-    except OSError:
-        return ""
-
-
 def _status_kib(name: str) -> int:
     """A ``/proc/self/status`` field in KiB (``VmRSS``: now, ``VmHWM``: peak); -1 if none."""
-    for line in _read("/proc/self/status").splitlines():
+    for line in read_text("/proc/self/status").splitlines():
         if line.startswith(name + ":"):
             return int(line.split()[1])
     return -1
@@ -219,67 +213,11 @@ def maxrss_mb(r: dict) -> float:
 
 
 # ---------------------------------------------------------------------------- machine info
-def _loadavg() -> str:
-    try:
-        return " ".join(f"{v:.2f}" for v in os.getloadavg()) + " (1, 5, 15 min)"
-    except OSError:
-        return "unknown"
-
-
 def _version(module: str) -> str:
     try:
         return __import__(module).__version__
     except Exception as exc:
         return f"unavailable ({type(exc).__name__})"
-
-
-def machine_info() -> dict[str, str]:
-    cpu = "unknown"
-    for line in _read("/proc/cpuinfo").splitlines():
-        if line.lower().startswith("model name"):
-            cpu = line.split(":", 1)[1].strip()
-            break
-    ram = "unknown"
-    for line in _read("/proc/meminfo").splitlines():
-        if line.startswith("MemTotal:"):
-            ram = f"{int(line.split()[1]) / 2**20:.1f} GiB"
-            break
-    logical = os.cpu_count() or 0
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else logical
-    try:
-        import numba
-
-        numba_v = f"{numba.__version__} (NUMBA_NUM_THREADS = {numba.config.NUMBA_NUM_THREADS})"
-    except Exception as exc:
-        numba_v = f"unavailable ({type(exc).__name__})"
-    try:
-        import csdf
-
-        csdf_v, csdf_dir = csdf.__version__, Path(csdf.__file__).resolve().parent
-    except Exception as exc:
-        csdf_v, csdf_dir = f"unavailable ({type(exc).__name__})", HERE.parent
-    commit = "unknown"
-    try:  # the checkout that the imported csdf comes from
-        commit = subprocess.run(
-            ["git", "-C", str(csdf_dir), "describe", "--always", "--dirty"],
-            capture_output=True, text=True, timeout=10, check=False,
-        ).stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {
-        "date": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
-        "CPU": cpu,
-        "cores": f"{logical} logical, {usable} usable by this process",
-        "RAM": ram,
-        "OS": f"{platform.system()} {platform.release()} ({platform.machine()})",
-        "Python": f"{platform.python_version()} ({sys.executable})",
-        "NumPy": np.__version__,
-        "Numba": numba_v,
-        "scikit-image": _version("skimage"),
-        "trimesh": _version("trimesh"),
-        "csdf": f"{csdf_v} (git {commit}, imported from {csdf_dir})",
-        "load average at start": _loadavg(),
-    }
 
 
 # ---------------------------------------------------------------------------- formatting
@@ -297,12 +235,6 @@ def fmt_mb(x: float | None) -> str:
 
 def fmt_x(x: float | None, digits: int = 2) -> str:
     return "-" if x is None else f"{x:.{digits}f}x"
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(out)
 
 
 def status(ok: bool | None) -> str:
@@ -406,7 +338,7 @@ def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
 
 
 def mem_available_mb() -> float | None:
-    for line in _read("/proc/meminfo").splitlines():
+    for line in read_text("/proc/meminfo").splitlines():
         if line.startswith("MemAvailable:"):
             return int(line.split()[1]) * 1024 / MB
     return None
@@ -486,7 +418,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(cfg: Config) -> int:
     t_start = time.perf_counter()
-    info = machine_info()
+    info = machine_info({"scikit-image": _version("skimage"), "trimesh": _version("trimesh")})
     log("csdf meshing benchmark\n" + "\n".join(f"  {k}: {v}" for k, v in info.items()))
     series = run_series(cfg)
     elapsed = time.perf_counter() - t_start
@@ -507,7 +439,7 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
     L.append(f"Command: `{cfg.command}`  \nTotal benchmark time: {elapsed:.0f} s\n")
     L.append("## Machine\n")
     L.append(md_table(["", ""], [[k, v] for k, v in info.items()]
-                      + [["load average at end", _loadavg()]]) + "\n")
+                      + [["load average at end", loadavg()]]) + "\n")
 
     L.append("## Setup\n")
     box = ", ".join(f"{lo:g}..{hi:g}" for lo, hi in zip(bounds[0], bounds[1]))

@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: test demo bench gallery storage lint clean
+.PHONY: test demo bench gallery storage lint clean editor-bundle
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -31,6 +31,10 @@ storage: $(STAMP)
 
 gallery: $(STAMP)
 	$(PY) docs/make_gallery.py docs/gallery.png
+
+# the live editor's CodeMirror 6 bundle (committed; only maintainers need node and npm)
+editor-bundle:
+	cd editor && npm ci --no-audit --no-fund && npm run build
 
 lint: $(STAMP)
 	$(PY) -m ruff check src tests examples benchmarks docs

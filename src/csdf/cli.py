@@ -471,6 +471,31 @@ def zoo_show(
     _run(go)
 
 
+@app.command()
+def edit(
+    model: Path | None = typer.Argument(
+        None, help="The .csdf model to edit (created on the first save if missing); "
+                   "without one, the editor opens a zoo model and asks for a file name "
+                   "in the current folder when saving."),
+    port: int = typer.Option(0, "--port", min=0, max=65535,
+                             help="TCP port on 127.0.0.1 (default: a free one)."),
+    no_browser: bool = typer.Option(False, "--no-browser",
+                                    help="Only print the URL; do not open a browser."),
+):
+    """Live editor: the model's text, a real-time GPU preview and a slider per parameter,
+    served on 127.0.0.1 (Ctrl-C to stop)."""
+
+    def go():
+        from .editor.server import serve
+
+        try:
+            serve(model, port=port, open_browser=not no_browser)
+        except KeyboardInterrupt:  # pragma: no cover - interactive
+            pass
+
+    _run(go)
+
+
 def main() -> None:
     """Entry point of the ``csdf`` script."""
     app()

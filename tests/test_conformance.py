@@ -155,3 +155,25 @@ def test_auto_backend_choice():
     assert select("auto", 10, prog, "value") is fast  # its kernel is ready now
     with pytest.raises(csdf.CsdfError, match="backend must be one of"):
         prog(np.zeros((1, 3)), backend="gpu")
+
+
+@pytest.mark.parametrize("mode", ["value", "grad", "jac", "all"])
+def test_reference_chunking_does_not_change_results(mode):
+    """The reference evaluates chunk by chunk; any chunk size (1 point, an odd size, all
+    points at once: the whole-array evaluator the benchmark compares against) gives the
+    same numbers bit for bit."""
+    from csdf.backends import numpy_backend
+
+    r = csdf.param("r", 1.0, 0.5, 1.5)
+    c = csdf.cylinder(0.5, 3.0)
+    prog = csdf.compile((csdf.sphere(r) & csdf.box(1.5)) - c - c.orient("x") - c.orient("y"))
+    pts = np.random.default_rng(3).uniform(-1.2, 1.2, (501, 3))
+    pv = prog.param_values(None)
+    ref = numpy_backend.evaluate(prog, pts, pv, mode)
+    for chunk in (1, 37, len(pts), 10 * len(pts)):
+        got = numpy_backend.evaluate(prog, pts, pv, mode, chunk=chunk)
+        assert got.keys() == ref.keys()
+        for k in ref:
+            np.testing.assert_array_equal(got[k], ref[k], err_msg=f"{k}, chunk={chunk}")
+    with pytest.raises(ValueError, match="chunk"):
+        numpy_backend.evaluate(prog, pts, pv, mode, chunk=0)

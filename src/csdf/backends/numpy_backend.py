@@ -121,7 +121,8 @@ def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype, a_const: bool = 
     raise AssertionError(op)  # pragma: no cover
 
 
-def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
+def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
+             chunk: int | None = None) -> dict[str, np.ndarray]:
     """Evaluate a program on points.
 
     Args:
@@ -129,6 +130,10 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
         pts: ``(N, D)`` float32/float64, D = 2 or 3.
         pvals: ``(P,)`` float64 parameter values.
         mode: ``'value' | 'grad' | 'jac' | 'all'``.
+        chunk: points per pass over the tape. ``None`` picks a cache-sized chunk
+            (``CHUNK`` values; fewer when tangents ride along); ``len(pts)`` gives the
+            textbook array evaluator that materialises a full ``(N,)`` array per
+            instruction (what the benchmark compares against).
 
     Returns:
         ``{'value': (N,), 'grad': (N, 3), 'jac': (N, P)}`` (the keys the mode asks for),
@@ -154,7 +159,10 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
     fns = {name: numpy_impl(name) for name, *_ in code}
     n_slots = prog.n_slots
     c_lo, c_hi = 3 + P, 3 + P + len(prog.consts)  # constant slots
-    chunk = CHUNK if T == 0 else max(1024, (1 << 20) // max(T, 1) // 4)
+    if chunk is None:
+        chunk = CHUNK if T == 0 else max(1024, (1 << 20) // max(T, 1) // 4)
+    elif chunk < 1:
+        raise ValueError(f"chunk must be >= 1, got {chunk}")
 
     seeds: list = [None] * n_slots
     if T:

@@ -179,6 +179,10 @@ def orient(shape: Shape, axis) -> Shape:
         K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
         ang = math.atan2(s, c)
         R = np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * (K @ K)
+        # axis-aligned targets give a signed permutation: make it exact (cos 90 deg is
+        # 6e-17 in floating point), so no x * 1e-16 terms reach the bytecode
+        snapped = np.round(R)
+        R = np.where(np.abs(R - snapped) < 1e-12, snapped, R)
     Rl = R.tolist()
     return _derived(
         shape, "orient", lambda p, ctx: shape.sdf(_apply_inverse(Rl, p), ctx), args=(axis,),

@@ -157,6 +157,12 @@ def test_preview_matches_cpu_render(page):
     union = np.logical_or(mask_gpu, r.mask).sum()
     assert 0.05 < r.mask.mean() < 0.8
     assert inter / union >= 0.97, f"silhouette IoU {inter / union:.3f}"
+    # exact normals: the GPU's (sdf_grad) against the CPU's where both hit
+    both = mask_gpu & r.mask
+    n_gpu = _image(page, "normals")[both].astype(float) / 255.0 * 2.0 - 1.0
+    n_gpu /= np.linalg.norm(n_gpu, axis=1, keepdims=True)
+    cos = np.sum(n_gpu * r.normals[both], axis=1)
+    assert np.mean(cos > 0.99) > 0.95, f"normals agree at {np.mean(cos > 0.99):.1%} of pixels"
     # shaded pixels: the object differs from the background
     assert np.abs(shaded[r.mask].mean(0) - shaded[~r.mask].mean(0)).max() > 20
     # the info panel shows csdf info's figures
@@ -236,3 +242,40 @@ def test_export_stl_is_watertight(page):
     assert m.is_watertight and m.is_winding_consistent
     # the chair at its defaults: the backrest's top at seat_height + back_height
     assert m.bounds[1][2] == pytest.approx(0.45 + 0.42, abs=0.02)
+
+
+def test_camera_and_slice_plane(page):
+    before = _image(page)
+    eye = _state(page, "camera().eye")
+    box = page.locator("#view").bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 60, y + 20, steps=4)
+    page.mouse.up()
+    page.wait_for_function(f"window.csdfEditor.camera().eye[0] !== {eye[0]}")
+    orbited = _image(page)
+    assert np.abs(orbited.astype(int) - before).max(-1).astype(bool).mean() > 0.01
+    cam = _state(page, "camera()")
+    dist = np.linalg.norm(np.subtract(cam["eye"], cam["target"]))
+    page.mouse.wheel(0, 300)
+    page.wait_for_function(
+        "(d) => { const c = window.csdfEditor.camera();"
+        " return Math.hypot(...c.eye.map((v, i) => v - c.target[i])) > d * 1.1; }", arg=dist)
+    page.dblclick("#view")
+    page.wait_for_function(f"window.csdfEditor.camera().eye[0] === {eye[0]}")
+    page.check("#slice-on")
+    page.locator("#slice-at").fill("0.3")
+    sliced = _image(page)
+    changed = np.abs(sliced.astype(int) - before).max(-1).astype(bool)
+    assert changed.mean() > 0.02
+
+
+def test_export_shadertoy_uses_the_slider_values(page):
+    page.locator("#param-u_seat_height").fill("0.5")
+    with page.expect_download() as dl:
+        page.click("#export-shadertoy")
+    assert dl.value.suggested_filename == f"{MODEL}.shadertoy.glsl"
+    with open(dl.value.path()) as f:
+        src = f.read()
+    assert "void mainImage(" in src and "const float u_seat_height = 0.5;" in src

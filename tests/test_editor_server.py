@@ -7,7 +7,11 @@ from __future__ import annotations
 
 import io
 import os
+import signal
 import stat
+import subprocess
+import sys
+import time
 
 import pytest
 import trimesh
@@ -228,3 +232,35 @@ def test_cli_edit(monkeypatch, tmp_path):
     assert calls == [((p,), {"port": 8123, "open_browser": False})]
     res = CliRunner().invoke(cli.app, ["edit", "--help"])
     assert "--no-browser" in res.output
+
+
+def test_csdf_edit_serves_on_loopback(tmp_path):
+    """The real command: prints its URL, serves the page on 127.0.0.1, stops on SIGINT."""
+    import httpx
+
+    p = tmp_path / "m.csdf"
+    p.write_text(SMALL)
+    port = srv.free_port()
+    code = "from csdf.cli import main; main()"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, "edit", str(p), "--no-browser", "--port", str(port)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert f"http://127.0.0.1:{port}/" in line, line
+        url = f"http://127.0.0.1:{port}/api/model"
+        for _ in range(200):
+            try:
+                r = httpx.get(url, timeout=5)
+                break
+            except httpx.TransportError:
+                time.sleep(0.05)
+        else:
+            pytest.fail("the editor did not answer")
+        assert r.json()["text"] == SMALL
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)

@@ -265,6 +265,9 @@
   }
 
   $("save").addEventListener("click", save);
+  window.addEventListener("beforeunload", (e) => {
+    if (savedText !== null && view.state.doc.toString() !== savedText) e.preventDefault();
+  });
   $("export-stl").addEventListener("click", () => exportMesh("stl"));
   $("export-obj").addEventListener("click", () => exportMesh("obj"));
   $("export-shadertoy").addEventListener("click", exportShadertoy);
@@ -288,7 +291,7 @@ uniform vec3 csdf_lo;      // tracing box
 uniform vec3 csdf_hi;
 uniform float csdf_step;   // step scale (1 / Lipschitz bound)
 uniform float csdf_eps;    // hit tolerance (model units)
-uniform int csdf_mode;     // 0 shaded, 1 silhouette mask
+uniform int csdf_mode;     // 0 shaded, 1 silhouette mask, 2 normals (0.5 + 0.5 n)
 uniform int csdf_slice;    // -1 off, else the axis of the slice plane
 uniform float csdf_slice_at;
 uniform float csdf_scale;  // diagonal of the box
@@ -334,6 +337,10 @@ void main() {
   }
   if (csdf_mode == 1) {
     csdf_color = vec4(vec3(hit ? 1.0 : 0.0), 1.0);
+    return;
+  }
+  if (csdf_mode == 2) {
+    csdf_color = vec4(hit ? 0.5 + 0.5 * csdfNormal(ro + t * rd) : vec3(0.0), 1.0);
     return;
   }
   vec3 col = csdfBackground(rd);
@@ -573,6 +580,7 @@ void main() {
   new ResizeObserver(resize).observe($("canvas-wrap"));
   resize();
 
+  const MODES = { shaded: 0, mask: 1, normals: 2 };
   function draw(mode) {
     if (!gl || !current) return;
     const L = current.loc;
@@ -590,18 +598,19 @@ void main() {
     gl.uniform1f(L.csdf_step, current.step);
     gl.uniform1f(L.csdf_eps, 2e-5 * box.diag);
     gl.uniform1f(L.csdf_scale, box.diag);
-    gl.uniform1i(L.csdf_mode, mode === "mask" ? 1 : 0);
-    gl.uniform1i(L.csdf_slice, $("slice-on").checked && mode !== "mask" ? sliceAxis() : -1);
+    gl.uniform1i(L.csdf_mode, MODES[mode] || 0);
+    gl.uniform1i(L.csdf_slice, $("slice-on").checked && !MODES[mode] ? sliceAxis() : -1);
     gl.uniform1f(L.csdf_slice_at, parseFloat($("slice-at").value));
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     api.renderCount++;
   }
 
-  // A PNG data URL of the preview ('shaded' or 'mask': white where a ray hits).
+  // A PNG data URL of the preview: 'shaded' (what the page shows), 'mask' (white where
+  // a ray hits the surface) or 'normals' (0.5 + 0.5 * the world-frame unit normal).
   api.snapshot = (mode) => {
-    draw(mode === "mask" ? "mask" : undefined);
+    draw(mode);
     const url = canvas.toDataURL("image/png");
-    if (mode === "mask") draw();
+    if (MODES[mode]) draw();
     return url;
   };
   api.draw = () => draw();

@@ -26,8 +26,8 @@ def _model(tmp_path, text=MODEL, name="csg.csdf"):
 def test_info(tmp_path):
     r = runner.invoke(app, ["info", str(_model(tmp_path))])
     assert r.exit_code == 0, r.output
-    for word in ("83 instructions", "bound", "Lipschitz 1", "[0.8, 1.2]", "expanded",
-                 "primitive", "942"):
+    for word in ("71 instructions", "bound", "Lipschitz 1", "[0.8, 1.2]", "expanded",
+                 "primitive", "830"):
         assert word in r.output
 
 

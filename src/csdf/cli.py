@@ -220,6 +220,9 @@ def fit(
     seed: int = typer.Option(0, "--seed", help="Seed of the multistart subsampling."),
     param: list[str] = typer.Option([], "--param", "-p", help="Initial name=value "
                                     "(repeatable)."),
+    overlay: Path | None = typer.Option(None, "--overlay", help="Also write a PNG of the "
+                                        "fitted model with the points drawn over it "
+                                        "(green: inliers, red: outliers)."),
 ):
     """Recover the model's pose (and scale, parameters) from a point cloud."""
 
@@ -230,6 +233,8 @@ def fit(
         from .io import atomic_path
         from .pointio import read_points
 
+        if overlay is not None and overlay.suffix.lower() != ".png":
+            raise CsdfError(f"{overlay}: the overlay must end in .png")
         m = _load(model)
         pts, _ = read_points(scan)
         res = fit_fn(m, pts, init={"params": _params(param)} if param else None,
@@ -241,6 +246,15 @@ def fit(
                   f"{res.seconds * 1e3:.0f} ms, converged={res.converged}", soft_wrap=True)
         for note in res.notes:
             out.print(f"note: {note}", soft_wrap=True)
+        if overlay is not None:
+            from PIL import Image
+
+            from .render.overlay import fit_overlay
+
+            img = fit_overlay(m, pts, res)
+            with atomic_path(overlay) as tmp:
+                Image.fromarray(img).save(tmp, format="PNG")
+            out.print(f"{overlay}: overlay of the fit", soft_wrap=True)
 
     _run(go)
 

@@ -264,3 +264,16 @@ def test_csdf_edit_serves_on_loopback(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=10)
+
+
+def test_serve_refuses_a_busy_port(tmp_path):
+    import socket
+
+    from csdf.errors import CsdfError
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        busy = s.getsockname()[1]
+        with pytest.raises(CsdfError, match=f"127.0.0.1:{busy}"):
+            srv.serve(tmp_path / "m.csdf", port=busy, open_browser=False)

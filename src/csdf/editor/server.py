@@ -423,10 +423,19 @@ def serve(model_path: str | Path | None = None, *, port: int = 0, open_browser: 
         port: the TCP port (0: a free one).
         open_browser: open the page with :mod:`webbrowser` when a browser is available.
         log_level: Uvicorn's log level.
+
+    Raises:
+        CsdfError: a bad model path, or ``port`` already in use.
     """
     import uvicorn
 
     app = create_app(model_path)
+    if port:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError as exc:
+                raise CsdfError(f"cannot listen on 127.0.0.1:{port}: {exc.strerror}") from None
     port = port or free_port()
     url = f"http://127.0.0.1:{port}/"
     config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level=log_level,

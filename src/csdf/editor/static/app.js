@@ -518,12 +518,14 @@ void main() {
       cam.el = Math.max(-1.55, Math.min(1.55, cam.el + dy * 0.01));
     }
     userMovedCamera = true;
+    interact();
     requestDraw();
   });
   canvas.addEventListener("wheel", (e) => {
     e.preventDefault();
     cam.dist *= Math.exp(0.0015 * e.deltaY);
     userMovedCamera = true;
+    interact();
     requestDraw();
   }, { passive: false });
   canvas.addEventListener("dblclick", resetCamera);
@@ -547,10 +549,18 @@ void main() {
     updateSliceRange();
     requestDraw();
   });
-  $("slice-at").addEventListener("input", requestDraw);
+  $("slice-at").addEventListener("input", () => { interact(); requestDraw(); });
 
   // ------------------------------------------------------------------ drawing
   let pending = false;
+  let interacting = false;
+  let idleTimer = null;
+  function interact() {
+    if (query.get("canvas")) return; // fixed size (tests, screenshots)
+    clearTimeout(idleTimer);
+    if (!interacting) { interacting = true; resize(); }
+    idleTimer = setTimeout(() => { interacting = false; resize(); requestDraw(); }, 200);
+  }
   function requestDraw() {
     if (pending) return;
     pending = true;
@@ -568,7 +578,9 @@ void main() {
       canvas.style.height = `${h}px`;
       return;
     }
-    const scale = Math.min(window.devicePixelRatio || 1, 1.5);
+    // while the user drags or slides, draw at half resolution (software WebGL and
+    // slow GPUs stay interactive), then at full resolution once idle
+    const scale = Math.min(window.devicePixelRatio || 1, 1.5) * (interacting ? 0.5 : 1);
     const w = Math.max(16, Math.round(canvas.clientWidth * scale));
     const h = Math.max(16, Math.round(canvas.clientHeight * scale));
     if (w !== canvas.width || h !== canvas.height) {
@@ -673,6 +685,7 @@ void main() {
         if (gl && current) {
           gl.useProgram(current.program);
           gl.uniform1f(current.loc[p.uniform], v);
+          interact();
           requestDraw();
         }
       });

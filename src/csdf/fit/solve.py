@@ -8,17 +8,26 @@ scene point is its signed distance to the posed model, in scene units::
 
 No nearest-neighbour search is needed: the model gives the distance and its gradient.
 The unknowns are a rotation increment ``w`` (the Lie algebra of SO(3), applied on the
-left of the current rotation and re-centred after every solve), ``t``, ``log s`` and the
-parameters ``c``; their Jacobian is exact: the spatial gradient and the parameter
-derivatives come from one forward-mode pass (:meth:`csdf.Program.value_grad_param_jacobian`)
-and the rotation block uses the left Jacobian of SO(3). SciPy's ``least_squares`` (trust
-region reflective) supplies robust losses and parameter bounds.
+left of the current rotation and re-centred after every step), ``t``, ``log s`` and the
+parameters ``c`` (clipped to their ranges); their Jacobian is exact: the spatial gradient
+and the parameter derivatives come from one forward-mode pass
+(:meth:`csdf.Program.value_grad_param_jacobian`).
 
-Scale and size parameters: if a parameter scales the whole shape (a sphere's radius),
-``s`` and that parameter describe the same change and the problem is singular. When both
-are estimated csdf adds a weak prior pulling ``log s`` to 0, so size is explained by the
-parameters when the data cannot tell them apart; the result lists such pairs in
-:attr:`FitResult.notes` (detected from nearly collinear Jacobian columns).
+Engines (``solver=``): ``'lm'`` (default, :mod:`.gn`): a hand-written robust
+Levenberg-Marquardt, coarse to fine with a graduated residual scale, an escape step for
+the minima of near-symmetric parts, an optional visibility term for single-view scans and
+a noise-bias correction of shape parameters; ``'scipy'``: SciPy's ``least_squares``
+(trust region reflective), in rounds re-centred on the current rotation.
+
+Scale and size parameters: if the estimated parameters can resize the whole shape (a
+sphere's radius; a chair whose every dimension is a parameter), ``s`` and the parameters
+describe the same change and the problem is singular or nearly so. With ``'lm'`` csdf
+measures this at the start of the joint stage (:func:`scale_ambiguity`: the sine of the
+angle between the Jacobian column of ``log s`` and the span of the parameters' columns);
+below ``AMBIGUITY_SIN`` the scale is held at its start (1 unless ``init`` gives one) and
+the parameters absorb the size; the reason is listed in :attr:`FitResult.notes`.
+Otherwise both are estimated. (``'scipy'`` instead adds a weak prior pulling ``log s`` to
+its start when both are estimated.)
 """
 
 from __future__ import annotations
@@ -31,6 +40,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import CsdfError, ParamError
+from .gn import jacobian
 from .lie import exp_so3, left_jacobian
 
 __all__ = ["FitResult", "fit", "Problem", "prepare"]
@@ -128,6 +138,12 @@ class Problem:
     f_scale: float
     loss: str
     backend: str
+    estimate: tuple = ()
+
+    @property
+    def pnames(self) -> list[str]:
+        """Names of all the program's parameters, in order."""
+        return [q.name for q in self.prog.params]
 
 
 def _parse_estimate(estimate) -> tuple[str, ...]:
@@ -160,6 +176,16 @@ def _init_pose(init, prob_params: dict) -> tuple:
         raise CsdfError("init transform must have a positive determinant")
     U, _, Vt = np.linalg.svd(A / s)
     return U @ Vt, M[:3, 3].copy(), s, {}
+
+
+def _resolve_backend(backend: str, prog, n: int) -> str:
+    """``'auto'`` becomes ``'fast'`` (values, gradients and parameter derivatives in one
+    compiled call) for clouds of 2,000 points or more when Numba is there."""
+    if backend != "auto":
+        return backend
+    from ..backends import fast
+
+    return "fast" if fast.available() and n >= 2000 else "auto"
 
 
 def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
@@ -214,7 +240,7 @@ def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="hub
     if not fs > 0:
         raise CsdfError(f"f_scale must be positive, got {f_scale}")
     return Problem(prog, P, "pose" in est, "scale" in est, names, values, R, t, s, centre,
-                   size, fs, loss, backend)
+                   size, fs, loss, _resolve_backend(backend, prog, len(P)), est)
 
 
 class _Residuals:
@@ -280,16 +306,10 @@ class _Residuals:
         p = self.p
         R, s, a, q, f, g, J = self._eval(x)
         w = self.unpack(x)[0]
-        cols = []
+        Jm = jacobian(p.pose, p.scale, s, a, f, g @ R.T, s * J[:, self.idx] if self.idx
+                      else None)
         if p.pose:
-            gw = g @ R.T  # world-frame gradient directions (N, 3)
-            cols.append(np.cross(gw, a) @ left_jacobian(w))
-            cols.append(-gw)
-        if p.scale:
-            cols.append((s * (f - np.sum(g * q, axis=1)))[:, None])
-        if self.idx:
-            cols.append(s * J[:, self.idx])
-        Jm = np.concatenate(cols, axis=1) if cols else np.zeros((len(f), 0))
+            Jm[:, :3] = Jm[:, :3] @ left_jacobian(w)
         if self.prior:
             row = np.zeros((1, Jm.shape[1]))
             row[0, 6 if p.pose else 0] = self.prior
@@ -403,9 +423,159 @@ def make_result(prob: Problem, stats: dict, seconds: float, method: str,
     )
 
 
+AMBIGUITY_SIN = 0.25  # scale is fixed when sin(angle(scale column, parameter span)) < this
+
+
+def scale_ambiguity(prob: Problem, P: np.ndarray) -> float:
+    """How well the estimated parameters can imitate a change of scale at the current
+    state: the sine of the angle between the Jacobian column of ``log s`` and the span of
+    the parameters' columns, on points ``P`` (N, 3) (0: a uniform resize is exactly a
+    parameter change, so scale and parameters cannot both be identified; 1: independent)."""
+    from .gn import _evaluate, _State
+
+    idx = [i for i, q in enumerate(prob.prog.params) if q.name in prob.names]
+    st = _State(prob.R, prob.t, math.log(prob.s), prob.values[idx])
+    pose, scale = prob.pose, prob.scale
+    prob.pose, prob.scale = False, True
+    try:
+        _, Jm = _evaluate(prob, P, st, idx, prob.f_scale)
+    finally:
+        prob.pose, prob.scale = pose, scale
+    js, Jc = Jm[:, 0], Jm[:, 1:]
+    ns = np.linalg.norm(js)
+    if ns == 0 or Jc.shape[1] == 0:
+        return 1.0
+    coef, *_ = np.linalg.lstsq(Jc, js, rcond=None)
+    return float(np.linalg.norm(js - Jc @ coef) / ns)
+
+
+def correct_noise_bias(prob: Problem, st, idx: list[int], max_iter: int = 50):
+    """Parametric-bootstrap correction of the noise bias of scale and shape parameters.
+
+    Noise makes a signed-distance fit biased at curved and thin features: the distance
+    of a convex shape is a convex function, so noisy points look outside on average
+    (Jensen) and the fitted part grows (thin legs fattest: the bias grows like
+    ``sigma^2 * curvature``). Estimate: the inliers are projected onto the fitted surface,
+    Gaussian noise of the residuals' RMS is added (seeded), the same problem is solved
+    again from the fitted state, and the change of ``log s`` and of the parameters is the
+    bias at that noise; it is scaled by the squared ratio of the real to the simulated
+    RMS (the RMS of signed distances underestimates the noise near edges, and the bias
+    goes with ``sigma^2``) and subtracted. Returns the corrected state and the number of
+    evaluations. No effect on noiseless data."""
+    from .gn import _State, lm_solve
+
+    s = math.exp(st.sigma)
+    pv = dict(zip(prob.pnames, _merge(prob, idx, st.cvals)))
+    q = ((prob.points - st.t) @ st.R) / s
+    f = np.asarray(prob.prog(q, pv, backend=prob.backend))
+    inl = np.abs(s * f) <= 3.0 * prob.f_scale
+    if inl.sum() < 10:
+        return st, 0
+    rms = float(np.sqrt(np.mean((s * f[inl]) ** 2)))
+    if not rms > 1e-9 * prob.size * s:
+        return st, 0
+    y = q[inl]
+    for _ in range(4):  # Newton projection onto the fitted surface (model frame)
+        fy, gy = prob.prog.value_and_grad(y, pv, backend=prob.backend)
+        gy = np.asarray(gy)
+        y = y - (np.asarray(fy) / np.maximum(np.sum(gy * gy, axis=1), 1e-30))[:, None] * gy
+    fy = np.asarray(prob.prog(y, pv, backend=prob.backend))
+    y = y[np.abs(fy) < 1e-3 * rms / s]
+    if len(y) < 10:
+        return st, 0
+    rng = np.random.default_rng(20261122)
+    sim = s * (y + rng.normal(0.0, rms / s, y.shape)) @ st.R.T + st.t
+    pose = prob.pose
+    prob.pose = False  # the bias of the pose is negligible; hold it
+    try:
+        st_sim, _, nev, _ = lm_solve(prob, sim, st, idx, prob.f_scale, max_iter)
+    finally:
+        prob.pose = pose
+    rs = np.asarray(prob.prog(((sim - st_sim.t) @ st_sim.R) / math.exp(st_sim.sigma),
+                              dict(zip(prob.pnames, _merge(prob, idx, st_sim.cvals))),
+                              backend=prob.backend)) * math.exp(st_sim.sigma)
+    rs = rs[np.abs(rs) <= 3.0 * prob.f_scale]
+    rms_sim = float(np.sqrt(np.mean(rs ** 2))) if len(rs) else rms
+    k = (rms / rms_sim) ** 2 if rms_sim > 0 else 1.0
+    lo = np.array([prob.prog.params[i].lo for i in idx])
+    hi = np.array([prob.prog.params[i].hi for i in idx])
+    cvals = np.clip(st.cvals - k * (st_sim.cvals - st.cvals), lo, hi) if idx else st.cvals
+    sigma = st.sigma - k * (st_sim.sigma - st.sigma) if prob.scale else st.sigma
+    return _State(st.R, st.t, sigma, cvals), nev
+
+
+def _merge(prob: Problem, idx: list[int], cvals: np.ndarray) -> np.ndarray:
+    values = prob.values.copy()
+    values[idx] = cvals
+    return values
+
+
+def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
+             escape: bool = True, correct_bias: bool = False) -> tuple[Problem, dict]:
+    """The default engine: coarse-to-fine robust Levenberg-Marquardt (:mod:`.gn`).
+
+    Stages: (1) the pose alone on a fixed subsample of at most ``gn.N_COARSE`` points,
+    with the residual scale graduated from ``8 f_scale`` down to ``f_scale``; (2) the pose
+    on all points; (3) when scale or parameters are estimated, everything jointly on all
+    points. ``max_iter`` bounds the evaluations of each stage. Runs in place."""
+    from .gn import GRADUATION, N_COARSE, Visibility, _State, lm_rounds, lm_solve
+    from .gn import escape as _escape
+
+    P = prob.points
+    n = len(P)
+    radius = 0.5 * prob.size * prob.s * 1.05
+    vis = None if viewpoint is None else Visibility(np.asarray(viewpoint, dtype=float),
+                                                    radius)
+    idx = [i for i, q in enumerate(prob.prog.params) if q.name in prob.names]
+    st = _State(prob.R, prob.t, math.log(prob.s), prob.values[idx])
+    nev, cost, converged = 0, math.nan, False
+    notes: list[str] = []
+    if prob.pose:
+        scale, names = prob.scale, prob.names
+        prob.scale, prob.names = False, []
+        st0 = _State(st.R, st.t, st.sigma, np.zeros(0))
+        sub = P if n <= N_COARSE else P[np.random.default_rng(0).choice(n, N_COARSE, False)]
+        per = max(3, min(10, max_iter // 4))
+        for mult in GRADUATION:
+            st0, cost, k, converged = lm_solve(prob, sub, st0, [], prob.f_scale * mult, per,
+                                               vis=vis, tol=1e-5)
+            nev += k
+        if escape:
+            st0, _ = _escape(prob, sub, st0, prob.f_scale, vis=vis)
+        st0, cost, k, converged = lm_rounds(prob, P, st0, [], max_iter, vis)
+        nev += k
+        prob.scale, prob.names = scale, names
+        st = _State(st0.R, st0.t, st.sigma, st.cvals)
+        prob.R, prob.t = st.R, st.t
+    if prob.scale or prob.names:
+        if prob.scale and prob.names:
+            sub = P if n <= N_COARSE else P[np.random.default_rng(1).choice(n, N_COARSE,
+                                                                             False)]
+            sin = scale_ambiguity(prob, sub)
+            if sin < AMBIGUITY_SIN:
+                prob.scale = False
+                notes.append(
+                    f"scale held at {prob.s:.6g}: the estimated parameters can imitate a "
+                    f"uniform resize (sin of the angle between the scale and parameter "
+                    f"Jacobian columns {sin:.3f} < {AMBIGUITY_SIN}): scale and size are "
+                    "ambiguous, so the parameters absorb the size")
+        st, cost, k, converged = lm_rounds(prob, P, st, idx, max_iter, vis)
+        nev += k
+        if correct_bias:
+            st, k = correct_noise_bias(prob, st, idx)
+            nev += k
+        prob.scale = "scale" in prob.estimate
+    prob.R, prob.t, prob.s = st.R, np.asarray(st.t, dtype=float), math.exp(st.sigma)
+    prob.values = _merge(prob, idx, st.cvals)
+    U, _, Vt = np.linalg.svd(prob.R)
+    prob.R = U @ Vt
+    return prob, {"nfev": nev, "converged": converged, "cost": cost, "notes": notes}
+
+
 def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
         f_scale=None, multistart=False, seed=None, max_iter=100, inlier_threshold=None,
-        backend="auto") -> FitResult:
+        backend="auto", viewpoint=None, solver="lm", debias=None,
+        escape=True) -> FitResult:
     """Fit a model to a point cloud: pose, optionally scale and shape parameters.
 
     Args:
@@ -415,17 +585,34 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
             transform ``[[s R, t], [0, 1]]``, a :class:`FitResult`, or a dict with
             ``rotation``, ``translation``, ``scale``, ``params``.
         estimate: any of ``'pose'``, ``'scale'``, ``'params'`` (tuple or comma string).
+            With both ``'scale'`` and ``'params'``, scale is held at its start (1 by
+            default) when the parameters can imitate a uniform resize (see
+            :func:`scale_ambiguity`; the reason is added to ``FitResult.notes``).
         params: names of the parameters to estimate (default: all); others stay at their
             values in ``init`` (or defaults).
-        loss: robust loss of ``scipy.optimize.least_squares`` (``'huber'``,
-            ``'cauchy'``, ``'soft_l1'``, ``'arctan'``, ``'linear'``).
+        loss: robust loss (``'huber'``, ``'cauchy'``, ``'soft_l1'``, ``'arctan'``,
+            ``'linear'``; SciPy ``least_squares`` conventions). ``'cauchy'`` is the better
+            choice when many points are outliers (Huber's optimum is pulled by them).
         f_scale: residual scale of the loss (scene units); default 1% of the model size.
         multistart: search many initial rotations first (see
             :func:`csdf.fit.init.multistart`); needed for large initial errors.
         seed: seeds the multistart subsampling (results are reproducible).
-        max_iter: residual evaluations per refinement round.
+        max_iter: residual evaluations per stage (refinement round with ``'scipy'``).
         inlier_threshold: ``|r|`` counted as inlier (default ``3 * f_scale``).
-        backend: evaluator backend.
+        backend: evaluator backend (``'auto'`` uses the compiled one for large clouds).
+        viewpoint: ``(3,)`` sensor position in the cloud's frame for a single-view scan
+            (the origin for :func:`csdf.scan`'s camera-frame clouds). Points matched to a
+            model surface facing away from it are re-matched to the first surface along
+            their ray (see :mod:`csdf.fit.gn`): needed for partial views of thin parts.
+        solver: ``'lm'`` (hand-written coarse-to-fine robust Levenberg-Marquardt, the
+            default) or ``'scipy'`` (``scipy.optimize.least_squares``, trust region
+            reflective; no ``viewpoint``).
+        debias: correct the noise bias of the estimated scale and parameters (see
+            :func:`correct_noise_bias`; ``'lm'`` only). Default: when ``'params'`` is
+            estimated.
+        escape: after the coarse stage, test turns about the model's axes and the cloud's
+            principal axes for a lower minimum (:func:`csdf.fit.gn.escape`; ``'lm'``
+            only): near-symmetric parts have wrong minima one feature spacing away.
 
     Returns:
         :class:`FitResult`.
@@ -435,11 +622,26 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
         ParamError: unknown parameter names.
     """
     t0 = time.perf_counter()
+    if solver not in ("lm", "scipy"):
+        raise CsdfError(f"solver must be 'lm' or 'scipy'; got {solver!r}")
     prob = prepare(shape, points, init, estimate, params, loss, f_scale, backend)
+    if viewpoint is not None:
+        vp = np.asarray(viewpoint, dtype=float)
+        if vp.shape != (3,) or not np.all(np.isfinite(vp)):
+            raise CsdfError(f"viewpoint must be a finite (3,) position; got {viewpoint!r}")
+        if solver != "lm":
+            raise CsdfError("viewpoint needs solver='lm'")
+        viewpoint = vp
     if multistart:
         from .init import multistart as _ms
 
         _ms(prob, seed=seed)
+    if solver == "lm":
+        if debias is None:
+            debias = bool(prob.names)
+        prob, stats = solve_lm(prob, max_iter=max_iter, viewpoint=viewpoint,
+                               escape=bool(escape), correct_bias=bool(debias))
+        return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)
     if prob.pose and (prob.scale or prob.names):
         # staged: the pose alone first (scale and shape held), then everything jointly;
         # starting the joint problem near the right pose keeps scale and size parameters
@@ -453,4 +655,3 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
     prob, stats = solve(prob, max_iter=max_iter)
     stats["nfev"] += first["nfev"]
     return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)
-

@@ -1,0 +1,380 @@
+"""Hand-written robust Levenberg-Marquardt for :func:`csdf.fit` (the default engine).
+
+Each iteration evaluates the model's values, spatial gradients (and parameter derivatives
+when shape parameters are estimated) at all points in one call of the fast backend, forms
+the Jacobian of the residuals ``r = s f(R^T (p - t) / s; c)`` (see :mod:`.solve`), and
+solves the small normal equations ``(J^T W J + lambda D) dx = -J^T W r`` with iteratively
+reweighted least-squares weights ``W`` of the robust loss (``rho'(z)``, SciPy's loss
+conventions). No dense ``N x n`` factorisation, no finite differences: the cost of an
+iteration is one evaluation plus an ``N x n`` product (``n`` = 6 for a pose).
+
+Coarse to fine with a graduated residual scale: the first iterations run on a fixed
+subsample of the cloud with the loss's residual scale ``f_scale`` widened (8x, then 4x,
+2x, 1x); a wide scale turns the robust cost into a smooth, nearly quadratic bowl whose
+basin reaches much larger initial errors, and narrowing it then rejects outliers. The
+last iterations use every point and the requested ``f_scale``.
+
+Visibility (``viewpoint=``): a point seen by a sensor at ``c`` is the *first* surface
+along its ray. A point whose nearest model surface faces away from ``c`` (it is explained
+by a back face the sensor cannot see, the typical wrong minimum for thin parts) is
+instead matched to the first hit of its ray on the posed model (sphere tracing from
+``c``), with a point-to-plane residual at that hit; rays that miss the model keep the
+signed-distance residual.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .lie import exp_so3
+
+__all__ = ["loss_weights", "lm_solve", "jacobian"]
+
+#: the graduated residual scales of the coarse stage (multiples of f_scale)
+GRADUATION = (8.0, 4.0, 2.0, 1.0)
+#: points in the coarse stage's subsample
+N_COARSE = 1500
+#: residual scale (x f_scale) at which escape() ranks its turns
+RANK_SCALE = 4.0
+
+
+def loss_weights_rho(z: np.ndarray, loss: str) -> np.ndarray:
+    """SciPy's ``rho(z)`` of a robust loss at ``z = (r / f_scale)^2``."""
+    return _rho_w(z, loss)[0]
+
+
+def _rho_w(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
+    if loss == "linear":
+        return z, np.ones_like(z)
+    if loss == "huber":
+        sq = np.sqrt(z)
+        big = z > 1.0
+        return np.where(big, 2.0 * sq - 1.0, z), np.where(big, 1.0 / np.maximum(sq, 1.0), 1.0)
+    if loss == "soft_l1":
+        return 2.0 * (np.sqrt(1.0 + z) - 1.0), 1.0 / np.sqrt(1.0 + z)
+    if loss == "cauchy":
+        return np.log1p(z), 1.0 / (1.0 + z)
+    if loss == "arctan":
+        return np.arctan(z), 1.0 / (1.0 + z * z)
+    raise ValueError(loss)  # pragma: no cover - validated by prepare()
+
+
+def loss_weights(r: np.ndarray, fs: float, loss: str) -> tuple[float, np.ndarray]:
+    """Robust cost ``0.5 fs^2 sum rho((r / fs)^2)`` (SciPy's convention) and the IRLS
+    weights ``rho'((r / fs)^2)``, shape (N,), for residuals ``r`` (N,) in scene units."""
+    rho, w = _rho_w((r / fs) ** 2, loss)
+    return 0.5 * fs * fs * float(np.sum(rho)), w
+
+
+def _normal_equations_np(J: np.ndarray, w: np.ndarray, r: np.ndarray):
+    Jw = J * w[:, None]
+    return Jw.T @ J, Jw.T @ r
+
+
+try:  # a compiled loop: multi-threaded BLAS on these thin products is slow when cores
+    # are shared, and a single pass over J is all that is needed
+    from numba import njit
+
+    @njit(cache=True, fastmath=False)
+    def _normal_equations_nb(J, w, r):  # pragma: no cover - compiled
+        N, n = J.shape
+        A = np.zeros((n, n))
+        b = np.zeros(n)
+        for k in range(N):
+            wk = w[k]
+            for i in range(n):
+                ji = J[k, i] * wk
+                b[i] += ji * r[k]
+                for j in range(i + 1):
+                    A[i, j] += ji * J[k, j]
+        for i in range(n):
+            for j in range(i):
+                A[j, i] = A[i, j]
+        return A, b
+except ImportError:  # pragma: no cover
+    _normal_equations_nb = None
+
+
+def normal_equations(J: np.ndarray, w: np.ndarray, r: np.ndarray):
+    """``(J^T W J, J^T W r)`` for a Jacobian ``J`` (N, n), weights ``w`` (N,) and
+    residuals ``r`` (N,)."""
+    if _normal_equations_nb is not None:
+        return _normal_equations_nb(np.ascontiguousarray(J), np.ascontiguousarray(w),
+                                    np.ascontiguousarray(r))
+    return _normal_equations_np(J, w, r)
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (N, 3) arrays (cheaper than ``np.cross``)."""
+    out = np.empty_like(u)
+    out[:, 0] = u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]
+    out[:, 1] = u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]
+    out[:, 2] = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    return out
+
+
+def jacobian(pose: bool, scale: bool, s: float, a: np.ndarray, f: np.ndarray,
+             gw: np.ndarray, Jp: np.ndarray | None) -> np.ndarray:
+    """Jacobian (N, n) of ``r = s f(q)`` for a left rotation increment ``w`` (3), the
+    translation ``t`` (3), ``log s`` and the parameters, at the linearisation point.
+
+    ``a`` = ``p - t`` (N, 3), ``f`` model values (N,), ``gw``
+    model gradients turned into the scene frame (N, 3), ``Jp`` scaled parameter
+    derivatives ``s df/dc`` (N, k) or None."""
+    cols = []
+    if pose:
+        cols += [_cross(gw, a), -gw]
+    if scale:
+        gq = np.einsum("ij,ij->i", gw, a) / s  # g . q (rotation-invariant)
+        cols.append((s * (f - gq))[:, None])
+    if Jp is not None and Jp.shape[1]:
+        cols.append(Jp)
+    return np.concatenate(cols, axis=1) if cols else np.zeros((len(f), 0))
+
+
+class _State:
+    """Pose, log-scale and estimated parameter values."""
+
+    def __init__(self, R, t, sigma, cvals):
+        self.R, self.t, self.sigma, self.cvals = R, t, sigma, cvals
+
+    def step(self, dx: np.ndarray, pose: bool, scale: bool, lo, hi) -> _State:
+        k = 0
+        R, t, sigma = self.R, self.t, self.sigma
+        if pose:
+            R = exp_so3(dx[0:3]) @ R
+            t = t + dx[3:6]
+            k = 6
+        if scale:
+            sigma = sigma + dx[k]
+            k += 1
+        c = np.clip(self.cvals + dx[k:], lo, hi) if len(self.cvals) else self.cvals
+        return _State(R, t, sigma, c)
+
+
+def _raycast(prog, pv, backend, c_m: np.ndarray, D_m: np.ndarray, centre: np.ndarray,
+             radius: float, tol: float, steps: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """First hits of rays ``c_m + u D_m`` (model frame, ``D_m`` unit (M, 3)) on the zero set
+    by sphere tracing from the entry of the bounding sphere; returns the hit distances
+    ``u`` (M,) and a mask of rays that hit."""
+    oc = c_m - centre
+    bproj = D_m @ oc
+    disc = bproj * bproj - (oc @ oc - radius * radius)
+    ok = disc > 0
+    u = np.where(ok, np.maximum(-bproj - np.sqrt(np.where(ok, disc, 0.0)), 0.0), 0.0)
+    hit = np.zeros(len(u), dtype=bool)
+    u_far = np.where(ok, -bproj + np.sqrt(np.where(ok, disc, 0.0)), 0.0)
+    active = ok.copy()
+    for _ in range(steps):
+        idx = np.flatnonzero(active)
+        if len(idx) == 0:
+            break
+        x = c_m + u[idx, None] * D_m[idx]
+        f = np.asarray(prog(x, pv, backend=backend))
+        done = f < tol
+        hit[idx[done]] = True
+        u[idx[~done]] += 0.9 * f[~done]
+        active[idx[done]] = False
+        active &= u < u_far
+    return u, hit
+
+
+class Visibility:
+    """The sensor position (3,) and the bounding radius of the posed model (scene units),
+    with the ray matches of the current :func:`lm_solve` call: indices of the points
+    re-matched to the first hit of their ray, and those hits in the model frame. The
+    matches are made at the first evaluation of a call and held during it (so that the
+    cost the LM compares is one function), like ICP's correspondences."""
+
+    def __init__(self, viewpoint: np.ndarray, radius: float):
+        self.viewpoint = viewpoint
+        self.radius = radius
+        self.sel: np.ndarray | None = None
+        self.X: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.sel = self.X = None
+
+    def match(self, prob, P, st: _State, pv: dict, gw: np.ndarray, fs: float) -> None:
+        """Find the points whose nearest surface faces away from the sensor (model
+        gradients ``gw`` (N, 3) in the scene frame) and their rays' first hits."""
+        s = math.exp(st.sigma)
+        d = P - self.viewpoint
+        d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        back = np.flatnonzero(np.einsum("ij,ij->i", gw, d) > 0)
+        self.sel, self.X = back[:0], np.zeros((0, 3))
+        if len(back):
+            c_m = ((self.viewpoint - st.t) @ st.R) / s
+            D_m = d[back] @ st.R
+            u, hit = _raycast(prob.prog, pv, prob.backend, c_m, D_m, prob.centre,
+                              self.radius / s, 0.05 * fs / s)
+            self.sel = back[hit]
+            self.X = c_m + u[hit, None] * D_m[hit]
+
+
+def _evaluate(prob, P, st: _State, idx, fs, vis: Visibility | None = None):
+    """Residuals (N,) and Jacobian (N, n) at state ``st``."""
+    prog = prob.prog
+    s = math.exp(st.sigma)
+    values = prob.values.copy()
+    values[idx] = st.cvals
+    pv = dict(zip(prob.pnames, values))
+    a = P - st.t
+    q = (a @ st.R) / s
+    if idx:
+        f, g, J = prog.value_grad_param_jacobian(q, pv, backend=prob.backend)
+        Jp = s * J[:, idx]
+    else:
+        f, g = prog.value_and_grad(q, pv, backend=prob.backend)
+        Jp = None
+    f = np.asarray(f, dtype=float)
+    gw = np.asarray(g) @ st.R.T
+    r = s * f
+    if vis is not None:
+        if vis.sel is None:
+            vis.match(prob, P, st, pv, gw, fs)
+        sel, X = vis.sel, vis.X
+        if len(sel):
+            # back-face matches: point-to-plane residual at the ray's first hit instead
+            if idx:
+                fh, gh, Jh = prog.value_grad_param_jacobian(X, pv, backend=prob.backend)
+                Jp[sel] = s * Jh[:, idx]
+            else:
+                fh, gh = prog.value_and_grad(X, pv, backend=prob.backend)
+            gh = np.asarray(gh)
+            n = gh / np.maximum(np.linalg.norm(gh, axis=1), 1e-300)[:, None]
+            nw = n @ st.R.T
+            xw = s * X @ st.R.T + st.t
+            # (plus the small model value at the hit, whose parameter derivatives move
+            # the plane)
+            r[sel] = np.einsum("ij,ij->i", nw, P[sel] - xw) + s * np.asarray(fh)
+            gw[sel] = nw
+            a[sel] = xw - st.t
+            f[sel] = 0.0  # the scale column of a point-to-plane residual: -s n . X
+    Jm = jacobian(prob.pose, prob.scale, s, a, f, gw, Jp)
+    return r, Jm
+
+
+def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_iter: int,
+             prior: float = 0.0, vis: Visibility | None = None, tol: float = 1e-7):
+    """Robust LM on points ``P`` (N, 3) from state ``st`` with residual scale ``fs``;
+    returns ``(state, cost, evaluations, converged)``. ``prior`` weights a pull of
+    ``log s`` towards 0; ``vis`` re-matches back-facing points (matched afresh)."""
+    if vis is not None:
+        vis.reset()
+    lo = np.array([prob.prog.params[i].lo for i in idx])
+    hi = np.array([prob.prog.params[i].hi for i in idx])
+    lam = 1e-3
+    r, Jm = _evaluate(prob, P, st, idx, fs, vis)
+    cost, w = loss_weights(r, fs, prob.loss)
+    kscale = 6 if prob.pose else 0
+
+    def with_prior(cost, sigma):
+        return cost + 0.5 * (prior * sigma) ** 2
+
+    cost = with_prior(cost, st.sigma)
+    nev = 1
+    converged = False
+    while nev < max_iter:
+        A, b = normal_equations(Jm, w, r)
+        if prior and prob.scale:
+            A[kscale, kscale] += prior * prior
+            b[kscale] += prior * prior * st.sigma
+        D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
+        accepted = False
+        while nev < max_iter:
+            try:
+                dx = -np.linalg.solve(A + lam * np.diag(D), b)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            if prob.pose and np.linalg.norm(dx[:3]) > 1.0:  # keep rotation steps sane
+                dx *= 1.0 / np.linalg.norm(dx[:3])
+            new = st.step(dx, prob.pose, prob.scale, lo, hi)
+            r2, J2 = _evaluate(prob, P, new, idx, fs, vis)
+            nev += 1
+            c2, w2 = loss_weights(r2, fs, prob.loss)
+            c2 = with_prior(c2, new.sigma)
+            if c2 <= cost:
+                pred = -(b @ dx) - 0.5 * dx @ (A @ dx)
+                rel = (cost - c2) / max(cost, 1e-300)
+                st, r, Jm, w = new, r2, J2, w2
+                small = rel < tol or (pred > 0 and cost - c2 < tol * cost)
+                cost = c2
+                lam = max(lam / 3.0, 1e-9)
+                accepted = True
+                if small:
+                    converged = True
+                break
+            lam *= 4.0
+            if lam > 1e10:
+                converged = True
+                break
+        if converged or not accepted:
+            break
+    return st, cost, nev, converged
+
+
+def lm_rounds(prob, P: np.ndarray, st: _State, idx: list[int], max_iter: int,
+              vis: Visibility | None):
+    """:func:`lm_solve` at ``prob.f_scale``; with visibility, repeated (re-matching the
+    back-facing points each time, like ICP) up to 3 times while the cost drops."""
+    cost, nev, converged = math.inf, 0, False
+    for _ in range(1 if vis is None else 3):
+        st, c2, k, converged = lm_solve(prob, P, st, idx, prob.f_scale, max_iter, vis=vis)
+        nev += k
+        done = not (c2 < cost * (1 - 1e-4))
+        cost = c2
+        if done:
+            break
+    return st, cost, nev, converged
+
+
+def axis_turns(P: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Turns about the centroid of the cloud ``P`` (N, 3): every 6 degrees about each axis
+    of the model's frame at rotation ``R`` (3, 3) (parts are usually modelled along their
+    axes of near-symmetry) and every 15 degrees about each principal axis of the cloud;
+    identity excluded. Returns ``(K, 3, 3)`` rotations and the centroid (3,)."""
+    c = P.mean(axis=0)
+    _, _, Vt = np.linalg.svd(P - c, full_matrices=False)
+    fine = np.deg2rad(np.arange(6.0, 360.0 - 1e-9, 6.0))
+    coarse = np.deg2rad(np.arange(15.0, 360.0 - 1e-9, 15.0))
+    turns = [exp_so3(th * ax) for ax in R.T for th in fine]
+    turns += [exp_so3(th * ax) for ax in Vt for th in coarse]
+    return np.array(turns), c
+
+
+def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 5, iters: int = 12,
+           vis: Visibility | None = None) -> tuple[_State, bool]:
+    """Leave a local minimum of the pose by turns about the cloud's principal axes.
+
+    Near-symmetric parts (a flange whose bolt holes are off by one hole spacing, a shaft
+    whose arms sit between their true places) have minima that differ by a turn about
+    one axis; they are far apart in rotation but cheap to test. Every turn of
+    :func:`axis_turns` is scored by its robust cost on ``P`` (a subsample) at the
+    converged translation turned about the centroid; the ``keep`` best get ``iters`` LM
+    evaluations; the best of those replaces ``st`` if its cost is lower. Returns the state
+    and whether it changed. Deterministic."""
+    s = math.exp(st.sigma)
+    pv = dict(zip(prob.pnames, prob.values))
+    base = lm_solve(prob, P, st, [], fs, iters, vis=vis)
+    best_state, best_cost = base[0], base[1]
+    Ts, c = axis_turns(P, st.R)
+    Q = P[:300]  # ranking needs few points; all turns in one evaluation
+    Rs = Ts @ st.R  # (K, 3, 3)
+    ts = c + (st.t - c) @ np.transpose(Ts, (0, 2, 1))  # (K, 3)
+    q = np.einsum("kpi,kij->kpj", Q[None] - ts[:, None], Rs) / s  # (K, M, 3)
+    f = np.asarray(prob.prog(q.reshape(-1, 3), pv, backend=prob.backend))
+    z = (s * f.reshape(len(Ts), -1) / (RANK_SCALE * fs)) ** 2
+    costs = np.sum(loss_weights_rho(z, prob.loss), axis=1)
+    changed = False
+    for j in np.argsort(costs)[:keep]:
+        T = Ts[j]
+        cand = _State(T @ st.R, c + T @ (st.t - c), st.sigma, st.cvals)
+        cand = lm_solve(prob, P, cand, [], 2.0 * fs, iters // 2, tol=1e-5)[0]
+        cand, cost, _, _ = lm_solve(prob, P, cand, [], fs, iters // 2, vis=vis, tol=1e-5)
+        if cost < best_cost * (1.0 - 1e-3):
+            best_state, best_cost, changed = cand, cost, True
+    return best_state, changed

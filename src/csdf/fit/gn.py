@@ -36,8 +36,10 @@ __all__ = ["loss_weights", "lm_solve", "jacobian"]
 GRADUATION = (8.0, 4.0, 2.0, 1.0)
 #: points in the coarse stage's subsample
 N_COARSE = 1500
+#: points on which escape() ranks its turns
+N_RANK = 1000
 #: residual scale (x f_scale) at which escape() ranks its turns
-RANK_SCALE = 4.0
+RANK_SCALE = 2.0
 
 
 def loss_weights_rho(z: np.ndarray, loss: str) -> np.ndarray:
@@ -332,47 +334,51 @@ def lm_rounds(prob, P: np.ndarray, st: _State, idx: list[int], max_iter: int,
     return st, cost, nev, converged
 
 
-def axis_turns(P: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Turns about the centroid of the cloud ``P`` (N, 3): every 6 degrees about each axis
-    of the model's frame at rotation ``R`` (3, 3) (parts are usually modelled along their
-    axes of near-symmetry) and every 15 degrees about each principal axis of the cloud;
-    identity excluded. Returns ``(K, 3, 3)`` rotations and the centroid (3,)."""
+def axis_turns(P: np.ndarray, R: np.ndarray, centre: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Turns to test: every 6 degrees about each axis of the model's frame at rotation
+    ``R`` (3, 3) through the posed model centre ``centre`` (3,) (parts are usually
+    modelled along their axes of near-symmetry), and every 15 degrees about each principal
+    axis of the cloud ``P`` (N, 3) through its centroid; identity excluded. Returns the
+    rotations (K, 3, 3) and their pivots (K, 3)."""
     c = P.mean(axis=0)
     _, _, Vt = np.linalg.svd(P - c, full_matrices=False)
     fine = np.deg2rad(np.arange(6.0, 360.0 - 1e-9, 6.0))
     coarse = np.deg2rad(np.arange(15.0, 360.0 - 1e-9, 15.0))
     turns = [exp_so3(th * ax) for ax in R.T for th in fine]
+    pivots = [centre] * len(turns)
     turns += [exp_so3(th * ax) for ax in Vt for th in coarse]
-    return np.array(turns), c
+    pivots += [c] * (len(turns) - len(pivots))
+    return np.array(turns), np.array(pivots)
 
 
 def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 5, iters: int = 12,
            vis: Visibility | None = None) -> tuple[_State, bool]:
-    """Leave a local minimum of the pose by turns about the cloud's principal axes.
+    """Leave a local minimum of the pose by turns about the model's and the cloud's axes.
 
     Near-symmetric parts (a flange whose bolt holes are off by one hole spacing, a shaft
     whose arms sit between their true places) have minima that differ by a turn about
     one axis; they are far apart in rotation but cheap to test. Every turn of
-    :func:`axis_turns` is scored by its robust cost on ``P`` (a subsample) at the
-    converged translation turned about the centroid; the ``keep`` best get ``iters`` LM
-    evaluations; the best of those replaces ``st`` if its cost is lower. Returns the state
-    and whether it changed. Deterministic."""
+    :func:`axis_turns` applied to the converged pose is scored by its robust cost on the
+    first ``N_RANK`` points of ``P`` (a random subsample) at ``RANK_SCALE * fs``, all in
+    one evaluation; the ``keep`` best get ``iters`` LM evaluations; the best of those
+    replaces ``st`` if its cost is lower than the converged one's. Returns the state and
+    whether it changed. Deterministic."""
     s = math.exp(st.sigma)
     pv = dict(zip(prob.pnames, prob.values))
     base = lm_solve(prob, P, st, [], fs, iters, vis=vis)
     best_state, best_cost = base[0], base[1]
-    Ts, c = axis_turns(P, st.R)
-    Q = P[:300]  # ranking needs few points; all turns in one evaluation
+    Ts, C = axis_turns(P, st.R, s * st.R @ prob.centre + st.t)
+    Q = P[:N_RANK]  # ranking needs fewer points; all turns in one evaluation
     Rs = Ts @ st.R  # (K, 3, 3)
-    ts = c + (st.t - c) @ np.transpose(Ts, (0, 2, 1))  # (K, 3)
+    ts = C + np.einsum("kij,kj->ki", Ts, st.t - C)  # (K, 3): turned about the pivots
     q = np.einsum("kpi,kij->kpj", Q[None] - ts[:, None], Rs) / s  # (K, M, 3)
     f = np.asarray(prob.prog(q.reshape(-1, 3), pv, backend=prob.backend))
     z = (s * f.reshape(len(Ts), -1) / (RANK_SCALE * fs)) ** 2
     costs = np.sum(loss_weights_rho(z, prob.loss), axis=1)
     changed = False
     for j in np.argsort(costs)[:keep]:
-        T = Ts[j]
-        cand = _State(T @ st.R, c + T @ (st.t - c), st.sigma, st.cvals)
+        cand = _State(Rs[j], ts[j], st.sigma, st.cvals)
         cand = lm_solve(prob, P, cand, [], 2.0 * fs, iters // 2, tol=1e-5)[0]
         cand, cost, _, _ = lm_solve(prob, P, cand, [], fs, iters // 2, vis=vis, tol=1e-5)
         if cost < best_cost * (1.0 - 1e-3):

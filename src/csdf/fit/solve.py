@@ -424,6 +424,7 @@ def make_result(prob: Problem, stats: dict, seconds: float, method: str,
 
 
 AMBIGUITY_SIN = 0.25  # scale is fixed when sin(angle(scale column, parameter span)) < this
+BIAS_COPIES = 2  # noisy copies of the projected cloud in the bias simulation
 
 
 def scale_ambiguity(prob: Problem, P: np.ndarray) -> float:
@@ -457,11 +458,13 @@ def correct_noise_bias(prob: Problem, st, idx: list[int], max_iter: int = 50):
     (Jensen) and the fitted part grows (thin legs fattest: the bias grows like
     ``sigma^2 * curvature``). Estimate: the inliers are projected onto the fitted surface,
     Gaussian noise of the residuals' RMS is added (seeded), the same problem is solved
-    again from the fitted state, and the change of ``log s`` and of the parameters is the
-    bias at that noise; it is scaled by the squared ratio of the real to the simulated
-    RMS (the RMS of signed distances underestimates the noise near edges, and the bias
-    goes with ``sigma^2``) and subtracted. Returns the corrected state and the number of
-    evaluations. No effect on noiseless data."""
+    again from the fitted state (``BIAS_COPIES`` noisy copies of the cloud, which lowers
+    the variance the correction adds), and the change of ``log s`` and of the parameters
+    is the bias at that noise (the pose is solved with them but kept); it is scaled by
+    the squared ratio of the real to the simulated RMS (the RMS of signed distances
+    underestimates the noise near edges, and the bias goes with ``sigma^2``) and
+    subtracted. Returns the corrected state and the number of evaluations. No effect on
+    noiseless data."""
     from .gn import _State, lm_solve
 
     s = math.exp(st.sigma)
@@ -484,13 +487,11 @@ def correct_noise_bias(prob: Problem, st, idx: list[int], max_iter: int = 50):
     if len(y) < 10:
         return st, 0
     rng = np.random.default_rng(20261122)
+    y = np.concatenate([y] * BIAS_COPIES)  # more copies: less variance in the estimate
     sim = s * (y + rng.normal(0.0, rms / s, y.shape)) @ st.R.T + st.t
-    pose = prob.pose
-    prob.pose = False  # the bias of the pose is negligible; hold it
-    try:
-        st_sim, _, nev, _ = lm_solve(prob, sim, st, idx, prob.f_scale, max_iter)
-    finally:
-        prob.pose = pose
+    # the pose is solved too (a seat height's bias comes with a shift along the legs) but
+    # only the scale and parameters are corrected
+    st_sim, _, nev, _ = lm_solve(prob, sim, st, idx, prob.f_scale, max_iter)
     rs = np.asarray(prob.prog(((sim - st_sim.t) @ st_sim.R) / math.exp(st_sim.sigma),
                               dict(zip(prob.pnames, _merge(prob, idx, st_sim.cvals))),
                               backend=prob.backend)) * math.exp(st_sim.sigma)

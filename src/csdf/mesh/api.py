@@ -10,6 +10,7 @@ import numpy as np
 
 from ..errors import CsdfError
 from .extract import Grid, extract
+from .stream import extract_mc
 
 __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_VOXELS"]
 
@@ -167,8 +168,13 @@ def mesh(
     t0 = time.perf_counter()
     reporter = _Progress() if progress else None
     try:
-        verts, faces = extract(grid, values, gradients, intervals, method,
-                               reporter.update if reporter else None)
+        if method == "mc" and backend == "fast":
+            # compiled, streamed over the octree's bricks (same results, see stream.py)
+            verts, faces = extract_mc(grid, values, intervals,
+                                      reporter.update if reporter else None)
+        else:
+            verts, faces = extract(grid, values, gradients, intervals, method,
+                                   reporter.update if reporter else None)
     finally:
         if reporter:
             reporter.close()
@@ -196,12 +202,12 @@ class _Progress:
                                  TimeElapsedColumn(), transient=True)
         self.bar.start()
         self.task = self.bar.add_task("octree", total=4)
-        self.done = 0
 
     def update(self, stage: str, a: int, b: int) -> None:
-        self.done += 1 if stage != "octree" else 0
+        # octree: up to 1; samples (a of b bricks, called per chunk): 1 to 3; roots: 4
+        done = {"octree": 1.0, "samples": 1.0 + 2.0 * a / max(b, 1)}.get(stage, 4.0)
         label = f"{stage} ({b:,} {'cells' if stage == 'octree' else 'items'})"
-        self.bar.update(self.task, description=label, completed=min(self.done + 1, 4))
+        self.bar.update(self.task, description=label, completed=done)
 
     def close(self) -> None:
         self.bar.stop()

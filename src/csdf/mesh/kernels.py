@@ -1,0 +1,342 @@
+"""Compiled (Numba) cores of the sparse marching-cubes mesher (see :mod:`.stream`).
+
+Everything here works on one *chunk* of bricks at a time (a brick is ``B^3`` voxels,
+``(B+1)^3`` samples, lower sample corner ``brick (3,)``), so memory stays bounded by the
+chunk plus the outputs:
+
+* :func:`brick_points`: the sample coordinates of a chunk's bricks;
+* :func:`close_on_box`: samples on the grid's outer faces count as outside;
+* :func:`mc_chunk`: marching cubes over the chunk's voxels. Each crossed grid edge gets
+  one vertex id: edges inside a brick are unique to it (a per-brick scratch table),
+  edges on a brick's faces may be shared with a neighbouring brick and are looked up in
+  an open-addressing hash map keyed by the global edge index, so no global sort or
+  ``unique`` is needed and shared edges give the same vertex (watertight);
+* :func:`root_points`, :func:`root_update`, :func:`clip_to_box`: the bracketed
+  Illinois / bisection root search on each new edge (the same iteration as
+  :func:`csdf.mesh.extract._refine_roots`), driven from Python because the field is
+  evaluated by the program's own backend.
+
+Global edge index of the edge from sample ``(cx, cy, cz)`` along ``axis``:
+``((cz * (ny + 1) + cy) * (nx + 1) + cx) * 3 + axis`` (as in :mod:`.extract`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "brick_points", "close_on_box", "mc_chunk", "new_hash", "root_points", "root_update",
+    "clip_to_box", "edge_on_box",
+]
+
+_EMPTY = -1
+
+
+def new_hash(capacity: int) -> np.ndarray:
+    """An empty edge hash map ``(H, 2)`` int64: rows ``(key, vertex id)``, key -1 = empty
+    (key and value side by side: one cache line per probe); ``H`` is the power of two at
+    or above ``capacity``."""
+    h = 1 << max(10, int(capacity - 1).bit_length())
+    table = np.empty((h, 2), dtype=np.int64)
+    table[:, 0] = _EMPTY
+    return table
+
+
+@njit(cache=True, nogil=True)
+def _slot(table: np.ndarray, key: np.int64) -> int:
+    """Row of ``key`` in the table, or the empty row where it would go (linear probing)."""
+    mask = table.shape[0] - 1
+    x = np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)
+    s = int(x ^ (x >> np.uint64(31))) & mask
+    while table[s, 0] != key and table[s, 0] != _EMPTY:
+        s = (s + 1) & mask
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _rehash(table: np.ndarray) -> np.ndarray:
+    out = np.empty((table.shape[0] * 2, 2), dtype=np.int64)
+    out[:, 0] = _EMPTY
+    for i in range(table.shape[0]):
+        if table[i, 0] != _EMPTY:
+            s = _slot(out, table[i, 0])
+            out[s, 0] = table[i, 0]
+            out[s, 1] = table[i, 1]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def brick_points(bricks: np.ndarray, origin: np.ndarray, h: float, B: int) -> np.ndarray:
+    """Sample coordinates ``(C * (B+1)^3, 3)`` float64 of bricks ``(C, 3)`` (lower sample
+    corners); sample ``(i, j, k)`` of brick ``b`` is row ``((b n + i) n + j) n + k``,
+    ``n = B + 1``, at ``origin + (brick + (i, j, k)) * h``."""
+    n = B + 1
+    out = np.empty((bricks.shape[0] * n * n * n, 3))
+    r = 0
+    for b in range(bricks.shape[0]):
+        for i in range(n):
+            x = origin[0] + (bricks[b, 0] + i) * h
+            for j in range(n):
+                y = origin[1] + (bricks[b, 1] + j) * h
+                for k in range(n):
+                    out[r, 0] = x
+                    out[r, 1] = y
+                    out[r, 2] = origin[2] + (bricks[b, 2] + k) * h
+                    r += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def close_on_box(bricks: np.ndarray, vals: np.ndarray, dims: np.ndarray, h: float) -> None:
+    """In place: samples on the grid's outer faces get ``max(f, h)`` (outside), which
+    closes the surface on the grid box. ``vals (C, n, n, n)``."""
+    n = vals.shape[1]
+    for b in range(bricks.shape[0]):
+        if (bricks[b, 0] > 0 and bricks[b, 1] > 0 and bricks[b, 2] > 0
+                and bricks[b, 0] + n - 1 < dims[0] and bricks[b, 1] + n - 1 < dims[1]
+                and bricks[b, 2] + n - 1 < dims[2]):
+            continue  # no sample on the box
+        for i in range(n):
+            gi = bricks[b, 0] + i
+            for j in range(n):
+                gj = bricks[b, 1] + j
+                for k in range(n):
+                    gk = bricks[b, 2] + k
+                    if (gi <= 0 or gj <= 0 or gk <= 0 or gi >= dims[0] or gj >= dims[1]
+                            or gk >= dims[2]):
+                        if vals[b, i, j, k] < h:
+                            vals[b, i, j, k] = h
+
+
+@njit(cache=True, nogil=True)
+def _grow2(a: np.ndarray, need: int) -> np.ndarray:
+    if need <= a.shape[0]:
+        return a
+    cap = max(need, 2 * a.shape[0])
+    out = np.empty((cap, a.shape[1]), dtype=a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _grow1(a: np.ndarray, need: int) -> np.ndarray:
+    if need <= a.shape[0]:
+        return a
+    out = np.empty(max(need, 2 * a.shape[0]), dtype=a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _mc_brick(b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tri, table,
+              n_used, faces, n_faces, vert_base, stamp, slot_vid, e_corner, e_axis,
+              e_f0, e_f1, n_new):
+    """Marching cubes in brick ``b`` of :func:`mc_chunk` (arrays with room for it; kept
+    apart so that no array is reassigned inside its loops). Returns the new
+    ``(n_faces, n_new, n_used)``."""
+    n = vals.shape[1]
+    B = n - 1
+    bx, by, bz = bricks[b, 0], bricks[b, 1], bricks[b, 2]
+    for x in range(B):
+        for y in range(B):
+            for z in range(B):
+                case = 0
+                for c in range(8):
+                    if vals[b, x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)] < 0:
+                        case |= 1 << c
+                if case == 0 or case == 255:
+                    continue
+                for t in range(n_tri[case]):
+                    for q in range(3):
+                        e = tri_table[case, t, q]
+                        a = edge_axis[e]
+                        lx = x + edge_origin[e, 0]
+                        ly = y + edge_origin[e, 1]
+                        lz = z + edge_origin[e, 2]
+                        s = ((a * n + lx) * n + ly) * n + lz
+                        if stamp[s] != b:
+                            stamp[s] = b
+                            on_face = False
+                            if a != 0 and (lx == 0 or lx == B):
+                                on_face = True
+                            if a != 1 and (ly == 0 or ly == B):
+                                on_face = True
+                            if a != 2 and (lz == 0 or lz == B):
+                                on_face = True
+                            vid = -1
+                            hs = 0
+                            if on_face:
+                                key = (((bz + lz) * ny1 + (by + ly)) * nx1 + (bx + lx)) * 3 + a
+                                hs = _slot(table, key)
+                                if table[hs, 0] == key:
+                                    vid = table[hs, 1]
+                                else:
+                                    table[hs, 0] = key
+                                    n_used += 1
+                            if vid < 0:
+                                vid = vert_base + n_new
+                                if on_face:
+                                    table[hs, 1] = vid
+                                e_corner[n_new, 0] = bx + lx
+                                e_corner[n_new, 1] = by + ly
+                                e_corner[n_new, 2] = bz + lz
+                                e_axis[n_new] = a
+                                e_f0[n_new] = vals[b, lx, ly, lz]
+                                e_f1[n_new] = vals[b, lx + (a == 0), ly + (a == 1),
+                                                   lz + (a == 2)]
+                                n_new += 1
+                            slot_vid[s] = vid
+                        faces[n_faces, q] = slot_vid[s]
+                    n_faces += 1
+    return n_faces, n_new, n_used
+
+
+@njit(cache=True, nogil=True)
+def mc_chunk(bricks, vals, dims, edge_origin, edge_axis, tri_table, n_tri, table,
+             n_used, faces, n_faces, vert_base, e_corner, e_axis, e_f0, e_f1):
+    """Marching cubes over one chunk of bricks.
+
+    Args:
+        bricks: ``(C, 3)`` int64 lower sample corners; vals: ``(C, n, n, n)`` float64 field
+            values at their samples (``n = B + 1``), already closed on the grid box.
+        dims: ``(3,)`` int64 voxels per axis; edge_origin ``(12, 3)``, edge_axis ``(12,)``,
+            tri_table ``(256, T, 3)``, n_tri ``(256,)``: the case table (:mod:`.cases`).
+        table: the edge hash map (global edge index -> vertex id, :func:`new_hash`),
+            kept across chunks, with ``n_used`` occupied slots; faces ``(Fcap, 3)`` int64 with
+            ``n_faces`` used rows.
+        vert_base: vertex id of this chunk's first new edge.
+        e_corner ``(Ecap, 3)`` int64, e_axis ``(Ecap,)`` int64, e_f0, e_f1 ``(Ecap,)``:
+            buffers for the new edges (reused from chunk to chunk: fresh memory is slow).
+
+    Returns:
+        ``(table, n_used, faces, n_faces, e_corner, e_axis, e_f0, e_f1, E)``: the
+        (possibly grown) tables and buffers; the buffers' first ``E`` rows are the
+        chunk's new edges (lower sample index, axis, field values at both ends) in
+        vertex-id order.
+    """
+    n = vals.shape[1]
+    B = n - 1
+    nx1 = dims[0] + 1
+    ny1 = dims[1] + 1
+    n_slots = 3 * n * n * n
+    stamp = np.full(n_slots, -1, dtype=np.int64)
+    slot_vid = np.zeros(n_slots, dtype=np.int32)
+    n_new = 0
+    max_tris = tri_table.shape[1]
+    for b in range(bricks.shape[0]):
+        # room for this brick: every face edge may be new in the hash, every voxel may
+        # emit the most triangles
+        while 2 * (n_used + n_slots) > table.shape[0]:
+            table = _rehash(table)
+        faces = _grow2(faces, n_faces + B * B * B * max_tris)
+        if n_new + n_slots > e_axis.shape[0]:  # (grown here, not in the inner loop)
+            e_corner = _grow2(e_corner, n_new + n_slots)
+            e_axis = _grow1(e_axis, n_new + n_slots)
+            e_f0 = _grow1(e_f0, n_new + n_slots)
+            e_f1 = _grow1(e_f1, n_new + n_slots)
+        n_faces, n_new, n_used = _mc_brick(
+            b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tri, table,
+            n_used, faces, n_faces, vert_base, stamp, slot_vid, e_corner, e_axis,
+            e_f0, e_f1, n_new)
+    return table, n_used, faces, n_faces, e_corner, e_axis, e_f0, e_f1, n_new
+
+
+@njit(cache=True, nogil=True)
+def edge_on_box(e_corner: np.ndarray, e_axis: np.ndarray, dims: np.ndarray) -> bool:
+    """True when some edge ``(E, 3)``/``(E,)`` touches the grid's outer faces."""
+    for r in range(e_corner.shape[0]):
+        for d in range(3):
+            c = e_corner[r, d]
+            if c <= 0 or c >= dims[d] or (e_axis[r] == d and c + 1 >= dims[d]):
+                return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def root_points(idx, e_corner, e_axis, t, origin, h) -> np.ndarray:
+    """Points ``(m, 3)`` at parameter ``t[e]`` along edges ``e = idx[r]``:
+    ``p0 + t (p1 - p0)`` with ``p0 = origin + c h``, ``p1 = origin + (c + step) h``."""
+    out = np.empty((idx.shape[0], 3))
+    for r in range(idx.shape[0]):
+        e = idx[r]
+        for d in range(3):
+            c = e_corner[e, d]
+            p0 = origin[d] + c * h
+            p1 = origin[d] + (c + (1 if e_axis[e] == d else 0)) * h
+            out[r, d] = p0 + t[e] * (p1 - p0)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def clip_to_box(p: np.ndarray, f: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float) -> None:
+    """In place ``f = max(f, 2 box(p) + h)``: the field closed on the grid box, which
+    agrees with :func:`close_on_box` at the samples (see ``extract._clip_box``)."""
+    for r in range(p.shape[0]):
+        m = -np.inf
+        for d in range(3):
+            m = max(m, lo[d] - p[r, d], p[r, d] - hi[d])
+        box = 2.0 * m + h
+        if box > f[r]:
+            f[r] = box
+
+
+@njit(cache=True, nogil=True)
+def _sign(v: float) -> int:
+    return 1 if v > 0 else (-1 if v < 0 else 0)
+
+
+@njit(cache=True, nogil=True)
+def root_start(f0: np.ndarray, f1: np.ndarray) -> tuple:
+    """Initial state of the root search on ``E`` edges: ``(t, a, b, fa, fb, side)``."""
+    m = f0.shape[0]
+    t = np.empty(m)
+    a = np.zeros(m)
+    b = np.ones(m)
+    fa = f0.copy()
+    fb = f1.copy()
+    side = np.zeros(m, dtype=np.int8)
+    for i in range(m):
+        v = fa[i] / (fa[i] - fb[i])
+        if not np.isfinite(v):
+            v = 0.5
+        t[i] = min(max(v, 0.0), 1.0)
+    return t, a, b, fa, fb, side
+
+
+@njit(cache=True, nogil=True)
+def root_update(idx, ft, t, a, b, fa, fb, side, tol, it) -> np.ndarray:
+    """One step of the bracketed root search on the pending edges ``idx`` given the
+    field ``ft`` at their current points; returns the edges still pending.
+
+    Regula falsi with the Illinois modification and a bisection step every third
+    iteration, always bracketed in ``[a, b]`` (the iteration of ``extract._refine_roots``).
+    """
+    keep = np.empty(idx.shape[0], dtype=idx.dtype)
+    n = 0
+    for r in range(idx.shape[0]):
+        e = idx[r]
+        f = ft[r]
+        if abs(f) <= tol:
+            continue
+        ti = t[e]
+        left = _sign(f) == _sign(fa[e])  # the root lies in (t, b)
+        if left:
+            if side[e] == 1:
+                fb[e] *= 0.5
+            a[e] = ti
+            fa[e] = f
+            side[e] = 1
+        else:
+            if side[e] == -1:
+                fa[e] *= 0.5
+            b[e] = ti
+            fb[e] = f
+            side[e] = -1
+        tn = a[e] + fa[e] * (b[e] - a[e]) / (fa[e] - fb[e])
+        if not np.isfinite(tn) or tn <= a[e] or tn >= b[e] or it % 3 == 2:
+            tn = 0.5 * (a[e] + b[e])
+        t[e] = tn
+        keep[n] = e
+        n += 1
+    return keep[:n]

@@ -1,0 +1,174 @@
+"""Streaming sparse marching cubes: the fast path of :func:`csdf.mesh` (``method='mc'``).
+
+Same grid, octree and results as :func:`csdf.mesh.extract.extract` (watertight,
+2-manifold, consistently wound, vertices on the zero set to ``1e-6`` voxel), but the
+bookkeeping is compiled (:mod:`.kernels`) and runs brick chunk by brick chunk in octree
+order: evaluate the chunk's samples, run marching cubes on it (new vertices are the
+chunk's new crossed edges, shared edges found in a hash map keyed by global edge
+index), refine the new edges' roots, and append vertices and faces. Working memory is
+the chunk (a few MB), the hash map of edges on brick faces and the growing output; no
+``(A, 12)`` arrays and no global sort.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from . import kernels as K
+from .cases import EDGE_AXIS, EDGE_ORIGIN, TRI_TABLE
+from .extract import BRICK, Grid, _octree
+
+__all__ = ["extract_mc", "CHUNK_SAMPLES"]
+
+CHUNK_SAMPLES = 1 << 19  # samples evaluated per call of the field (~12 MB of points)
+ITERATIONS = 40  # root search steps at most
+FIRST_ITERATIONS = 4  # steps per chunk; the few edges left go on together at the end
+_N_TRI = (TRI_TABLE[:, :, 0] >= 0).sum(axis=1).astype(np.int64)
+_TRI = TRI_TABLE.astype(np.int64)
+
+
+def extract_mc(
+    grid: Grid,
+    values: Callable[[np.ndarray], np.ndarray],
+    intervals: Callable,
+    progress: Callable | None = None,
+    tol: float = 1e-6,
+    chunk_samples: int = CHUNK_SAMPLES,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Marching cubes of the zero set on ``grid``, streamed over the octree's bricks.
+
+    Args:
+        values: ``(M, 3) float64 -> (M,)`` field values (one backend for the whole mesh,
+            so a sample shared by two bricks gets the same value in both).
+        intervals: ``(lo (M, 3), hi (M, 3)) -> (flo (M,), fhi (M,))``, conservative.
+        progress: optional ``callback(stage: str, done: int, total: int)``.
+        tol: root tolerance on ``|f|`` in voxels.
+        chunk_samples: samples per field evaluation (memory / call-overhead trade-off).
+
+    Returns:
+        ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64 (what ``trimesh`` keeps, so
+        it makes no copy), counter-clockwise seen from outside.
+    """
+    bricks = _octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
+                     else None)
+    if len(bricks) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    # octree order already groups neighbours; sort for a deterministic, local sweep
+    bricks = bricks[np.lexsort((bricks[:, 2], bricks[:, 1], bricks[:, 0]))]
+    dims = np.array(grid.dims, dtype=np.int64)
+    origin = np.asarray(grid.origin, dtype=np.float64)
+    h = float(grid.h)
+    per_chunk = max(1, chunk_samples // (BRICK + 1) ** 3)
+    box_lo = origin
+    box_hi = origin + h * dims
+    # initial sizes from the brick count, grown on demand: ~2 faces and ~1 vertex per
+    # surface voxel, ~B^2 surface voxels per brick, ~2 B of its crossed edges on its faces
+    # (the hash map's keys, at most half full). The outputs get twice that: pages never
+    # written cost address space, not memory, and a growth would copy everything
+    est_faces = int(len(bricks) * 4.0 * BRICK * BRICK) + 1024
+    table = K.new_hash(len(bricks) * 4 * BRICK + 1024)
+    faces = np.empty((est_faces, 3), dtype=np.int64)
+    n_faces = 0
+    n_used = 0  # occupied slots of the hash map
+    verts = np.empty((est_faces // 2, 3))
+    n_verts = 0
+    stragglers: list[_Roots] = []
+    cap = per_chunk * 2 * BRICK * BRICK  # edge buffers, grown on demand
+    ebuf = (np.empty((cap, 3), dtype=np.int64), np.empty(cap, dtype=np.int64),
+            np.empty(cap), np.empty(cap))
+    for s in range(0, len(bricks), per_chunk):
+        chunk = bricks[s:s + per_chunk]
+        vals = _samples(chunk, values, origin, h, dims)
+        table, n_used, faces, n_faces, *ebuf, n_new = K.mc_chunk(
+            chunk, vals, dims, EDGE_ORIGIN, EDGE_AXIS, _TRI, _N_TRI, table, n_used,
+            faces, n_faces, n_verts, *ebuf)
+        del vals
+        e_c, e_a, e_f0, e_f1 = (a[:n_new] for a in ebuf)
+        roots = _Roots(e_c, e_a, e_f0, e_f1, origin, h, tol * h,
+                       (box_lo, box_hi) if K.edge_on_box(e_c, e_a, dims) else None)
+        roots.run(values, FIRST_ITERATIONS)
+        if n_verts + len(e_a) > len(verts):
+            grown = np.empty((max(n_verts + len(e_a), 2 * len(verts)), 3))
+            grown[:n_verts] = verts[:n_verts]
+            verts = grown
+        roots.points(verts[n_verts:n_verts + len(e_a)])
+        if len(roots.idx):
+            stragglers.append(roots.pending(n_verts))
+        n_verts += len(e_a)
+        if progress:
+            progress("samples", s + len(chunk), len(bricks))
+    if stragglers:  # the few slow roots (kinks, flat spots) of all chunks together
+        rest = _Roots.concat(stragglers)
+        rest.run(values, ITERATIONS)
+        verts[rest.vid] = rest.points(np.empty((len(rest.vid), 3)))
+    if progress:
+        progress("roots", n_verts, n_verts)
+    return verts[:n_verts], faces[:n_faces]
+
+
+def _samples(chunk: np.ndarray, values: Callable, origin: np.ndarray, h: float,
+             dims: np.ndarray) -> np.ndarray:
+    """Field values ``(C, n, n, n)`` at the samples of bricks ``chunk (C, 3)``, closed on
+    the grid box (``n = BRICK + 1``)."""
+    n = BRICK + 1
+    pts = K.brick_points(chunk, origin, h, BRICK)
+    vals = np.asarray(values(pts), dtype=np.float64).reshape(len(chunk), n, n, n)
+    K.close_on_box(chunk, vals, dims, h)
+    return vals
+
+
+class _Roots:
+    """The bracketed root search on a set of edges (state as in :func:`.kernels.root_start`),
+    run a few steps at a time.
+
+    Attributes:
+        e_c ``(E, 3)`` int64, e_a ``(E,)``: the edges; t, a, b, fa, fb, side ``(E,)``: the
+        search state; idx: the edges still pending; it: steps done; vid ``(E,)``: the
+        edges' vertex ids (for the stragglers).
+    """
+
+    def __init__(self, e_c, e_a, f0, f1, origin, h, tol, box, it=0, state=None, idx=None,
+                 vid=None):
+        self.e_c, self.e_a, self.origin, self.h, self.tol, self.box = e_c, e_a, origin, h, tol, box
+        self.state = K.root_start(f0, f1) if state is None else state
+        self.idx = np.arange(len(e_a), dtype=np.int64) if idx is None else idx
+        self.it = it
+        self.vid = vid
+
+    def run(self, values: Callable, until: int) -> None:
+        """Search steps until ``until`` steps are done or no edge is pending."""
+        while self.it < until and len(self.idx):
+            t = self.state[0]
+            p = K.root_points(self.idx, self.e_c, self.e_a, t, self.origin, self.h)
+            ft = np.asarray(values(p), dtype=np.float64)
+            if self.box is not None:
+                K.clip_to_box(p, ft, self.box[0], self.box[1], self.h)
+            self.idx = K.root_update(self.idx, ft, *self.state, self.tol, self.it)
+            self.it += 1
+
+    def points(self, out: np.ndarray) -> np.ndarray:
+        """The current points ``(E, 3)``, written into ``out``."""
+        out[:] = K.root_points(np.arange(len(self.e_a), dtype=np.int64), self.e_c, self.e_a,
+                               self.state[0], self.origin, self.h)
+        return out
+
+    def pending(self, vert_base: int) -> _Roots:
+        """The pending edges alone (vertex ids from ``vert_base``)."""
+        i = self.idx
+        state = tuple(x[i] for x in self.state)
+        return _Roots(self.e_c[i], self.e_a[i], None, None, self.origin, self.h, self.tol,
+                      self.box, self.it, state, None, vert_base + i)
+
+    @staticmethod
+    def concat(parts: list[_Roots]) -> _Roots:
+        """One search over the pending edges of several (all after the same steps; the
+        grid box closes the field if it closes any part's)."""
+        box = next((p.box for p in parts if p.box is not None), None)
+        p0 = parts[0]
+        state = tuple(np.concatenate([p.state[k] for p in parts]) for k in range(6))
+        return _Roots(np.concatenate([p.e_c for p in parts]),
+                      np.concatenate([p.e_a for p in parts]), None, None, p0.origin, p0.h,
+                      p0.tol, box, p0.it, state, None,
+                      np.concatenate([p.vid for p in parts]))

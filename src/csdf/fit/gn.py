@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .lie import exp_so3
+from .lie import exp_so3, hat
 
 __all__ = ["loss_weights", "lm_solve", "jacobian"]
 
@@ -36,8 +36,10 @@ __all__ = ["loss_weights", "lm_solve", "jacobian"]
 GRADUATION = (8.0, 4.0, 2.0, 1.0)
 #: points in the coarse stage's subsample
 N_COARSE = 1500
-#: points on which escape() ranks its turns
+#: points on which escape() refines its turns (ranked on half as many)
 N_RANK = 1000
+#: escape() refines a turn only if its unrefined cost is below this times the current one
+PROMISING = 2.0
 #: residual scale (x f_scale) at which escape() ranks its turns
 RANK_SCALE = 2.0
 
@@ -260,14 +262,18 @@ def _evaluate(prob, P, st: _State, idx, fs, vis: Visibility | None = None):
 
 
 def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_iter: int,
-             prior: float = 0.0, vis: Visibility | None = None, tol: float = 1e-7):
+             prior: float = 0.0, vis: Visibility | None = None, tol: float = 1e-7,
+             slack: float = 0.0):
     """Robust LM on points ``P`` (N, 3) from state ``st`` with residual scale ``fs``;
     returns ``(state, cost, evaluations, converged)``. ``prior`` weights a pull of
-    ``log s`` towards 0; ``vis`` re-matches back-facing points (matched afresh)."""
+    ``log s`` towards 0; ``vis`` re-matches back-facing points (matched afresh);
+    ``slack`` widens the parameters' ranges by that fraction of their spans."""
     if vis is not None:
         vis.reset()
     lo = np.array([prob.prog.params[i].lo for i in idx])
     hi = np.array([prob.prog.params[i].hi for i in idx])
+    span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+    lo, hi = lo - slack * span, hi + slack * span
     lam = 1e-3
     r, Jm = _evaluate(prob, P, st, idx, fs, vis)
     cost, w = loss_weights(r, fs, prob.loss)
@@ -320,12 +326,13 @@ def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_ite
 
 
 def lm_rounds(prob, P: np.ndarray, st: _State, idx: list[int], max_iter: int,
-              vis: Visibility | None):
+              vis: Visibility | None, slack: float = 0.0):
     """:func:`lm_solve` at ``prob.f_scale``; with visibility, repeated (re-matching the
     back-facing points each time, like ICP) up to 3 times while the cost drops."""
     cost, nev, converged = math.inf, 0, False
     for _ in range(1 if vis is None else 3):
-        st, c2, k, converged = lm_solve(prob, P, st, idx, prob.f_scale, max_iter, vis=vis)
+        st, c2, k, converged = lm_solve(prob, P, st, idx, prob.f_scale, max_iter, vis=vis,
+                                        slack=slack)
         nev += k
         done = not (c2 < cost * (1 - 1e-4))
         cost = c2
@@ -345,14 +352,24 @@ def axis_turns(P: np.ndarray, R: np.ndarray, centre: np.ndarray
     _, _, Vt = np.linalg.svd(P - c, full_matrices=False)
     fine = np.deg2rad(np.arange(6.0, 360.0 - 1e-9, 6.0))
     coarse = np.deg2rad(np.arange(15.0, 360.0 - 1e-9, 15.0))
-    turns = [exp_so3(th * ax) for ax in R.T for th in fine]
-    pivots = [centre] * len(turns)
-    turns += [exp_so3(th * ax) for ax in Vt for th in coarse]
-    pivots += [c] * (len(turns) - len(pivots))
-    return np.array(turns), np.array(pivots)
+    fine_turns = _turns(R.T, fine)
+    coarse_turns = _turns(Vt, coarse)
+    pivots = np.concatenate([np.repeat(centre[None], len(fine_turns), axis=0),
+                             np.repeat(c[None], len(coarse_turns), axis=0)])
+    return np.concatenate([fine_turns, coarse_turns]), pivots
 
 
-def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 5, iters: int = 12,
+def _turns(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Rotations (len(axes) * len(angles), 3, 3) by each angle (radians) about each unit
+    axis (rows of ``axes``), axis-major (Rodrigues, vectorised)."""
+    K = np.array([hat(a) for a in axes])  # (A, 3, 3)
+    KK = K @ K
+    sn, cs = np.sin(angles)[None, :, None, None], np.cos(angles)[None, :, None, None]
+    out = np.eye(3) + sn * K[:, None] + (1.0 - cs) * KK[:, None]
+    return out.reshape(-1, 3, 3)
+
+
+def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 4, iters: int = 8,
            vis: Visibility | None = None) -> tuple[_State, bool]:
     """Leave a local minimum of the pose by turns about the model's and the cloud's axes.
 
@@ -360,27 +377,38 @@ def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 5, iters: int
     whose arms sit between their true places) have minima that differ by a turn about
     one axis; they are far apart in rotation but cheap to test. Every turn of
     :func:`axis_turns` applied to the converged pose is scored by its robust cost on the
-    first ``N_RANK`` points of ``P`` (a random subsample) at ``RANK_SCALE * fs``, all in
-    one evaluation; the ``keep`` best get ``iters`` LM evaluations; the best of those
+    first ``N_RANK / 2`` points of ``P`` (a random subsample) at ``RANK_SCALE * fs``, all
+    in one evaluation; the ``keep`` best, if no worse than ``PROMISING`` times the
+    converged pose's cost, get ``iters`` LM evaluations on the first ``N_RANK`` points,
+    and the best of those
     replaces ``st`` if its cost is lower than the converged one's. Returns the state and
     whether it changed. Deterministic."""
     s = math.exp(st.sigma)
     pv = dict(zip(prob.pnames, prob.values))
-    base = lm_solve(prob, P, st, [], fs, iters, vis=vis)
+    Q = P[:N_RANK]  # ranking and refinement need fewer points
+    base = lm_solve(prob, Q, st, [], fs, iters, vis=vis)
     best_state, best_cost = base[0], base[1]
     Ts, C = axis_turns(P, st.R, s * st.R @ prob.centre + st.t)
-    Q = P[:N_RANK]  # ranking needs fewer points; all turns in one evaluation
+    # all turns in one evaluation
     Rs = Ts @ st.R  # (K, 3, 3)
     ts = C + np.einsum("kij,kj->ki", Ts, st.t - C)  # (K, 3): turned about the pivots
-    q = np.einsum("kpi,kij->kpj", Q[None] - ts[:, None], Rs) / s  # (K, M, 3)
+    Qr = Q[:N_RANK // 2]
+    K, M = len(Ts), len(Qr)
+    # q_kp = R_k^T (Q_p - t_k) / s, all at once: Q @ [R_1 .. R_K] minus t_k R_k
+    QR = (Qr @ np.transpose(Rs, (1, 0, 2)).reshape(3, 3 * K)).reshape(M, K, 3)
+    q = (np.transpose(QR, (1, 0, 2)) - np.einsum("ki,kij->kj", ts, Rs)[:, None]) / s
     f = np.asarray(prob.prog(q.reshape(-1, 3), pv, backend=prob.backend))
     z = (s * f.reshape(len(Ts), -1) / (RANK_SCALE * fs)) ** 2
     costs = np.sum(loss_weights_rho(z, prob.loss), axis=1)
+    f0 = np.asarray(prob.prog(((Qr - st.t) @ st.R) / s, pv, backend=prob.backend))
+    c0 = float(np.sum(loss_weights_rho((s * f0 / (RANK_SCALE * fs)) ** 2, prob.loss)))
     changed = False
     for j in np.argsort(costs)[:keep]:
+        if costs[j] > PROMISING * c0:
+            break  # sorted: the rest are worse
         cand = _State(Rs[j], ts[j], st.sigma, st.cvals)
-        cand = lm_solve(prob, P, cand, [], 2.0 * fs, iters // 2, tol=1e-5)[0]
-        cand, cost, _, _ = lm_solve(prob, P, cand, [], fs, iters // 2, vis=vis, tol=1e-5)
+        cand = lm_solve(prob, Q, cand, [], 2.0 * fs, iters // 2, tol=1e-5)[0]
+        cand, cost, _, _ = lm_solve(prob, Q, cand, [], fs, iters // 2, vis=vis, tol=1e-5)
         if cost < best_cost * (1.0 - 1e-3):
             best_state, best_cost, changed = cand, cost, True
     return best_state, changed

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from .gn import jacobian, normal_equations
 from .lie import cube_rotations, exp_so3, sphere_rotations
 
 __all__ = ["multistart", "model_points"]
@@ -54,10 +55,8 @@ def _gn_pose(prob, P, R, t, s, iters: int, fs: float):
         if _ == iters:
             break
         wgt = np.where(ar <= fs, 1.0, fs / np.maximum(ar, 1e-300))
-        gw = g @ R.T
-        J = np.concatenate([np.cross(gw, a), -gw], axis=1)
-        A = J.T @ (J * wgt[:, None])
-        b = J.T @ (wgt * r)
+        J = jacobian(True, False, s, a, f, np.asarray(g) @ R.T, None)
+        A, b = normal_equations(J, wgt, r)
         try:
             d = -np.linalg.solve(A + 1e-6 * np.trace(A) / 6 * np.eye(6), b)
         except np.linalg.LinAlgError:

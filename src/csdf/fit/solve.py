@@ -425,6 +425,9 @@ def make_result(prob: Problem, stats: dict, seconds: float, method: str,
 
 AMBIGUITY_SIN = 0.25  # scale is fixed when sin(angle(scale column, parameter span)) < this
 BIAS_COPIES = 2  # noisy copies of the projected cloud in the bias simulation
+BIAS_ROUNDS = 2  # iterations of the bootstrap bias correction
+SMALL_START = 0.1  # the joint stage also tries parameters this far into their ranges
+BOUND_SLACK = 0.1  # parameter ranges widened by this fraction before the bias correction
 
 
 def scale_ambiguity(prob: Problem, P: np.ndarray) -> float:
@@ -477,32 +480,53 @@ def correct_noise_bias(prob: Problem, st, idx: list[int], max_iter: int = 50):
     rms = float(np.sqrt(np.mean((s * f[inl]) ** 2)))
     if not rms > 1e-9 * prob.size * s:
         return st, 0
-    y = q[inl]
-    for _ in range(4):  # Newton projection onto the fitted surface (model frame)
+    lo = np.array([prob.prog.params[i].lo for i in idx])
+    hi = np.array([prob.prog.params[i].hi for i in idx])
+    P_in = prob.points[inl]
+    cur, k, nev = st, None, 0
+    for _ in range(BIAS_ROUNDS):
+        sim = _simulate(prob, P_in, cur, idx, rms)
+        if sim is None:
+            return st, nev
+        # the pose is solved too (a seat height's bias comes with a shift along the legs)
+        # but only the scale and parameters are corrected
+        st_sim, _, n_ev, _ = lm_solve(prob, sim, cur, idx, prob.f_scale, max_iter,
+                                      slack=BOUND_SLACK)
+        nev += n_ev
+        if k is None:
+            s2 = math.exp(st_sim.sigma)
+            pv2 = dict(zip(prob.pnames, _merge(prob, idx, st_sim.cvals)))
+            rs = s2 * np.asarray(prob.prog(((sim - st_sim.t) @ st_sim.R) / s2, pv2,
+                                           backend=prob.backend))
+            rs = rs[np.abs(rs) <= 3.0 * prob.f_scale]
+            rms_sim = float(np.sqrt(np.mean(rs ** 2))) if len(rs) else rms
+            k = (rms / rms_sim) ** 2 if rms_sim > 0 else 1.0
+        # iterated bootstrap: the bias is re-evaluated at the corrected values
+        cvals = np.clip(st.cvals - k * (st_sim.cvals - cur.cvals), lo, hi) if idx \
+            else st.cvals
+        sigma = st.sigma - k * (st_sim.sigma - cur.sigma) if prob.scale else st.sigma
+        cur = _State(st.R, st.t, sigma, cvals)
+    return cur, nev
+
+
+def _simulate(prob: Problem, P: np.ndarray, st, idx: list[int], rms: float):
+    """Scene points ``P`` (N, 3) projected onto the surface of state ``st`` (Newton steps
+    in the model frame) with Gaussian noise of ``rms`` (scene units) added, in
+    ``BIAS_COPIES`` seeded copies; None if too few project."""
+    s = math.exp(st.sigma)
+    pv = dict(zip(prob.pnames, _merge(prob, idx, st.cvals)))
+    y = ((P - st.t) @ st.R) / s
+    for _ in range(4):
         fy, gy = prob.prog.value_and_grad(y, pv, backend=prob.backend)
         gy = np.asarray(gy)
         y = y - (np.asarray(fy) / np.maximum(np.sum(gy * gy, axis=1), 1e-30))[:, None] * gy
     fy = np.asarray(prob.prog(y, pv, backend=prob.backend))
     y = y[np.abs(fy) < 1e-3 * rms / s]
     if len(y) < 10:
-        return st, 0
+        return None
     rng = np.random.default_rng(20261122)
     y = np.concatenate([y] * BIAS_COPIES)  # more copies: less variance in the estimate
-    sim = s * (y + rng.normal(0.0, rms / s, y.shape)) @ st.R.T + st.t
-    # the pose is solved too (a seat height's bias comes with a shift along the legs) but
-    # only the scale and parameters are corrected
-    st_sim, _, nev, _ = lm_solve(prob, sim, st, idx, prob.f_scale, max_iter)
-    rs = np.asarray(prob.prog(((sim - st_sim.t) @ st_sim.R) / math.exp(st_sim.sigma),
-                              dict(zip(prob.pnames, _merge(prob, idx, st_sim.cvals))),
-                              backend=prob.backend)) * math.exp(st_sim.sigma)
-    rs = rs[np.abs(rs) <= 3.0 * prob.f_scale]
-    rms_sim = float(np.sqrt(np.mean(rs ** 2))) if len(rs) else rms
-    k = (rms / rms_sim) ** 2 if rms_sim > 0 else 1.0
-    lo = np.array([prob.prog.params[i].lo for i in idx])
-    hi = np.array([prob.prog.params[i].hi for i in idx])
-    cvals = np.clip(st.cvals - k * (st_sim.cvals - st.cvals), lo, hi) if idx else st.cvals
-    sigma = st.sigma - k * (st_sim.sigma - st.sigma) if prob.scale else st.sigma
-    return _State(st.R, st.t, sigma, cvals), nev
+    return s * (y + rng.normal(0.0, rms / s, y.shape)) @ st.R.T + st.t
 
 
 def _merge(prob: Problem, idx: list[int], cvals: np.ndarray) -> np.ndarray:
@@ -511,14 +535,44 @@ def _merge(prob: Problem, idx: list[int], cvals: np.ndarray) -> np.ndarray:
     return values
 
 
+def _small_start(prob: Problem, P: np.ndarray, st, idx: list[int], max_iter: int):
+    """The better of two starts for the joint stage, by their cost after a short solve on
+    a subsample: the parameters as given, or every parameter near the low end of its range
+    (``lo + SMALL_START * span``).
+
+    The residuals measure the distance from each point to the model, not from the model to
+    the points: a part made too long (legs below the floor) adds surface where there are
+    no points, which costs nothing, while the points beyond a part made too short pull it
+    out. Parameters that start too large can therefore stay there; starting small avoids
+    that trap."""
+    from .gn import N_COARSE, _State, lm_solve
+
+    n = len(P)
+    sub = P if n <= N_COARSE else P[np.random.default_rng(2).choice(n, N_COARSE, False)]
+    lo = np.array([prob.prog.params[i].lo for i in idx])
+    hi = np.array([prob.prog.params[i].hi for i in idx])
+    small = np.where(np.isfinite(hi - lo), lo + SMALL_START * (hi - lo), st.cvals)
+    best, nev = None, 0
+    for cvals in (st.cvals, small):
+        cand = lm_solve(prob, sub, _State(st.R, st.t, st.sigma, cvals), idx, prob.f_scale,
+                        max(10, max_iter // 4))
+        nev += cand[2]
+        if best is None or cand[1] < best[1]:
+            best = cand
+    return best[0], nev
+
+
 def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
              escape: bool = True, correct_bias: bool = False) -> tuple[Problem, dict]:
     """The default engine: coarse-to-fine robust Levenberg-Marquardt (:mod:`.gn`).
 
     Stages: (1) the pose alone on a fixed subsample of at most ``gn.N_COARSE`` points,
-    with the residual scale graduated from ``8 f_scale`` down to ``f_scale``; (2) the pose
-    on all points; (3) when scale or parameters are estimated, everything jointly on all
-    points. ``max_iter`` bounds the evaluations of each stage. Runs in place."""
+    with the residual scale graduated from ``8 f_scale`` down to ``f_scale``, then the
+    escape step (:func:`csdf.fit.gn.escape`); (2) when only the pose is estimated, the
+    pose on all points; otherwise everything jointly on all points (scale held if
+    ambiguous, see :func:`scale_ambiguity`; parameters from the better of two starts, see
+    :func:`_small_start`), then the noise-bias correction (:func:`correct_noise_bias`).
+    ``max_iter`` bounds the evaluations of each stage. Runs in place."""
     from .gn import GRADUATION, N_COARSE, Visibility, _State, lm_rounds, lm_solve
     from .gn import escape as _escape
 
@@ -543,8 +597,9 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
             nev += k
         if escape:
             st0, _ = _escape(prob, sub, st0, prob.f_scale, vis=vis)
-        st0, cost, k, converged = lm_rounds(prob, P, st0, [], max_iter, vis)
-        nev += k
+        if not (scale or names):  # (otherwise the joint stage refines the pose on all)
+            st0, cost, k, converged = lm_rounds(prob, P, st0, [], max_iter, vis)
+            nev += k
         prob.scale, prob.names = scale, names
         st = _State(st0.R, st0.t, st.sigma, st.cvals)
         prob.R, prob.t = st.R, st.t
@@ -560,7 +615,13 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
                     f"uniform resize (sin of the angle between the scale and parameter "
                     f"Jacobian columns {sin:.3f} < {AMBIGUITY_SIN}): scale and size are "
                     "ambiguous, so the parameters absorb the size")
-        st, cost, k, converged = lm_rounds(prob, P, st, idx, max_iter, vis)
+        if prob.names and prob.pose:
+            st, k = _small_start(prob, P, st, idx, max_iter)
+            nev += k
+        # with the bias correction, the biased estimate may leave the ranges a little
+        # (a true value near a bound); the corrected one is clipped to them
+        st, cost, k, converged = lm_rounds(prob, P, st, idx, max_iter, vis,
+                                           slack=BOUND_SLACK if correct_bias else 0.0)
         nev += k
         if correct_bias:
             st, k = correct_noise_bias(prob, st, idx)

@@ -226,3 +226,16 @@ def test_noise_bias_of_parameters_is_corrected():
     fixed = csdf.fit(ball, P, **kw)
     err0, err1 = abs(biased.params["r"] - 0.08), abs(fixed.params["r"] - 0.08)
     assert err0 > 1e-4 and err1 < err0 / 3
+
+
+def test_parameters_that_start_too_large_are_recovered():
+    # a rod whose length starts far too long: the points on its true end caps lie inside
+    # the long rod, nearer its side than its caps, so only a start from short lengths
+    # (the joint stage's second start) pulls the caps to them
+    length = csdf.param("length", 0.3, 0.1, 0.4)
+    rod = csdf.cylinder(0.02, length) | csdf.box((0.08, 0.01, 0.01))
+    P = _scene(rod, n=2000, length=0.15)
+    res = csdf.fit(rod, P, init={"rotation": R_TRUE, "translation": T_TRUE},
+                   estimate="pose,params")
+    assert res.params["length"] == pytest.approx(0.15, abs=1e-6)
+    assert rotation_angle(res.rotation, R_TRUE) < 1e-6

@@ -22,7 +22,7 @@ from .extract import BRICK, Grid, _octree
 
 __all__ = ["extract_mc", "CHUNK_SAMPLES"]
 
-CHUNK_SAMPLES = 1 << 19  # samples evaluated per call of the field (~12 MB of points)
+CHUNK_SAMPLES = 1 << 18  # samples evaluated per call of the field (~6 MB of points)
 ITERATIONS = 40  # root search steps at most
 FIRST_ITERATIONS = 4  # steps per chunk; the few edges left go on together at the end
 _N_TRI = (TRI_TABLE[:, :, 0] >= 0).sum(axis=1).astype(np.int64)
@@ -69,10 +69,10 @@ def extract_mc(
     # written cost address space, not memory, and a growth would copy everything
     est_faces = int(len(bricks) * 4.0 * BRICK * BRICK) + 1024
     table = K.new_hash(len(bricks) * 4 * BRICK + 1024)
-    faces = np.empty((est_faces, 3), dtype=np.int64)
+    faces = K.fresh_array((est_faces, 3), np.int64)
     n_faces = 0
     n_used = 0  # occupied slots of the hash map
-    verts = np.empty((est_faces // 2, 3))
+    verts = K.fresh_array((est_faces // 2, 3), np.float64)
     n_verts = 0
     stragglers: list[_Roots] = []
     cap = per_chunk * 2 * BRICK * BRICK  # edge buffers, grown on demand
@@ -90,7 +90,7 @@ def extract_mc(
                        (box_lo, box_hi) if K.edge_on_box(e_c, e_a, dims) else None)
         roots.run(values, FIRST_ITERATIONS)
         if n_verts + len(e_a) > len(verts):
-            grown = np.empty((max(n_verts + len(e_a), 2 * len(verts)), 3))
+            grown = K.fresh_array((max(n_verts + len(e_a), 2 * len(verts)), 3), np.float64)
             grown[:n_verts] = verts[:n_verts]
             verts = grown
         roots.points(verts[n_verts:n_verts + len(e_a)])
@@ -150,8 +150,7 @@ class _Roots:
 
     def points(self, out: np.ndarray) -> np.ndarray:
         """The current points ``(E, 3)``, written into ``out``."""
-        out[:] = K.root_points(np.arange(len(self.e_a), dtype=np.int64), self.e_c, self.e_a,
-                               self.state[0], self.origin, self.h)
+        K.all_points(None, self.e_c, self.e_a, self.state[0], self.origin, self.h, out)
         return out
 
     def pending(self, vert_base: int) -> _Roots:

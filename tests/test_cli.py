@@ -108,3 +108,34 @@ def test_fit_recovers_a_translated_model(tmp_path):
     res = json.loads(out.read_text())
     np.testing.assert_allclose(res["translation"], [0.1, 0.2, 0.3], atol=1e-6)
     assert abs(res["params"]["w"] - 0.4) < 1e-6
+
+
+def test_fit_passes_the_sensor_options(tmp_path):
+    """--viewpoint / --no-escape / --no-debias reach csdf.fit; bad values are reported
+    with the flag's name."""
+    import json
+
+    import numpy as np
+
+    import csdf
+    from csdf.pointio import write_points
+
+    model = tmp_path / "plate.csdf"
+    model.write_text("export box((0.3, 0.2, 0.02)) - sphere(0.04).translate((0.08, 0.05, 0))\n")
+    shape = csdf.load(model)
+    eye = (0.2, -0.3, 0.4)
+    cam = csdf.Camera.look_at(eye=eye, target=(0, 0, 0), fov=40, width=80, height=60)
+    pts, _ = csdf.scan(shape, cam, seed=0)
+    scan = tmp_path / "scan.ply"
+    write_points(scan, cam.camera_to_world(pts) + np.array([0.01, -0.02, 0.005]))
+    out = tmp_path / "fit.json"
+    r = runner.invoke(app, ["fit", str(model), str(scan), "-o", str(out), "--viewpoint",
+                            ",".join(map(str, eye)), "--no-escape", "--no-debias"])
+    assert r.exit_code == 0, r.output
+    res = json.loads(out.read_text())
+    np.testing.assert_allclose(res["translation"], [0.01, -0.02, 0.005], atol=1e-4)
+    np.testing.assert_allclose(res["rotation"], np.eye(3), atol=1e-3)
+    r = runner.invoke(app, ["fit", str(model), str(scan), "-o", str(out), "--solver", "x"])
+    assert r.exit_code == 2 and "solver" in r.output
+    r = runner.invoke(app, ["fit", str(model), str(scan), "-o", str(out), "--viewpoint", "1,2"])
+    assert r.exit_code == 2 and "--viewpoint" in r.output

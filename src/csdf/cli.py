@@ -216,8 +216,20 @@ def fit(
                                  "pose,scale,params"),
     multistart: bool = typer.Option(False, "--multistart", help="Search all rotations "
                                     "first (for large initial errors)."),
-    loss: str = typer.Option("huber", "--loss", help="huber, cauchy, soft_l1, arctan, linear"),
+    loss: str = typer.Option("huber", "--loss", help="huber, cauchy, soft_l1, arctan, linear; "
+                             "cauchy for heavy outliers."),
     seed: int = typer.Option(0, "--seed", help="Seed of the multistart subsampling."),
+    viewpoint: str | None = typer.Option(None, "--viewpoint", help="x,y,z: the sensor "
+                                         "position of a single-view scan (0,0,0 for "
+                                         "camera-frame clouds such as csdf scan's); points "
+                                         "are then matched to surfaces facing it."),
+    solver: str = typer.Option("lm", "--solver", help="lm (robust Levenberg-Marquardt) or "
+                               "scipy (least_squares)."),
+    escape: bool = typer.Option(True, "--escape/--no-escape", help="Test turns about the "
+                                "model's and the cloud's axes for a lower minimum."),
+    debias: bool | None = typer.Option(None, "--debias/--no-debias", help="Correct the noise "
+                                       "bias of estimated parameters (default: on when "
+                                       "parameters are estimated)."),
     param: list[str] = typer.Option([], "--param", "-p", help="Initial name=value "
                                     "(repeatable)."),
     overlay: Path | None = typer.Option(None, "--overlay", help="Also write a PNG of the "
@@ -238,7 +250,9 @@ def fit(
         m = _load(model)
         pts, _ = read_points(scan)
         res = fit_fn(m, pts, init={"params": _params(param)} if param else None,
-                     estimate=estimate, multistart=multistart, loss=loss, seed=seed)
+                     estimate=estimate, multistart=multistart, loss=loss, seed=seed,
+                     viewpoint=_vec3(viewpoint, "--viewpoint"), solver=solver,
+                     escape=escape, debias=debias)
         with atomic_path(output) as tmp:
             tmp.write_text(json.dumps(res.to_dict(), indent=2))
         out.print(f"{output}: rmse {res.rmse:.3g}, inliers {res.inlier_fraction:.1%}, "

@@ -33,6 +33,11 @@ __all__ = [
 ]
 
 _EMPTY = -1
+# Hash keys of edges: (brick index << _LOCAL_BITS) | local edge index in the brick, the
+# brick being the one that holds the edge's lower end; the hash scatters bricks and
+# keeps a brick's edges side by side (few cache lines and pages per brick)
+_LOCAL_BITS = 12  # room for 3 B^3 local edges: B <= 11
+_LOCAL_MASK = (1 << _LOCAL_BITS) - 1
 
 
 def new_hash(capacity: int) -> np.ndarray:
@@ -70,8 +75,8 @@ def fresh_array(shape: tuple[int, ...], dtype) -> np.ndarray:
 def _slot(table: np.ndarray, key: np.int64) -> int:
     """Row of ``key`` in the table, or the empty row where it would go (linear probing)."""
     mask = table.shape[0] - 1
-    x = np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)
-    s = int(x ^ (x >> np.uint64(31))) & mask
+    x = np.uint64(key >> _LOCAL_BITS) * np.uint64(0x9E3779B97F4A7C15)
+    s = (int(x ^ (x >> np.uint64(31))) + (key & _LOCAL_MASK)) & mask
     while table[s, 0] != key and table[s, 0] != _EMPTY:
         s = (s + 1) & mask
     return s
@@ -160,6 +165,8 @@ def _mc_brick(b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tr
     ``(n_faces, n_new, n_used)``."""
     n = vals.shape[1]
     B = n - 1
+    nbx = (nx1 - 1) // B + 2  # bricks per axis, with room for the upper faces
+    nby = (ny1 - 1) // B + 2
     bx, by, bz = bricks[b, 0], bricks[b, 1], bricks[b, 2]
     for x in range(B):
         for y in range(B):
@@ -190,7 +197,12 @@ def _mc_brick(b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tr
                             vid = -1
                             hs = 0
                             if on_face:
-                                key = (((bz + lz) * ny1 + (by + ly)) * nx1 + (bx + lx)) * 3 + a
+                                # (brick holding the edge's lower end, local index)
+                                qx, rx = divmod(bx + lx, B)
+                                qy, ry = divmod(by + ly, B)
+                                qz, rz = divmod(bz + lz, B)
+                                key = ((((qz * nby + qy) * nbx + qx) << _LOCAL_BITS)
+                                       | (((rx * B + ry) * B + rz) * 3 + a))
                                 hs = _slot(table, key)
                                 if table[hs, 0] == key:
                                     vid = table[hs, 1]

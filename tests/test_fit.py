@@ -108,6 +108,48 @@ def test_robust_loss_with_outliers():
     assert 0.6 < res.inlier_fraction < 0.75
 
 
+def _cluttered(seed=0):
+    """1000 surface points (noise 1 mm) and as many outliers in a box on one side of the
+    part (clutter): they pull Huber's optimum."""
+    P = _scene(_part(), n=1000)
+    rng = np.random.default_rng(seed)
+    lo, hi = P.min(0), P.max(0)
+    out = rng.uniform(lo, hi + np.array([0.15, 0.15, 0.0]), (1000, 3))
+    return np.vstack([P + rng.normal(scale=0.001, size=P.shape), out])
+
+
+def test_auto_loss_switches_to_cauchy_under_heavy_outliers():
+    shape = _part()
+    X = _cluttered()
+    huber = csdf.fit(shape, X, init=_init(20), loss="huber")
+    auto = csdf.fit(shape, X, init=_init(20))  # the default is loss='auto'
+    assert huber.loss == "huber" and auto.loss == "cauchy"
+    # Huber's optimum is pulled by the clutter; auto's (Cauchy's) is not
+    assert rotation_angle(huber.rotation, R_TRUE) > np.deg2rad(1.0)
+    assert np.linalg.norm(huber.translation - T_TRUE) > 0.003
+    assert rotation_angle(auto.rotation, R_TRUE) < np.deg2rad(0.3)
+    assert np.linalg.norm(auto.translation - T_TRUE) < 0.001
+    assert any("loss='auto'" in n and "Cauchy" in n for n in auto.notes)
+    assert auto.to_dict()["loss"] == "cauchy"
+
+
+def test_auto_loss_is_huber_on_a_clean_cloud():
+    shape = _part()
+    P = _scene(shape, n=1500) + np.random.default_rng(1).normal(scale=0.001, size=(1500, 3))
+    huber = csdf.fit(shape, P, init=_init(20), loss="huber")
+    auto = csdf.fit(shape, P, init=_init(20), loss="auto")
+    assert auto.loss == huber.loss == "huber"
+    np.testing.assert_array_equal(auto.transform, huber.transform)
+    assert auto.notes == huber.notes == [] and auto.cost == huber.cost
+    # also through multistart's final refinement and the SciPy engine
+    a = csdf.fit(shape, P, multistart=True, seed=3)
+    b = csdf.fit(shape, P, multistart=True, seed=3, loss="huber")
+    np.testing.assert_array_equal(a.transform, b.transform)
+    assert a.loss == "huber"
+    c = csdf.fit(shape, P, init=_init(5), solver="scipy")
+    assert c.loss == "huber" and rotation_angle(c.rotation, R_TRUE) < np.deg2rad(0.3)
+
+
 def test_multistart_from_any_rotation_is_reproducible():
     shape = _part()
     P = _scene(shape, n=1200)
@@ -143,7 +185,8 @@ def test_bad_input():
         csdf.fit(shape, P[:, :2])
     with pytest.raises(csdf.CsdfError, match="estimate must be"):
         csdf.fit(shape, P, estimate="pose,colour")
-    with pytest.raises(csdf.CsdfError, match="loss must be"):
+    with pytest.raises(csdf.CsdfError, match="loss must be one of auto, huber, cauchy, "
+                       "linear, soft_l1, arctan; got 'l3'"):
         csdf.fit(shape, P, loss="l3")
 
 

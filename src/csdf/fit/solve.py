@@ -40,13 +40,17 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import CsdfError, ParamError
-from .gn import jacobian
+from .gn import jacobian, loss_weights
 from .lie import exp_so3, left_jacobian
 
 __all__ = ["FitResult", "fit", "Problem", "prepare"]
 
 ESTIMATES = ("pose", "scale", "params")
-LOSSES = ("linear", "huber", "soft_l1", "cauchy", "arctan")
+LOSSES = ("auto", "huber", "cauchy", "linear", "soft_l1", "arctan")
+#: ``loss='auto'``: Huber first; if the fraction of points with ``|r| <= AUTO_INLIER_K *
+#: f_scale`` is below ``AUTO_SWITCH``, Cauchy is tried (see :func:`auto_continue`)
+AUTO_SWITCH = 0.9
+AUTO_INLIER_K = 3.0
 
 
 @dataclass
@@ -66,7 +70,9 @@ class FitResult:
         seconds: wall time.
         cost: final robust cost.
         method: ``'csdf'`` (SDF-to-cloud least squares) or ``'icp'``.
-        notes: remarks such as scale/parameter ambiguity.
+        notes: remarks such as scale/parameter ambiguity, or what ``loss='auto'`` did.
+        loss: the robust loss of the final solve (``'huber'`` or ``'cauchy'`` when
+            ``loss='auto'`` was asked; None for :func:`csdf.icp`).
     """
 
     rotation: np.ndarray
@@ -82,6 +88,7 @@ class FitResult:
     cost: float = math.nan
     method: str = "csdf"
     notes: list[str] = field(default_factory=list)
+    loss: str | None = None
 
     @property
     def transform(self) -> np.ndarray:
@@ -100,6 +107,7 @@ class FitResult:
             "inlier_fraction": self.inlier_fraction, "inlier_threshold": self.inlier_threshold,
             "converged": self.converged, "iterations": self.iterations,
             "seconds": self.seconds, "cost": self.cost, "notes": list(self.notes),
+            "loss": self.loss,
         }
 
 
@@ -420,6 +428,7 @@ def make_result(prob: Problem, stats: dict, seconds: float, method: str,
         rmse=rmse, inlier_fraction=float(inl.mean()), inlier_threshold=thr,
         converged=bool(stats["converged"]), iterations=int(stats["nfev"]), seconds=seconds,
         cost=float(stats.get("cost", math.nan)), method=method, notes=list(stats["notes"]),
+        loss=stats.get("loss"),
     )
 
 
@@ -563,7 +572,8 @@ def _small_start(prob: Problem, P: np.ndarray, st, idx: list[int], max_iter: int
 
 
 def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
-             escape: bool = True, correct_bias: bool = False) -> tuple[Problem, dict]:
+             escape: bool = True, correct_bias: bool = False,
+             auto: bool = False) -> tuple[Problem, dict]:
     """The default engine: coarse-to-fine robust Levenberg-Marquardt (:mod:`.gn`).
 
     Stages: (1) the pose alone on a fixed subsample of at most ``gn.N_COARSE`` points,
@@ -572,7 +582,20 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
     pose on all points; otherwise everything jointly on all points (scale held if
     ambiguous, see :func:`scale_ambiguity`; parameters from the better of two starts, see
     :func:`_small_start`), then the noise-bias correction (:func:`correct_noise_bias`).
-    ``max_iter`` bounds the evaluations of each stage. Runs in place."""
+    ``max_iter`` bounds the evaluations of each stage. With ``auto`` (``loss='auto'``)
+    this runs with Huber and then :func:`auto_continue` decides on Cauchy. Runs in place;
+    ``prob.loss`` ends as the loss of the returned solution."""
+    if not auto:
+        return _solve_lm(prob, max_iter, viewpoint, escape, correct_bias)
+    start = (prob.R, prob.t, prob.s, prob.values.copy())
+    prob.loss = "huber"
+    prob, stats = _solve_lm(prob, max_iter, viewpoint, escape, correct_bias)
+    return auto_continue(prob, stats, start, max_iter, viewpoint, escape, correct_bias)
+
+
+def _solve_lm(prob: Problem, max_iter: int, viewpoint, escape: bool,
+              correct_bias: bool) -> tuple[Problem, dict]:
+    """:func:`solve_lm` with the fixed loss ``prob.loss``."""
     from .gn import GRADUATION, N_COARSE, Visibility, _State, lm_rounds, lm_solve
     from .gn import escape as _escape
 
@@ -585,6 +608,7 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
     st = _State(prob.R, prob.t, math.log(prob.s), prob.values[idx])
     nev, cost, converged = 0, math.nan, False
     notes: list[str] = []
+    held = False
     if prob.pose:
         scale, names = prob.scale, prob.names
         prob.scale, prob.names = False, []
@@ -609,7 +633,7 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
                                                                              False)]
             sin = scale_ambiguity(prob, sub)
             if sin < AMBIGUITY_SIN:
-                prob.scale = False
+                prob.scale, held = False, True
                 notes.append(
                     f"scale held at {prob.s:.6g}: the estimated parameters can imitate a "
                     f"uniform resize (sin of the angle between the scale and parameter "
@@ -627,14 +651,118 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None,
             st, k = correct_noise_bias(prob, st, idx)
             nev += k
         prob.scale = "scale" in prob.estimate
+    _store(prob, st, idx)
+    return prob, {"nfev": nev, "converged": converged, "cost": cost, "notes": notes,
+                  "loss": prob.loss, "scale_held": held}
+
+
+def _store(prob: Problem, st, idx: list[int]) -> None:
+    """Write state ``st`` back into ``prob`` (rotation re-orthonormalised)."""
     prob.R, prob.t, prob.s = st.R, np.asarray(st.t, dtype=float), math.exp(st.sigma)
     prob.values = _merge(prob, idx, st.cvals)
     U, _, Vt = np.linalg.svd(prob.R)
     prob.R = U @ Vt
-    return prob, {"nfev": nev, "converged": converged, "cost": cost, "notes": notes}
 
 
-def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
+def _refine(prob: Problem, max_iter: int, viewpoint, correct_bias: bool,
+            held: bool) -> tuple[Problem, dict]:
+    """Refine every estimated unknown from ``prob``'s state on all points with
+    ``prob.loss`` (no coarse stage, no escape; the scale held if ``held``), then the
+    noise-bias correction if asked. In place."""
+    from .gn import Visibility, _State, lm_rounds
+
+    vis = None if viewpoint is None else Visibility(
+        np.asarray(viewpoint, dtype=float), 0.5 * prob.size * prob.s * 1.05)
+    idx = [i for i, q in enumerate(prob.prog.params) if q.name in prob.names]
+    st = _State(prob.R, prob.t, math.log(prob.s), prob.values[idx])
+    joint = bool(prob.scale or prob.names)
+    if held:
+        prob.scale = False
+    st, cost, nev, converged = lm_rounds(prob, prob.points, st, idx, max_iter, vis,
+                                         slack=BOUND_SLACK if joint and correct_bias
+                                         else 0.0)
+    if joint and correct_bias:
+        st, k = correct_noise_bias(prob, st, idx)
+        nev += k
+    prob.scale = "scale" in prob.estimate
+    _store(prob, st, idx)
+    return prob, {"nfev": nev, "converged": converged, "cost": cost, "notes": [],
+                  "loss": prob.loss}
+
+
+def _auto_measure(prob: Problem) -> tuple[int, float]:
+    """At ``prob``'s state: the inliers (``|r| <= AUTO_INLIER_K * f_scale``, signed
+    distances of all points) and the Cauchy cost at ``f_scale`` of the same residuals."""
+    r = residuals(prob, prob.R, prob.t, prob.s, prob.values)
+    n_in = int(np.count_nonzero(np.abs(r) <= AUTO_INLIER_K * prob.f_scale))
+    return n_in, loss_weights(r, prob.f_scale, "cauchy")[0]
+
+
+def _snapshot(prob: Problem) -> tuple:
+    return prob.R.copy(), np.array(prob.t, dtype=float), prob.s, prob.values.copy()
+
+
+def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewpoint,
+                  escape: bool, correct_bias: bool,
+                  scipy_solver=None) -> tuple[Problem, dict]:
+    """The second half of ``loss='auto'`` (graduated non-convexity), given the finished
+    Huber fit in ``prob`` (its statistics ``stats``) and the state it started from,
+    ``start = (R, t, s, values)``.
+
+    Count the inliers ``|r| <= AUTO_INLIER_K * f_scale`` of the Huber solution (signed
+    distances of all points). If they are at least ``AUTO_SWITCH`` of the cloud, the Huber
+    fit is returned unchanged. Otherwise a substantial share of the points are outliers,
+    which pull Huber's optimum (their influence never vanishes), and two fits with the
+    redescending Cauchy loss at the same ``f_scale`` are made: (a) the continuation: every
+    estimated unknown refined from the Huber solution on all points; (b) the complete fit
+    (coarse stage, escape, final) with Cauchy from the same start as the Huber fit (heavy
+    outliers can lead Huber's coarse stage into a wrong basin). Of the Huber solution and
+    these two, the one with the lowest Cauchy cost (signed distances of all points,
+    ``f_scale``; the cost Cauchy minimises, on the same residuals for all three) is
+    returned; ``prob.loss`` is set to its loss. (The inlier count is no criterion: a
+    biased Huber fit still has nearly every true inlier within ``3 f_scale``.)
+
+    ``scipy_solver``: for ``solver='scipy'``, a function ``prob -> (prob, stats)`` used
+    for both Cauchy fits instead. Returns ``(prob, stats)``; ``stats['notes']`` says what
+    was done when Cauchy was tried."""
+    n = len(prob.points)
+    n_h, c_h = _auto_measure(prob)
+    if n_h >= AUTO_SWITCH * n:
+        stats["loss"] = prob.loss = "huber"
+        return prob, stats
+    held = bool(stats.get("scale_held"))
+    cands = [("Huber", _snapshot(prob), stats, c_h)]
+    total = stats["nfev"]
+    for label in ("continued", "restarted"):
+        prob.loss = "cauchy"
+        if label == "restarted":
+            prob.R, prob.t, prob.s, prob.values = (start[0], start[1], start[2],
+                                                   start[3].copy())
+        if scipy_solver is not None:
+            prob, st2 = scipy_solver(prob)
+        elif label == "continued":
+            prob, st2 = _refine(prob, max_iter, viewpoint, correct_bias, held)
+        else:
+            prob, st2 = _solve_lm(prob, max_iter, viewpoint, escape, correct_bias)
+        total += st2["nfev"]
+        cands.append((label, _snapshot(prob), st2, _auto_measure(prob)[1]))
+    # the lowest Cauchy cost; ties go to the Cauchy fits (listed later)
+    label, snap, best, c = min(reversed(cands), key=lambda x: x[3])
+    prob.R, prob.t, prob.s, prob.values = snap
+    prob.loss = "huber" if label == "Huber" else "cauchy"
+    out = dict(best)
+    out["nfev"], out["loss"] = total, prob.loss
+    out["notes"] = list(stats["notes"]) + [
+        f"loss='auto': the Huber fit has {n_h / n:.1%} inliers (|r| <= {AUTO_INLIER_K:g} "
+        f"f_scale) < {AUTO_SWITCH:.0%}, so Cauchy was tried at the same f_scale; Cauchy "
+        f"cost (x f_scale^2): Huber fit {c_h / prob.f_scale ** 2:.6g}, Cauchy continued "
+        f"from it {cands[1][3] / prob.f_scale ** 2:.6g}, Cauchy from the start "
+        f"{cands[2][3] / prob.f_scale ** 2:.6g}: "
+        + ("the Huber fit kept" if label == "Huber" else f"Cauchy ({label}) kept")]
+    return prob, out
+
+
+def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
         f_scale=None, multistart=False, seed=None, max_iter=100, inlier_threshold=None,
         backend="auto", viewpoint=None, solver="lm", debias=None,
         escape=True) -> FitResult:
@@ -652,9 +780,21 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
             :func:`scale_ambiguity`; the reason is added to ``FitResult.notes``).
         params: names of the parameters to estimate (default: all); others stay at their
             values in ``init`` (or defaults).
-        loss: robust loss (``'huber'``, ``'cauchy'``, ``'soft_l1'``, ``'arctan'``,
-            ``'linear'``; SciPy ``least_squares`` conventions). ``'cauchy'`` is the better
-            choice when many points are outliers (Huber's optimum is pulled by them).
+        loss: robust loss: ``'auto'`` (default), ``'huber'``, ``'cauchy'``,
+            ``'soft_l1'``, ``'arctan'``, ``'linear'`` (SciPy ``least_squares``
+            conventions, residual scale ``f_scale``). Huber has a wide basin but its
+            optimum is pulled by outliers (their influence never vanishes); Cauchy's is
+            not (redescending) but its basin is narrower. ``'auto'`` combines them
+            (graduated non-convexity): the whole fit is made with Huber; if fewer than
+            ``AUTO_SWITCH`` (90%) of the points are then inliers (``|r| <= 3
+            f_scale``), two Cauchy fits at the same ``f_scale`` follow, one refining the
+            Huber solution, one redoing the fit from the same start, and of the three
+            solutions the one with the lowest Cauchy cost (signed distances of all
+            points) is returned (see :func:`auto_continue`). With fewer outliers it is
+            exactly ``'huber'``. :attr:`FitResult.loss` says which loss gave the
+            result, and :attr:`FitResult.notes` what ``'auto'`` did when it tried
+            Cauchy. With ``multistart`` the search is unchanged and its final fit uses
+            this logic (the Cauchy restart starts from the search's result).
         f_scale: residual scale of the loss (scene units); default 1% of the model size.
         multistart: search many initial rotations first (see
             :func:`csdf.fit.init.multistart`); needed for large initial errors.
@@ -687,6 +827,9 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
     if solver not in ("lm", "scipy"):
         raise CsdfError(f"solver must be 'lm' or 'scipy'; got {solver!r}")
     prob = prepare(shape, points, init, estimate, params, loss, f_scale, backend)
+    auto = prob.loss == "auto"
+    if auto:
+        prob.loss = "huber"  # first; auto_continue may switch to 'cauchy'
     if viewpoint is not None:
         vp = np.asarray(viewpoint, dtype=float)
         if vp.shape != (3,) or not np.all(np.isfinite(vp)):
@@ -702,8 +845,9 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
         if debias is None:
             debias = bool(prob.names)
         prob, stats = solve_lm(prob, max_iter=max_iter, viewpoint=viewpoint,
-                               escape=bool(escape), correct_bias=bool(debias))
+                               escape=bool(escape), correct_bias=bool(debias), auto=auto)
         return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)
+    start = (prob.R, prob.t, prob.s, prob.values.copy())
     if prob.pose and (prob.scale or prob.names):
         # staged: the pose alone first (scale and shape held), then everything jointly;
         # starting the joint problem near the right pose keeps scale and size parameters
@@ -716,4 +860,14 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
         first = {"nfev": 0}
     prob, stats = solve(prob, max_iter=max_iter)
     stats["nfev"] += first["nfev"]
+    if auto:
+        def cauchy_scipy(p: Problem) -> tuple[Problem, dict]:
+            p, st2 = solve(p, max_iter=max_iter)
+            r = residuals(p, p.R, p.t, p.s, p.values)
+            st2["cost"] = loss_weights(r, p.f_scale, "cauchy")[0]
+            return p, st2
+
+        prob, stats = auto_continue(prob, stats, start, max_iter, None, False, False,
+                                    scipy_solver=cauchy_scipy)
+    stats["loss"] = prob.loss
     return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)

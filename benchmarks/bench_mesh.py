@@ -156,6 +156,7 @@ def child_csdf(resolution: int, method: str) -> dict:
     rec.update(
         warmup=warmup, mesher_seconds=meta["seconds"], dims=list(meta["dims"]),
         voxel_size=meta["voxel_size"], faces=len(m.faces), vertices=len(m.vertices),
+        output_bytes=int(m.vertices.nbytes + m.faces.nbytes),
         watertight=bool(m.is_watertight),
     )
     return rec
@@ -293,6 +294,12 @@ class Series:
     @property
     def peak(self) -> float | None:
         return self.med(peak_mb)
+
+    @property
+    def output(self) -> float | None:
+        """The output mesh's size (trimesh's float64 vertices + int64 faces), MB."""
+        vals = [r["output_bytes"] / MB for r in self.records if "output_bytes" in r]
+        return statistics.median(vals) if vals else None
 
 
 def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
@@ -448,7 +455,9 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
         f"Shape: {SHAPE_DESC} (the README example without its parameter), bounds "
         f"`shape.bounds` = [{box}] (x, y, z).\n\n"
         f"* **csdf**: `csdf.mesh(shape, resolution=N, method=..., progress=False)` (sparse "
-        f"octree pruned by interval arithmetic, fast backend); its grid has h = longest "
+        f"octree pruned by interval arithmetic, fast backend; `mc` is the compiled "
+        f"marching cubes streamed over the octree's bricks, `src/csdf/mesh/stream.py`, "
+        f"`dc` the NumPy dual contouring of `src/csdf/mesh/extract.py`); its grid has h = longest "
         f"side / N, origin = bounds[0] - h (2 + jitter) and ceil(extent / h) + 5 voxels "
         f"per axis. The call's time includes building the `trimesh.Trimesh`.\n"
         f"* **dense + skimage MC** (baseline): the same grid without the jitter (origin = "
@@ -521,10 +530,18 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
             sp = d.time / c.time if c.time and d.time else None
             mr = c.peak / d.peak if c.peak is not None and d.peak else None
             compare[(m, n)] = (sp, mr)
+            work = c.peak - c.output if c.peak is not None and c.output is not None else None
             rows.append([str(n), f"csdf {m}", fmt_s(c.time), fmt_s(d.time), fmt_x(sp, 2),
-                         fmt_mb(c.peak), fmt_mb(d.peak), fmt_x(mr, 3)])
+                         fmt_mb(c.peak), fmt_mb(d.peak), fmt_x(mr, 3), fmt_mb(c.output),
+                         fmt_x(c.output / d.peak if c.output and d.peak else None, 3),
+                         fmt_mb(work), fmt_x(work / d.peak if work and d.peak else None, 3)])
+    L.append("*output*: the returned mesh alone (trimesh keeps float64 vertices and int64 "
+             "faces: 24 bytes per vertex and per face), part of csdf's peak; *working*: "
+             "csdf peak - output, everything else the call held at its peak. Both are "
+             "shown as a share of the dense peak.\n")
     L.append(md_table(["N", "csdf", "csdf time", "dense+MC time", "speedup", "csdf peak",
-                       "dense+MC peak", "memory ratio"], rows) + "\n")
+                       "dense+MC peak", "memory ratio", "output", "output / dense peak",
+                       "working", "working / dense peak"], rows) + "\n")
 
     # scaling
     L.append("## Scaling\n")
@@ -570,6 +587,12 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
                   if mr is not None and c and d else "not measured")
         rows.append([f"{big}^3, {m}{tag}: csdf peak memory <= {TARGET_MEMORY:g} x dense+MC",
                      detail, status(None if mr is None else mr <= TARGET_MEMORY)])
+        if c and d and c.output and d.peak and c.peak is not None:
+            rows.append([f"({big}^3, {m}{tag}: the output mesh alone vs dense+MC peak; "
+                         "working memory vs dense+MC peak)",
+                         f"{c.output / d.peak:.3f} ({fmt_mb(c.output)}); "
+                         f"{(c.peak - c.output) / d.peak:.3f} ({fmt_mb(c.peak - c.output)})",
+                         "info"])
         for n1, n2 in zip(res, res[1:]):
             ratio = scaling.get((m, n2))
             rows.append([f"{m}{tag}: time({n2}) / time({n1}) <= {TARGET_SCALING:g}",

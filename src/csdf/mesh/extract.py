@@ -1,6 +1,10 @@
 """Sparse surface extraction on a voxel grid: octree pruning by interval arithmetic,
 then marching cubes or manifold dual contouring on the active voxels only.
 
+This is the NumPy implementation: dual contouring, and marching cubes without Numba.
+With the fast backend, marching cubes runs compiled and streamed
+(:mod:`csdf.mesh.stream`, same octree, case table and root search, tested equal to this).
+
 Grid: ``dims = (nx, ny, nz)`` voxels of edge ``h`` from ``origin``; sample ``(i, j, k)``
 is the point ``origin + h * (i, j, k)``. The mesher works in three stages:
 

@@ -9,15 +9,15 @@ chunk plus the outputs:
 * :func:`mc_chunk`: marching cubes over the chunk's voxels. Each crossed grid edge gets
   one vertex id: edges inside a brick are unique to it (a per-brick scratch table),
   edges on a brick's faces may be shared with a neighbouring brick and are looked up in
-  an open-addressing hash map keyed by the global edge index, so no global sort or
-  ``unique`` is needed and shared edges give the same vertex (watertight);
+  an open-addressing hash map keyed by the edge (the brick holding its lower end and
+  its index there), so no global sort or ``unique`` is needed and shared edges give
+  the same vertex (watertight);
 * :func:`root_points`, :func:`root_update`, :func:`clip_to_box`: the bracketed
   Illinois / bisection root search on each new edge (the same iteration as
   :func:`csdf.mesh.extract._refine_roots`), driven from Python because the field is
   evaluated by the program's own backend.
 
-Global edge index of the edge from sample ``(cx, cy, cz)`` along ``axis``:
-``((cz * (ny + 1) + cy) * (nx + 1) + cx) * 3 + axis`` (as in :mod:`.extract`).
+* :func:`fresh_array`: the big outputs on memory advised to use huge pages.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from numba import njit
 
 __all__ = [
     "all_points", "brick_points", "close_on_box", "mc_chunk", "new_hash", "root_points",
-    "root_update", "clip_to_box", "edge_on_box", "fresh_array",
+    "root_start", "root_update", "clip_to_box", "edge_on_box", "fresh_array",
 ]
 
 _EMPTY = -1
@@ -71,7 +71,7 @@ def fresh_array(shape: tuple[int, ...], dtype) -> np.ndarray:
     return np.frombuffer(buf, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _slot(table: np.ndarray, key: np.int64) -> int:
     """Row of ``key`` in the table, or the empty row where it would go (linear probing)."""
     mask = table.shape[0] - 1

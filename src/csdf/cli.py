@@ -216,8 +216,8 @@ def fit(
                                  "pose,scale,params"),
     multistart: bool = typer.Option(False, "--multistart", help="Search all rotations "
                                     "first (for large initial errors)."),
-    loss: str = typer.Option("huber", "--loss", help="huber, cauchy, soft_l1, arctan, linear; "
-                             "cauchy for heavy outliers."),
+    loss: str = typer.Option("auto", "--loss", help="auto (Huber, then Cauchy when many "
+                             "points are outliers), huber, cauchy, soft_l1, arctan, linear."),
     seed: int = typer.Option(0, "--seed", help="Seed of the multistart subsampling."),
     viewpoint: str | None = typer.Option(None, "--viewpoint", help="x,y,z: the sensor "
                                          "position of a single-view scan (0,0,0 for "

@@ -10,7 +10,6 @@ import numpy as np
 
 from ..errors import CsdfError
 from .extract import Grid, extract
-from .stream import extract_mc
 
 __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_VOXELS"]
 
@@ -170,6 +169,8 @@ def mesh(
     try:
         if method == "mc" and backend == "fast":
             # compiled, streamed over the octree's bricks (same results, see stream.py)
+            from .stream import extract_mc
+
             verts, faces = extract_mc(grid, values, intervals,
                                       reporter.update if reporter else None)
         else:

@@ -31,6 +31,7 @@ __all__ = ["extract_mc", "CHUNK_SAMPLES"]
 CHUNK_SAMPLES = 1 << 18  # samples evaluated per call of the field (~6 MB of points)
 ITERATIONS = 40  # root search steps at most
 FIRST_ITERATIONS = 4  # steps per chunk; the few edges left go on together at the end
+assert 3 * BRICK**3 <= 1 << K._LOCAL_BITS, "hash keys need room for a brick's edges"
 _N_TRI = (TRI_TABLE[:, :, 0] >= 0).sum(axis=1).astype(np.int64)
 _TRI = TRI_TABLE.astype(np.int64)
 

@@ -138,3 +138,23 @@ def test_random_shapes_are_watertight_and_manifold(seed):
     h = m.metadata["csdf"]["voxel_size"]
     lip = max(shape.lipschitz, 1.0)
     assert np.max(np.abs(shape(np.asarray(m.vertices)))) <= 1e-3 * h * lip
+
+
+def test_fresh_arrays_are_ordinary_writable_arrays():
+    small = K.fresh_array((10, 3), np.int64)
+    big = K.fresh_array((1 << 19, 3), np.int64)  # 12 MB: its own memory map
+    for a in (small, big):
+        assert a.dtype == np.int64 and a.flags.writeable and a.flags.c_contiguous
+    assert big.shape == (1 << 19, 3) and not big.any()  # fresh anonymous memory is zero
+    big[-1] = (1, 2, 3)
+    assert big[-1].tolist() == [1, 2, 3]
+
+
+def test_large_mesh_on_mapped_memory_is_watertight():
+    # big enough that the output arrays come from fresh_array's memory maps
+    m = csdf.mesh(csdf.torus(0.6, 0.2), resolution=160, progress=False)
+    root = m.faces
+    while isinstance(root, np.ndarray) and root.base is not None:
+        root = root.base
+    assert isinstance(root, memoryview)  # np.frombuffer over an mmap, not a copy
+    assert m.is_watertight and m.euler_number == 0

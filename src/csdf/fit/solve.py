@@ -19,6 +19,11 @@ the minima of near-symmetric parts, an optional visibility term for single-view 
 a noise-bias correction of shape parameters; ``'scipy'``: SciPy's ``least_squares``
 (trust region reflective), in rounds re-centred on the current rotation.
 
+Losses (``loss=``): SciPy's robust losses at the residual scale ``f_scale``, and the
+default ``'auto'``: Huber first; when the Huber solution leaves more than 10% of the points
+farther than ``3 f_scale`` from the surface, Cauchy is tried as well (refining that
+solution, and from the same start) and the lowest Cauchy cost wins (:func:`auto_continue`).
+
 Scale and size parameters: if the estimated parameters can resize the whole shape (a
 sphere's radius; a chair whose every dimension is a parameter), ``s`` and the parameters
 describe the same change and the problem is singular or nearly so. With ``'lm'`` csdf

@@ -20,9 +20,9 @@ a noise-bias correction of shape parameters; ``'scipy'``: SciPy's ``least_square
 (trust region reflective), in rounds re-centred on the current rotation.
 
 Losses (``loss=``): SciPy's robust losses at the residual scale ``f_scale``, and the
-default ``'auto'``: Huber first; when the Huber solution leaves more than 10% of the points
-farther than ``3 f_scale`` from the surface, Cauchy is tried as well (refining that
-solution, and from the same start) and the lowest Cauchy cost wins (:func:`auto_continue`).
+default ``'auto'``: Huber first; when the Huber solution leaves more than 1% of the points
+farther than ``3 f_scale`` from the surface, Cauchy refines that solution (and, beyond 10%,
+also restarts from the same start), and the lowest Cauchy cost wins (:func:`auto_continue`).
 
 Scale and size parameters: if the estimated parameters can resize the whole shape (a
 sphere's radius; a chair whose every dimension is a parameter), ``s`` and the parameters
@@ -53,8 +53,10 @@ __all__ = ["FitResult", "fit", "Problem", "prepare"]
 ESTIMATES = ("pose", "scale", "params")
 LOSSES = ("auto", "huber", "cauchy", "linear", "soft_l1", "arctan")
 #: ``loss='auto'``: Huber first; if the fraction of points with ``|r| <= AUTO_INLIER_K *
-#: f_scale`` is below ``AUTO_SWITCH``, Cauchy is tried (see :func:`auto_continue`)
+#: f_scale`` is below ``AUTO_CLEAN``, Cauchy continues from the Huber solution, and below
+#: ``AUTO_SWITCH`` Cauchy also restarts from the start (see :func:`auto_continue`)
 AUTO_SWITCH = 0.9
+AUTO_CLEAN = 0.99
 AUTO_INLIER_K = 3.0
 
 
@@ -715,15 +717,17 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
     ``start = (R, t, s, values)``.
 
     Count the inliers ``|r| <= AUTO_INLIER_K * f_scale`` of the Huber solution (signed
-    distances of all points). If they are at least ``AUTO_SWITCH`` of the cloud, the Huber
-    fit is returned unchanged. Otherwise a substantial share of the points are outliers,
-    which pull Huber's optimum (their influence never vanishes), and two fits with the
-    redescending Cauchy loss at the same ``f_scale`` are made: (a) the continuation: every
-    estimated unknown refined from the Huber solution on all points; (b) the complete fit
-    (coarse stage, escape, final) with Cauchy from the same start as the Huber fit (heavy
-    outliers can lead Huber's coarse stage into a wrong basin). Of the Huber solution and
-    these two, the one with the lowest Cauchy cost (signed distances of all points,
-    ``f_scale``; the cost Cauchy minimises, on the same residuals for all three) is
+    distances of all points). If they are at least ``AUTO_CLEAN`` of the cloud, the Huber
+    fit is returned unchanged. Otherwise some points are outliers, which pull Huber's
+    optimum (their influence never vanishes; a few percent of clutter already biases
+    size parameters by centimetres on a chair), and fits with the redescending Cauchy loss
+    at the same ``f_scale`` are made: (a) the continuation: every estimated unknown
+    refined from the Huber solution on all points; and, when fewer than ``AUTO_SWITCH``
+    are inliers, (b) the complete fit (coarse stage, escape, final) with Cauchy from the
+    same start as the Huber fit (heavy outliers can lead Huber's coarse stage into a wrong
+    basin). Of the Huber solution and these, the one with the lowest Cauchy cost (signed
+    distances of all points, ``f_scale``; the cost Cauchy minimises, on the same
+    residuals for all) is
     returned; ``prob.loss`` is set to its loss. (The inlier count is no criterion: a
     biased Huber fit still has nearly every true inlier within ``3 f_scale``.)
 
@@ -732,13 +736,14 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
     was done when Cauchy was tried."""
     n = len(prob.points)
     n_h, c_h = _auto_measure(prob)
-    if n_h >= AUTO_SWITCH * n:
+    if n_h >= AUTO_CLEAN * n:
         stats["loss"] = prob.loss = "huber"
         return prob, stats
     held = bool(stats.get("scale_held"))
     cands = [("Huber", _snapshot(prob), stats, c_h)]
     total = stats["nfev"]
-    for label in ("continued", "restarted"):
+    labels = ("continued", "restarted") if n_h < AUTO_SWITCH * n else ("continued",)
+    for label in labels:
         prob.loss = "cauchy"
         if label == "restarted":
             prob.R, prob.t, prob.s, prob.values = (start[0], start[1], start[2],
@@ -757,12 +762,12 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
     prob.loss = "huber" if label == "Huber" else "cauchy"
     out = dict(best)
     out["nfev"], out["loss"] = total, prob.loss
+    tried = ", ".join(f"{lab if lab == 'Huber' else 'Cauchy ' + lab} {c / prob.f_scale ** 2:.6g}"
+                      for lab, _, _, c in cands)
     out["notes"] = list(stats["notes"]) + [
         f"loss='auto': the Huber fit has {n_h / n:.1%} inliers (|r| <= {AUTO_INLIER_K:g} "
-        f"f_scale) < {AUTO_SWITCH:.0%}, so Cauchy was tried at the same f_scale; Cauchy "
-        f"cost (x f_scale^2): Huber fit {c_h / prob.f_scale ** 2:.6g}, Cauchy continued "
-        f"from it {cands[1][3] / prob.f_scale ** 2:.6g}, Cauchy from the start "
-        f"{cands[2][3] / prob.f_scale ** 2:.6g}: "
+        f"f_scale) < {AUTO_CLEAN:.0%}, so Cauchy was tried at the same f_scale; Cauchy "
+        f"cost (x f_scale^2): {tried}: "
         + ("the Huber fit kept" if label == "Huber" else f"Cauchy ({label}) kept")]
     return prob, out
 
@@ -791,11 +796,11 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
             optimum is pulled by outliers (their influence never vanishes); Cauchy's is
             not (redescending) but its basin is narrower. ``'auto'`` combines them
             (graduated non-convexity): the whole fit is made with Huber; if fewer than
-            ``AUTO_SWITCH`` (90%) of the points are then inliers (``|r| <= 3
-            f_scale``), two Cauchy fits at the same ``f_scale`` follow, one refining the
-            Huber solution, one redoing the fit from the same start, and of the three
-            solutions the one with the lowest Cauchy cost (signed distances of all
-            points) is returned (see :func:`auto_continue`). With fewer outliers it is
+            ``AUTO_CLEAN`` (99%) of the points are then inliers (``|r| <= 3
+            f_scale``), a Cauchy fit at the same ``f_scale`` refines the Huber solution,
+            and below ``AUTO_SWITCH`` (90%) another redoes the fit from the same start;
+            of the solutions the one with the lowest Cauchy cost (signed distances of
+            all points) is returned (see :func:`auto_continue`). On clean clouds it is
             exactly ``'huber'``. :attr:`FitResult.loss` says which loss gave the
             result, and :attr:`FitResult.notes` what ``'auto'`` did when it tried
             Cauchy. With ``multistart`` the search is unchanged and its final fit uses

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import loadavg, machine_info, md_table, read_text  # noqa: E402
+from common import loadavg, machine_info, md_table, read_text, thread_scaling  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 MODELS = ("sphere", "csg", "union20")
@@ -623,6 +623,7 @@ def run(cfg: Config) -> int:
 
     t_start = time.perf_counter()
     info = machine_info()
+    info.update(thread_scaling())
     log("csdf evaluation benchmark\n" + "\n".join(f"  {k}: {v}" for k, v in info.items()))
 
     shapes = {m: build_model(m) for m in cfg.models}

@@ -83,3 +83,71 @@ def machine_info(extra: dict[str, str] | None = None) -> dict[str, str]:
         "csdf": f"{csdf_v} (git {commit}, imported from {csdf_dir})",
         "load average at start": loadavg(),
     }
+
+
+def thread_scaling(seconds: float = 0.5) -> dict[str, str]:
+    """How much a second thread adds on this machine, for two kinds of Numba loop.
+
+    Runs a job alone, then two copies at once on two threads, and reports
+    ``time(one job) * 2 / time(two jobs)`` (2.0 = the second thread doubles the work done;
+    1.0 = it adds nothing). *Vector-bound*: a SIMD multiply-add loop over an L1-resident
+    array (the kind of code the fast backend runs); *latency-bound*: a scalar dependency
+    chain. Virtual CPUs that are hyper-threads of one core share its vector units: the
+    first ratio then stays near 1 while the second reaches 2.
+
+    Returns ``{'thread scaling, vector-bound': '1.05x', 'thread scaling, latency-bound':
+    '1.98x'}`` (or one 'unavailable' entry without Numba).
+    """
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    try:
+        from numba import njit
+    except Exception as exc:  # pragma: no cover - numba is a dependency
+        return {"thread scaling": f"unavailable ({type(exc).__name__})"}
+
+    @njit(nogil=True, cache=False)
+    def vector_job(a, out, reps):
+        for _ in range(reps):
+            for j in range(a.shape[0]):
+                x = a[j]
+                out[j] = x * 1.1 + (x + 1.0) * 1.3 + (x + 2.0) * x * 0.5 + out[j] * 0.25
+
+    @njit(nogil=True, cache=False)
+    def latency_job(n):
+        s = 0.0
+        for i in range(n):
+            s = s * 0.999999 + i
+        return s
+
+    a = np.random.default_rng(0).random(2048)
+    outs = [np.zeros_like(a), np.zeros_like(a)]
+    vector_job(a, outs[0], 1)
+    latency_job(10)
+
+    def calibrate(run) -> int:
+        n = 1
+        while True:
+            t0 = time.perf_counter()
+            run(0, n)
+            if time.perf_counter() - t0 > seconds / 4:
+                return max(1, int(n * seconds / 4 / (time.perf_counter() - t0) * 4))
+            n *= 4
+
+    jobs = {
+        "vector-bound": lambda k, n: vector_job(a, outs[k], n),
+        "latency-bound": lambda k, n: latency_job(n * 1000),
+    }
+    res = {}
+    with ThreadPoolExecutor(2) as ex:
+        for name, run in jobs.items():
+            n = calibrate(run)
+            t0 = time.perf_counter()
+            run(0, n)
+            one = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            for f in [ex.submit(run, k, n) for k in (0, 1)]:
+                f.result()
+            two = time.perf_counter() - t0
+            res[f"thread scaling, {name}"] = f"{2 * one / two:.2f}x (2 threads, 2.00x = ideal)"
+    return res

@@ -22,7 +22,8 @@ from .errors import CsdfError
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
-    help="Continuous signed distance functions: inspect, compile and mesh .csdf models.",
+    help="Continuous signed distance functions: inspect, compile, mesh, render, scan, fit "
+         "and edit .csdf models.",
 )
 out = Console()
 err = Console(stderr=True)

@@ -409,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="runs per measurement at resolutions > 256 (default 2)")
     p.add_argument("--no-memory-guard", action="store_true",
                    help="run a measurement even when its projected memory exceeds "
-                   f"{MEMORY_GUARD:.0%} of MemAvailable")
+                   f"{MEMORY_GUARD * 100:.0f}%% of MemAvailable")  # %% for argparse
     p.add_argument("--output", type=Path, default=HERE / "MESH_RESULTS.md",
                    help="Markdown results file (default benchmarks/MESH_RESULTS.md)")
     p.add_argument("--child", choices=("csdf", "dense"), help=argparse.SUPPRESS)

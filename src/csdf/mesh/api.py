@@ -174,8 +174,10 @@ def mesh(
             verts, faces = extract_mc(grid, values, intervals,
                                       reporter.update if reporter else None)
         else:
+            # dual contouring's per-cell work is compiled with the fast backend (same mesh)
             verts, faces = extract(grid, values, gradients, intervals, method,
-                                   reporter.update if reporter else None)
+                                   reporter.update if reporter else None,
+                                   compiled=backend == "fast")
     finally:
         if reporter:
             reporter.close()

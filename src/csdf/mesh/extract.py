@@ -150,6 +150,7 @@ def extract(
     intervals: Callable,
     method: str = "mc",
     progress: Callable | None = None,
+    compiled: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Extract the zero set on ``grid``.
 
@@ -158,6 +159,8 @@ def extract(
         intervals: ``(lo (M, 3), hi (M, 3)) -> (flo (M,), fhi (M,))``, conservative.
         method: ``'mc'`` (marching cubes) or ``'dc'`` (manifold dual contouring).
         progress: optional ``callback(stage: str, done: int, total: int)``.
+        compiled: dual contouring's per-cell work in the compiled kernels of
+            :mod:`.dc_kernels` (needs Numba; the same mesh as the NumPy code).
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64, counter-clockwise seen
@@ -211,7 +214,7 @@ def extract(
         faces = lut[a_idx[:, None], tri[a_idx, t_idx]].astype(np.int64)
         return roots, faces
     return _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, axis[first], ukeys, dims,
-                         gradients, on_box, values)
+                         gradients, on_box, values, compiled)
 
 
 def _clip_box(values: Callable, grid: Grid, on_box: np.ndarray) -> Callable:
@@ -245,17 +248,9 @@ def _project(verts: np.ndarray, fg: Callable, h: float, steps: int = 3) -> np.nd
     return verts
 
 
-def _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, uaxis, ukeys, dims, gradients,
-                  on_box, values):
-    def gradients_values(p):
-        return values(p), gradients(p)
-
-    # one vertex per (active voxel, component)
-    comp = COMPONENT_TABLE[vcase]  # (A, 12)
-    vert_of = comp[av, ae]  # component of each (voxel, edge) pair
-    vid_key = av * MAX_COMPONENTS + vert_of
-    uv, vinv = np.unique(vid_key, return_inverse=True)
-    n_v = len(uv)
+def _edge_normals(grid: Grid, roots: np.ndarray, uaxis: np.ndarray, gradients: Callable,
+                  on_box: np.ndarray) -> np.ndarray:
+    """Unit normals ``(E, 3)`` at the edge roots ``(E, 3)`` (edge axes ``uaxis (E,)``)."""
     # normals from both sides of the surface along each edge: exactly on a kink (a box
     # face, f = 0 where max/min tie) a gradient is a one-sided choice and can vanish
     step = np.eye(3)[uaxis] * (1e-4 * grid.h)
@@ -273,6 +268,29 @@ def _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, uaxis, ukeys, dims, 
         nb = np.zeros((len(rp), 3))
         nb[np.arange(len(rp)), face % 3] = np.where(face < 3, -1.0, 1.0)
         normals[on_box] = np.where((np.max(d, axis=1) > -grid.h)[:, None], nb, normals[on_box])
+    return normals
+
+
+# a quad's diagonals tie (flat faces: both midpoints on the surface up to rounding) when
+# their |f| differ by less than this many voxels: take 0-2, whatever the rounding
+_TIE = 1e-9
+
+
+def _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, uaxis, ukeys, dims, gradients,
+                  on_box, values, compiled=False):
+    def gradients_values(p):
+        return values(p), gradients(p)
+
+    normals = _edge_normals(grid, roots, uaxis, gradients, on_box)
+    if compiled:
+        return _dual_contour_compiled(grid, vox, vcase, inv, roots, normals, f0, uaxis,
+                                      values, gradients_values)
+    # one vertex per (active voxel, component)
+    comp = COMPONENT_TABLE[vcase]  # (A, 12)
+    vert_of = comp[av, ae]  # component of each (voxel, edge) pair
+    vid_key = av * MAX_COMPONENTS + vert_of
+    uv, vinv = np.unique(vid_key, return_inverse=True)
+    n_v = len(uv)
     p = roots[inv]
     n = normals[inv]
     # quadric error per vertex: A = sum n n^T, b = sum n (n . p), mass point
@@ -341,11 +359,29 @@ def _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, uaxis, ukeys, dims, 
     m02 = 0.5 * (verts[quads[:, 0]] + verts[quads[:, 2]])
     m13 = 0.5 * (verts[quads[:, 1]] + verts[quads[:, 3]])
     fm = np.abs(values(np.concatenate([m02, m13])))
-    use02 = fm[: len(quads)] <= fm[len(quads):]
+    use02 = fm[: len(quads)] <= fm[len(quads):] + _TIE * grid.h
     t1 = np.where(use02[:, None], quads[:, [0, 1, 2]], quads[:, [0, 1, 3]])
     t2 = np.where(use02[:, None], quads[:, [0, 2, 3]], quads[:, [1, 2, 3]])
     faces = np.concatenate([t1, t2])
     return verts, faces
+
+
+def _dual_contour_compiled(grid, vox, vcase, inv, roots, normals, f0, uaxis, values,
+                           gradients_values):
+    """:func:`_dual_contour` after the normals, with its per-cell work compiled
+    (:mod:`.dc_kernels`): the same vertices, quads and triangles."""
+    from . import dc_kernels as D
+
+    verts, quads, found = D.dc_vertices(
+        vox, vcase.astype(np.int64), inv.astype(np.int64), roots, normals,
+        uaxis.astype(np.int64), COMPONENT_TABLE.astype(np.int64),
+        EDGE_ORIGIN.astype(np.int64), np.asarray(grid.origin, dtype=np.float64),
+        float(grid.h), MAX_COMPONENTS)
+    verts = _project(verts, gradients_values, grid.h)
+    quads, mid = D.dc_quads(quads, found, f0, verts)
+    del found
+    fm = np.asarray(values(mid), dtype=np.float64)
+    return verts, D.dc_split(quads, fm, _TIE * grid.h)
 
 
 _LOCAL = {}

@@ -1,0 +1,223 @@
+"""Compiled (Numba) cores of manifold dual contouring (``method='dc'`` with the fast backend).
+
+The same computation as :func:`csdf.mesh.extract._dual_contour` (tested equal to it), on
+the arrays that :func:`csdf.mesh.extract.extract` builds, without its ``(pairs, ...)``
+temporaries, ``ufunc.at``, batched SVD or sorted searches:
+
+* :func:`dc_vertices`: one vertex per surface component of each active voxel (ids in
+  (voxel, component) order, as ``np.unique`` gives them), its quadric accumulated in the
+  same order as ``np.add.at``, minimised by the pseudo-inverse of the 3x3 normal matrix
+  (a symmetric positive semi-definite matrix, so its SVD is its eigendecomposition, found
+  by cyclic Jacobi rotations) with the same relative cut-off ``0.05`` of the largest
+  singular value around the component's mass point, then clamped to half a voxel around
+  its voxel; and for every crossed edge the quad of the four vertices around it, found
+  by scattering each (voxel, edge) pair into its slot of the edge's quad (no search);
+* :func:`dc_quads`: the complete quads, wound by the edge's sign, and the midpoints of
+  both diagonals (where the field is evaluated);
+* :func:`dc_split`: each quad split along the diagonal whose midpoint is nearer the
+  surface (first triangles, then second triangles, as the NumPy path orders them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["dc_vertices", "dc_quads", "dc_split", "sym_eig3"]
+
+_CUT = 0.05  # singular values below this fraction of the largest are dropped (as NumPy)
+
+
+@njit(cache=True, nogil=True)
+def sym_eig3(a: np.ndarray, v: np.ndarray) -> None:
+    """In place: eigendecomposition of the symmetric ``a (3, 3)`` by cyclic Jacobi
+    rotations. On return ``a``'s diagonal holds the eigenvalues and ``v (3, 3)``'s
+    columns the orthonormal eigenvectors (``a_in = v diag(a) v^T``)."""
+    for i in range(3):
+        for j in range(3):
+            v[i, j] = 1.0 if i == j else 0.0
+    for _ in range(60):
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        diag = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
+        if off == 0.0 or off <= 1e-36 * diag:
+            return
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if abs(theta) > 1e150:
+                t = 0.5 / theta
+            else:
+                t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+            c = 1.0 / np.sqrt(t * t + 1.0)
+            s = t * c
+            for k in range(3):  # a <- a P (columns p, q)
+                akp = a[k, p]
+                akq = a[k, q]
+                a[k, p] = c * akp - s * akq
+                a[k, q] = s * akp + c * akq
+            for k in range(3):  # a <- P^T a (rows p, q)
+                apk = a[p, k]
+                aqk = a[q, k]
+                a[p, k] = c * apk - s * aqk
+                a[q, k] = s * apk + c * aqk
+            for k in range(3):  # v <- v P
+                vkp = v[k, p]
+                vkq = v[k, q]
+                v[k, p] = c * vkp - s * vkq
+                v[k, q] = s * vkp + c * vkq
+
+
+@njit(cache=True, nogil=True)
+def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
+                origin, h, max_components):
+    """Dual-contouring vertices and the quad of every crossed edge.
+
+    Args:
+        vox: ``(A, 3)`` int64 active voxels (lower sample corner); vcase ``(A,)`` their
+            marching-cubes cases.
+        inv: ``(P,)`` unique edge of each (voxel, crossed local edge) pair, the pairs in
+            (voxel, local edge) order (``np.nonzero(COMPONENT_TABLE[vcase] >= 0)``).
+        roots, normals: ``(E, 3)`` float64 root and unit normal of each unique edge;
+            uaxis ``(E,)`` its axis.
+        comp_table: ``(256, 12)`` component of each crossed edge (-1: not crossed);
+            edge_origin ``(12, 3)``: lower corner of each local edge.
+        origin ``(3,)``, h: the grid; max_components: components per voxel at most.
+
+    Returns:
+        ``(verts (V, 3) float64, quads (E, 4) int64, found (E,) int64)``: the clamped QEF
+        vertices in (voxel, component) order; for each edge the vertex of the voxel at
+        each corner of its quad (``(du, dv) = (0, 0), (1, 0), (1, 1), (0, 1)`` voxels
+        below it along the axes after its own) and a bit mask of the corners found.
+    """
+    n_vox = vox.shape[0]
+    n_edges = roots.shape[0]
+    # vertex ids: per voxel, its components in ascending order
+    base = np.empty(n_vox + 1, dtype=np.int64)
+    local = np.full((n_vox, max_components), -1, dtype=np.int64)
+    n_v = 0
+    for a in range(n_vox):
+        base[a] = n_v
+        c = vcase[a]
+        for k in range(max_components):
+            for e in range(12):
+                if comp_table[c, e] == k:
+                    local[a, k] = n_v
+                    n_v += 1
+                    break
+    base[n_vox] = n_v
+    A = np.zeros((n_v, 6))  # xx, xy, xz, yy, yz, zz
+    bvec = np.zeros((n_v, 3))
+    mass = np.zeros((n_v, 3))
+    cnt = np.zeros(n_v)
+    quads = np.zeros((n_edges, 4), dtype=np.int64)
+    found = np.zeros(n_edges, dtype=np.int64)
+    owner = np.empty(n_v, dtype=np.int64)
+    p = 0
+    for a in range(n_vox):
+        c = vcase[a]
+        for e in range(12):
+            k = comp_table[c, e]
+            if k < 0:
+                continue
+            vid = local[a, k]
+            owner[vid] = a
+            u = inv[p]
+            p += 1
+            nx, ny, nz = normals[u, 0], normals[u, 1], normals[u, 2]
+            px, py, pz = roots[u, 0], roots[u, 1], roots[u, 2]
+            A[vid, 0] += nx * nx
+            A[vid, 1] += nx * ny
+            A[vid, 2] += nx * nz
+            A[vid, 3] += ny * ny
+            A[vid, 4] += ny * nz
+            A[vid, 5] += nz * nz
+            d = nx * px + ny * py + nz * pz
+            bvec[vid, 0] += nx * d
+            bvec[vid, 1] += ny * d
+            bvec[vid, 2] += nz * d
+            mass[vid, 0] += px
+            mass[vid, 1] += py
+            mass[vid, 2] += pz
+            cnt[vid] += 1.0
+            ax = uaxis[u]
+            du = edge_origin[e, (ax + 1) % 3]
+            dv = edge_origin[e, (ax + 2) % 3]
+            q = (0 if dv == 0 else 3) if du == 0 else (1 if dv == 0 else 2)
+            quads[u, q] = vid
+            found[u] |= 1 << q
+    verts = np.empty((n_v, 3))
+    m = np.empty((3, 3))
+    vec = np.empty((3, 3))
+    rhs = np.empty(3)
+    ms = np.empty(3)
+    for v in range(n_v):
+        for i in range(3):
+            ms[i] = mass[v, i] / cnt[v]
+        m[0, 0], m[0, 1], m[0, 2] = A[v, 0], A[v, 1], A[v, 2]
+        m[1, 0], m[1, 1], m[1, 2] = A[v, 1], A[v, 3], A[v, 4]
+        m[2, 0], m[2, 1], m[2, 2] = A[v, 2], A[v, 4], A[v, 5]
+        for i in range(3):
+            rhs[i] = bvec[v, i] - (m[i, 0] * ms[0] + m[i, 1] * ms[1] + m[i, 2] * ms[2])
+        sym_eig3(m, vec)
+        smax = max(abs(m[0, 0]), abs(m[1, 1]), abs(m[2, 2]))
+        cut = _CUT * max(smax, 1e-300)
+        x0, x1, x2 = ms[0], ms[1], ms[2]
+        for j in range(3):
+            s = abs(m[j, j])
+            if s > cut and s > 0.0:
+                w = (vec[0, j] * rhs[0] + vec[1, j] * rhs[1] + vec[2, j] * rhs[2]) / s
+                x0 += vec[0, j] * w
+                x1 += vec[1, j] * w
+                x2 += vec[2, j] * w
+        o = vox[owner[v]]
+        for i, xi in enumerate((x0, x1, x2)):
+            lo = (origin[i] + o[i] * h) - 0.5 * h
+            hi = (origin[i] + (o[i] + 1) * h) + 0.5 * h
+            verts[v, i] = min(max(xi, lo), hi)
+    return verts, quads, found
+
+
+@njit(cache=True, nogil=True)
+def dc_quads(quads, found, f0, verts):
+    """The complete quads ``(Q, 4)`` (all four corners found), reversed where the edge's
+    lower end is outside (``f0 >= 0``), and the midpoints ``(2 Q, 3)`` of their diagonals
+    0-2 (first ``Q`` rows) and 1-3."""
+    n = 0
+    for u in range(quads.shape[0]):
+        if found[u] == 15:
+            n += 1
+    out = np.empty((n, 4), dtype=np.int64)
+    mid = np.empty((2 * n, 3))
+    r = 0
+    for u in range(quads.shape[0]):
+        if found[u] != 15:
+            continue
+        for q in range(4):
+            out[r, q] = quads[u, 3 - q] if f0[u] >= 0 else quads[u, q]
+        for i in range(3):
+            mid[r, i] = 0.5 * (verts[out[r, 0], i] + verts[out[r, 2], i])
+            mid[n + r, i] = 0.5 * (verts[out[r, 1], i] + verts[out[r, 3], i])
+        r += 1
+    return out, mid
+
+
+@njit(cache=True, nogil=True)
+def dc_split(quads, fm, tie):
+    """Triangles ``(2 Q, 3)`` of quads ``(Q, 4)``: along diagonal 0-2 where
+    ``|f(mid02)| <= |f(mid13)| + tie`` (``fm (2 Q,)``), else 1-3; first triangles, then
+    second."""
+    n = quads.shape[0]
+    faces = np.empty((2 * n, 3), dtype=np.int64)
+    for r in range(n):
+        q0, q1, q2, q3 = quads[r, 0], quads[r, 1], quads[r, 2], quads[r, 3]
+        if abs(fm[r]) <= abs(fm[n + r]) + tie:
+            faces[r, 0], faces[r, 1], faces[r, 2] = q0, q1, q2
+            faces[n + r, 0], faces[n + r, 1], faces[n + r, 2] = q0, q2, q3
+        else:
+            faces[r, 0], faces[r, 1], faces[r, 2] = q0, q1, q3
+            faces[n + r, 0], faces[n + r, 1], faces[n + r, 2] = q1, q2, q3
+    return faces

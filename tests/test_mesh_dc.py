@@ -1,0 +1,64 @@
+"""The compiled dual contouring (``csdf.mesh.dc_kernels``): the same mesh as the NumPy
+dual contouring, and watertight 2-manifold meshes on random CSG shapes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import csdf
+from csdf.mesh.extract import extract
+
+pytest.importorskip("numba")
+
+from csdf.mesh import dc_kernels as D  # noqa: E402
+from test_mesh_stream import _csg, _random_shape, _setup, _triangles  # noqa: E402
+
+CASES = {
+    "sphere": (lambda: csdf.sphere(1.0), None),
+    "box": (lambda: csdf.box((1.0, 0.8, 0.6)).rotate(0.3, (1, 2, 3)), None),
+    "csg": (_csg, None),
+    "twisted box": (lambda: csdf.box((1.0, 0.4, 2.0)).twist(1.2), None),
+    "cut by bounds": (lambda: csdf.sphere(1.0), ((-1, -1, 0), (1, 1, 1))),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_compiled_dc_equals_numpy_dc(name):
+    make, bounds = CASES[name]
+    grid, values, gradients, intervals = _setup(make(), 28, bounds)
+    rv, rf = extract(grid, values, gradients, intervals, "dc")
+    cv, cf = extract(grid, values, gradients, intervals, "dc", compiled=True)
+    assert cv.dtype == np.float64 and cf.dtype == np.int64
+    assert len(cv) == len(rv) and len(cf) == len(rf)
+    # the same vertices in the same (voxel, component) order ...
+    np.testing.assert_allclose(cv, rv, rtol=0, atol=1e-9 * grid.h)
+    # ... joined into the same oriented triangles
+    assert _triangles(cv, cf, grid.h) == _triangles(rv, rf, grid.h)
+
+
+def test_symmetric_eigensolver_matches_numpy():
+    rng = np.random.default_rng(1)
+    vec = np.empty((3, 3))
+    for rank in (0, 1, 2, 3, 3, 3):
+        n = rng.normal(size=(5, 3))[:rank]
+        a = n.T @ n
+        m = a.copy()
+        D.sym_eig3(m, vec)
+        np.testing.assert_allclose(vec @ np.diag(np.diag(m)) @ vec.T, a, atol=1e-12)
+        np.testing.assert_allclose(vec.T @ vec, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(np.sort(np.diag(m)), np.linalg.eigvalsh(a), atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_shapes_dc_are_watertight_and_manifold(seed):
+    rng = np.random.default_rng(seed + 100)
+    shape = _random_shape(rng)
+    m = csdf.mesh(shape, resolution=int(rng.integers(20, 40)), method="dc", progress=False)
+    if len(m.faces) == 0:
+        pytest.skip("empty shape")
+    assert m.is_watertight and m.is_winding_consistent
+    edges = np.sort(m.edges, axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(counts == 2)
+    assert m.volume > 0

@@ -11,7 +11,10 @@ from csdf.mesh.extract import extract
 
 pytest.importorskip("numba")
 
+from scipy.spatial import cKDTree  # noqa: E402
+
 from csdf.mesh import dc_kernels as D  # noqa: E402
+from csdf.mesh.stream import extract_dc  # noqa: E402
 from test_mesh_stream import _csg, _random_shape, _setup, _triangles  # noqa: E402
 
 CASES = {
@@ -35,6 +38,23 @@ def test_compiled_dc_equals_numpy_dc(name):
     np.testing.assert_allclose(cv, rv, rtol=0, atol=1e-9 * grid.h)
     # ... joined into the same oriented triangles
     assert _triangles(cv, cf, grid.h) == _triangles(rv, rf, grid.h)
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+@pytest.mark.parametrize("chunk_samples", [1, 1 << 18])
+def test_streamed_dc_equals_numpy_dc(name, chunk_samples):
+    # streamed (one brick per chunk, or whole): vertices numbered in stream order, so
+    # compare the vertex sets and the triangles by coordinates
+    make, bounds = CASES[name]
+    grid, values, gradients, intervals = _setup(make(), 30, bounds)
+    rv, rf = extract(grid, values, gradients, intervals, "dc")
+    sv, sf = extract_dc(grid, values, gradients, intervals, chunk_samples=chunk_samples)
+    assert sv.dtype == np.float64 and sf.dtype == np.int64
+    assert len(sv) == len(rv) and len(sf) == len(rf)
+    dist, idx = cKDTree(rv).query(sv)
+    assert dist.max() <= 1e-9 * grid.h
+    assert len(np.unique(idx)) == len(rv)
+    assert _triangles(sv, sf, grid.h) == _triangles(rv, rf, grid.h)
 
 
 def test_symmetric_eigensolver_matches_numpy():

@@ -167,17 +167,18 @@ def mesh(
     t0 = time.perf_counter()
     reporter = _Progress() if progress else None
     try:
-        if method == "mc" and backend == "fast":
+        if backend == "fast":
             # compiled, streamed over the octree's bricks (same results, see stream.py)
-            from .stream import extract_mc
+            from .stream import extract_dc, extract_mc
 
-            verts, faces = extract_mc(grid, values, intervals,
-                                      reporter.update if reporter else None)
+            update = reporter.update if reporter else None
+            if method == "mc":
+                verts, faces = extract_mc(grid, values, intervals, update)
+            else:
+                verts, faces = extract_dc(grid, values, gradients, intervals, update)
         else:
-            # dual contouring's per-cell work is compiled with the fast backend (same mesh)
             verts, faces = extract(grid, values, gradients, intervals, method,
-                                   reporter.update if reporter else None,
-                                   compiled=backend == "fast")
+                                   reporter.update if reporter else None)
     finally:
         if reporter:
             reporter.close()

@@ -23,7 +23,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["dc_vertices", "dc_quads", "dc_split", "sym_eig3"]
+from . import kernels as K
+
+__all__ = ["dc_chunk", "dc_vertices", "dc_quads", "dc_split", "edge_flags", "sym_eig3"]
 
 _CUT = 0.05  # singular values below this fraction of the largest are dropped (as NumPy)
 
@@ -221,3 +223,136 @@ def dc_split(quads, fm, tie):
             faces[r, 0], faces[r, 1], faces[r, 2] = q0, q1, q3
             faces[n + r, 0], faces[n + r, 1], faces[n + r, 2] = q1, q2, q3
     return faces
+
+
+@njit(cache=True, nogil=True)
+def _dc_brick(b, bricks, vals, nbx, nby, edge_origin, edge_axis, comp_table, table, n_used,
+              vert_base, stamp, slot_vid, e_corner, e_axis, e_f0, e_f1, n_new, vox, vcase,
+              n_vox, pairs, n_pairs):
+    """The active voxels of brick ``b`` of :func:`dc_chunk` (arrays with room for them).
+    Crossed edges get vertex ids exactly as :func:`csdf.mesh.kernels.mc_chunk` gives them
+    (per-brick scratch slots, the hash map for edges on brick faces). Returns the new
+    ``(n_new, n_used, n_vox, n_pairs)``."""
+    n = vals.shape[1]
+    B = n - 1
+    bx, by, bz = bricks[b, 0], bricks[b, 1], bricks[b, 2]
+    for x in range(B):
+        for y in range(B):
+            for z in range(B):
+                case = 0
+                for c in range(8):
+                    if vals[b, x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)] < 0:
+                        case |= 1 << c
+                if case == 0 or case == 255:
+                    continue
+                vox[n_vox, 0] = bricks[b, 0] + x
+                vox[n_vox, 1] = bricks[b, 1] + y
+                vox[n_vox, 2] = bricks[b, 2] + z
+                vcase[n_vox] = case
+                n_vox += 1
+                for e in range(12):
+                    if comp_table[case, e] < 0:
+                        continue
+                    # the vertex id of the edge, as kernels._mc_brick numbers it (the
+                    # same code, deliberately inline: moving it into a shared helper
+                    # made the marching-cubes kernel ~2.5x slower, measured)
+                    a = edge_axis[e]
+                    lx = x + edge_origin[e, 0]
+                    ly = y + edge_origin[e, 1]
+                    lz = z + edge_origin[e, 2]
+                    s = ((a * n + lx) * n + ly) * n + lz
+                    if stamp[s] != b:
+                        stamp[s] = b
+                        on_face = ((a != 0 and (lx == 0 or lx == B))
+                                   or (a != 1 and (ly == 0 or ly == B))
+                                   or (a != 2 and (lz == 0 or lz == B)))
+                        vid = -1
+                        hs = 0
+                        if on_face:
+                            qx, rx = divmod(bx + lx, B)
+                            qy, ry = divmod(by + ly, B)
+                            qz, rz = divmod(bz + lz, B)
+                            key = ((((qz * nby + qy) * nbx + qx) << K._LOCAL_BITS)
+                                   | (((rx * B + ry) * B + rz) * 3 + a))
+                            hs = K._slot(table, key)
+                            if table[hs, 0] == key:
+                                vid = table[hs, 1]
+                            else:
+                                table[hs, 0] = key
+                                n_used += 1
+                        if vid < 0:
+                            vid = vert_base + n_new
+                            if on_face:
+                                table[hs, 1] = vid
+                            e_corner[n_new, 0] = bx + lx
+                            e_corner[n_new, 1] = by + ly
+                            e_corner[n_new, 2] = bz + lz
+                            e_axis[n_new] = a
+                            e_f0[n_new] = vals[b, lx, ly, lz]
+                            e_f1[n_new] = vals[b, lx + (a == 0), ly + (a == 1),
+                                               lz + (a == 2)]
+                            n_new += 1
+                        slot_vid[s] = vid
+                    pairs[n_pairs] = slot_vid[s]
+                    n_pairs += 1
+    return n_new, n_used, n_vox, n_pairs
+
+
+@njit(cache=True, nogil=True)
+def dc_chunk(bricks, vals, dims, edge_origin, edge_axis, comp_table, table, n_used,
+             vert_base, e_corner, e_axis, e_f0, e_f1, vox, vcase, n_vox, pairs, n_pairs):
+    """The active voxels of one chunk of bricks and their crossed edges' vertex ids.
+
+    Args:
+        bricks, vals, dims, edge_origin, edge_axis, table, n_used, vert_base, e_corner,
+            e_axis, e_f0, e_f1: as for :func:`csdf.mesh.kernels.mc_chunk` (the same edge
+            numbering); comp_table ``(256, 12)``: component of each crossed edge.
+        vox ``(Acap, 3)`` int64, vcase ``(Acap,)`` int64 with ``n_vox`` rows used: active
+            voxels (lower sample corner) and their cases; pairs ``(Pcap,)`` int64 with
+            ``n_pairs`` used: the vertex id of each (active voxel, crossed local edge), in
+            (voxel, local edge) order.
+
+    Returns:
+        ``(table, n_used, e_corner, e_axis, e_f0, e_f1, E, vox, vcase, n_vox, pairs,
+        n_pairs)``: the (possibly grown) arrays; the edge buffers' first ``E`` rows are
+        the chunk's new edges, in vertex-id order.
+    """
+    n = vals.shape[1]
+    B = n - 1
+    nbx = dims[0] // B + 2  # bricks per axis, with room for the upper faces
+    nby = dims[1] // B + 2
+    n_slots = 3 * n * n * n
+    stamp = np.full(n_slots, -1, dtype=np.int64)
+    slot_vid = np.zeros(n_slots, dtype=np.int32)
+    n_new = 0
+    for b in range(bricks.shape[0]):
+        while 2 * (n_used + n_slots) > table.shape[0]:
+            table = K._rehash(table)
+        vox = K._grow2(vox, n_vox + B * B * B)
+        vcase = K._grow1(vcase, n_vox + B * B * B)
+        pairs = K._grow1(pairs, n_pairs + 12 * B * B * B)
+        if n_new + n_slots > e_axis.shape[0]:
+            e_corner = K._grow2(e_corner, n_new + n_slots)
+            e_axis = K._grow1(e_axis, n_new + n_slots)
+            e_f0 = K._grow1(e_f0, n_new + n_slots)
+            e_f1 = K._grow1(e_f1, n_new + n_slots)
+        n_new, n_used, n_vox, n_pairs = _dc_brick(
+            b, bricks, vals, nbx, nby, edge_origin, edge_axis, comp_table, table, n_used,
+            vert_base, stamp, slot_vid, e_corner, e_axis, e_f0, e_f1, n_new, vox, vcase,
+            n_vox, pairs, n_pairs)
+    return (table, n_used, e_corner, e_axis, e_f0, e_f1, n_new, vox, vcase, n_vox, pairs,
+            n_pairs)
+
+
+@njit(cache=True, nogil=True)
+def edge_flags(e_corner, e_axis, dims, on_box):
+    """In place ``on_box (E,)``: 1 where edge ``(E, 3)``/``(E,)`` touches the grid's outer
+    faces (an end on or beyond them), else 0."""
+    for r in range(e_corner.shape[0]):
+        flag = 0
+        for d in range(3):
+            c = e_corner[r, d]
+            c1 = c + (1 if e_axis[r] == d else 0)
+            if c <= 0 or c1 <= 0 or c >= dims[d] or c1 >= dims[d]:
+                flag = 1
+        on_box[r] = flag

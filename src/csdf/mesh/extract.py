@@ -1,9 +1,10 @@
 """Sparse surface extraction on a voxel grid: octree pruning by interval arithmetic,
 then marching cubes or manifold dual contouring on the active voxels only.
 
-This is the NumPy implementation: dual contouring, and marching cubes without Numba.
-With the fast backend, marching cubes runs compiled and streamed
-(:mod:`csdf.mesh.stream`, same octree, case table and root search, tested equal to this).
+This is the NumPy implementation, used without Numba. With the fast backend, both
+methods run compiled and streamed (:mod:`csdf.mesh.stream`, :mod:`csdf.mesh.kernels`,
+:mod:`csdf.mesh.dc_kernels`: same octree, case table, root search and vertex placement,
+tested equal to this).
 
 Grid: ``dims = (nx, ny, nz)`` voxels of edge ``h`` from ``origin``; sample ``(i, j, k)``
 is the point ``origin + h * (i, j, k)``. The mesher works in three stages:

@@ -1,4 +1,5 @@
-"""Streaming sparse marching cubes: the fast path of :func:`csdf.mesh` (``method='mc'``).
+"""Streaming sparse marching cubes: the fast path of :func:`csdf.mesh` (``method='mc'``;
+``method='dc'``: :func:`extract_dc`, the same stream feeding compiled dual contouring).
 
 Same grid, octree and results as :func:`csdf.mesh.extract.extract` (watertight,
 2-manifold, consistently wound, vertices on the zero set to ``1e-6`` voxel), but the
@@ -23,10 +24,10 @@ from collections.abc import Callable
 import numpy as np
 
 from . import kernels as K
-from .cases import EDGE_AXIS, EDGE_ORIGIN, TRI_TABLE
+from .cases import COMPONENT_TABLE, EDGE_AXIS, EDGE_ORIGIN, TRI_TABLE
 from .extract import BRICK, Grid, _octree
 
-__all__ = ["extract_mc", "CHUNK_SAMPLES"]
+__all__ = ["extract_mc", "extract_dc", "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = 1 << 18  # samples evaluated per call of the field (~6 MB of points)
 ITERATIONS = 40  # root search steps at most
@@ -34,6 +35,7 @@ FIRST_ITERATIONS = 4  # steps per chunk; the few edges left go on together at th
 assert 3 * BRICK**3 <= 1 << K._LOCAL_BITS, "hash keys need room for a brick's edges"
 _N_TRI = (TRI_TABLE[:, :, 0] >= 0).sum(axis=1).astype(np.int64)
 _TRI = TRI_TABLE.astype(np.int64)
+_COMP = COMPONENT_TABLE.astype(np.int64)
 
 
 def extract_mc(
@@ -58,28 +60,124 @@ def extract_mc(
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64 (what ``trimesh`` keeps, so
         it makes no copy), counter-clockwise seen from outside.
     """
-    bricks = _octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
-                     else None)
+    bricks = _sorted_bricks(grid, intervals, progress)
     if len(bricks) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    # octree order already groups neighbours; sort for a deterministic, local sweep
-    bricks = bricks[np.lexsort((bricks[:, 2], bricks[:, 1], bricks[:, 0]))]
+    dims = np.array(grid.dims, dtype=np.int64)
+    # initial sizes from the brick count, grown on demand: ~2 faces and ~1 vertex per
+    # surface voxel, ~B^2 surface voxels per brick. The outputs get twice that: pages
+    # never written cost address space, not memory, and a growth would copy everything
+    est_faces = int(len(bricks) * 4.0 * BRICK * BRICK) + 1024
+    out = [K.fresh_array((est_faces, 3), np.int64), 0]  # faces, rows used
+
+    def kernel(chunk, vals, table, n_used, n_verts, ebuf):
+        table, n_used, out[0], out[1], *ebuf, n_new = K.mc_chunk(
+            chunk, vals, dims, EDGE_ORIGIN, EDGE_AXIS, _TRI, _N_TRI, table, n_used,
+            out[0], out[1], n_verts, *ebuf)
+        return table, n_used, ebuf, n_new
+
+    verts = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel,
+                    est_faces // 2)
+    return verts, out[0][:out[1]]
+
+
+def extract_dc(
+    grid: Grid,
+    values: Callable[[np.ndarray], np.ndarray],
+    gradients: Callable[[np.ndarray], np.ndarray],
+    intervals: Callable,
+    progress: Callable | None = None,
+    tol: float = 1e-6,
+    chunk_samples: int = CHUNK_SAMPLES,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Manifold dual contouring of the zero set on ``grid``, streamed like
+    :func:`extract_mc` and compiled (:mod:`.dc_kernels`): the same mesh as
+    ``extract(..., method='dc')`` up to the order of vertices and faces.
+
+    The stream records the active voxels (corner, case) and the vertex id of each of
+    their crossed edges (the roots, numbered as :func:`extract_mc` numbers them); then the
+    normals at the roots (exact gradients, in blocks), the QEF vertices and the quads.
+
+    Args:
+        values: ``(M, 3) -> (M,)`` field values; gradients: ``(M, 3) -> (M, 3)``.
+        intervals, progress, tol, chunk_samples: as for :func:`extract_mc`.
+
+    Returns:
+        ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64, counter-clockwise seen
+        from outside.
+    """
+    from . import dc_kernels as D
+    from .extract import _dual_contour_compiled, _edge_normals
+
+    bricks = _sorted_bricks(grid, intervals, progress)
+    if len(bricks) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    dims = np.array(grid.dims, dtype=np.int64)
+    est = int(len(bricks) * 2.0 * BRICK * BRICK) + 1024  # ~active voxels
+    st = {"vox": np.empty((est, 3), dtype=np.int64), "vcase": np.empty(est, dtype=np.int64),
+          "n_vox": 0, "pairs": np.empty(4 * est, dtype=np.int64), "n_pairs": 0,
+          "f0": np.empty(est), "axis": np.empty(est, dtype=np.int8),
+          "on_box": np.empty(est, dtype=np.uint8)}
+
+    def kernel(chunk, vals, table, n_used, n_verts, ebuf):
+        (table, n_used, *ebuf, n_new, st["vox"], st["vcase"], st["n_vox"], st["pairs"],
+         st["n_pairs"]) = D.dc_chunk(
+            chunk, vals, dims, EDGE_ORIGIN, EDGE_AXIS, _COMP, table, n_used, n_verts,
+            *ebuf, st["vox"], st["vcase"], st["n_vox"], st["pairs"], st["n_pairs"])
+        need = n_verts + n_new
+        for k in ("f0", "axis", "on_box"):
+            if need > len(st[k]):
+                grown = np.empty(max(need, 2 * len(st[k])), dtype=st[k].dtype)
+                grown[:n_verts] = st[k][:n_verts]
+                st[k] = grown
+        st["f0"][n_verts:need] = ebuf[2][:n_new]
+        st["axis"][n_verts:need] = ebuf[1][:n_new]
+        D.edge_flags(ebuf[0][:n_new], ebuf[1][:n_new], dims, st["on_box"][n_verts:need])
+        return table, n_used, ebuf, n_new
+
+    roots = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel, est)
+    n_e = len(roots)
+    uaxis = st["axis"][:n_e].astype(np.int64)
+    on_box = st["on_box"][:n_e].astype(bool)
+    normals = np.empty((n_e, 3))
+    block = max(1, chunk_samples)
+    for s in range(0, n_e, block):
+        sl = slice(s, s + block)
+        normals[sl] = _edge_normals(grid, roots[sl], uaxis[sl], gradients, on_box[sl])
+
+    def gradients_values(p):
+        return values(p), gradients(p)
+
+    n_vox, n_pairs = st["n_vox"], st["n_pairs"]
+    return _dual_contour_compiled(grid, st["vox"][:n_vox], st["vcase"][:n_vox],
+                                  st["pairs"][:n_pairs], roots, normals, st["f0"][:n_e],
+                                  uaxis, values, gradients_values)
+
+
+def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:
+    """The octree's bricks ``(K, 3)``, sorted by x, y, z (a deterministic, local sweep)."""
+    bricks = _octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
+                     else None)
+    return bricks[np.lexsort((bricks[:, 2], bricks[:, 1], bricks[:, 0]))]
+
+
+def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable | None,
+            tol: float, chunk_samples: int, kernel: Callable, est_verts: int) -> np.ndarray:
+    """Stream over ``bricks (K, 3)`` chunk by chunk: evaluate the samples, run ``kernel``
+    (``(chunk, vals, table, n_used, n_verts, ebuf) -> (table, n_used, ebuf, n_new)``, which
+    numbers the chunk's new crossed edges from ``n_verts`` in the edge hash map ``table``
+    and writes them to the edge buffers ``ebuf``), search the new edges' roots; returns
+    the roots ``(V, 3)`` (vertex ``i`` on crossed edge ``i``)."""
     dims = np.array(grid.dims, dtype=np.int64)
     origin = np.asarray(grid.origin, dtype=np.float64)
     h = float(grid.h)
     per_chunk = max(1, chunk_samples // (BRICK + 1) ** 3)
     box_lo = origin
     box_hi = origin + h * dims
-    # initial sizes from the brick count, grown on demand: ~2 faces and ~1 vertex per
-    # surface voxel, ~B^2 surface voxels per brick, ~2 B of its crossed edges on its faces
-    # (the hash map's keys, at most half full). The outputs get twice that: pages never
-    # written cost address space, not memory, and a growth would copy everything
-    est_faces = int(len(bricks) * 4.0 * BRICK * BRICK) + 1024
+    # ~2 B of a brick's crossed edges on its faces: the hash map's keys (at most half full)
     table = K.new_hash(len(bricks) * 4 * BRICK + 1024)
-    faces = K.fresh_array((est_faces, 3), np.int64)
-    n_faces = 0
     n_used = 0  # occupied slots of the hash map
-    verts = K.fresh_array((est_faces // 2, 3), np.float64)
+    verts = K.fresh_array((est_verts, 3), np.float64)
     n_verts = 0
     stragglers: list[_Roots] = []
     cap = per_chunk * 2 * BRICK * BRICK  # edge buffers, grown on demand
@@ -88,9 +186,7 @@ def extract_mc(
     for s in range(0, len(bricks), per_chunk):
         chunk = bricks[s:s + per_chunk]
         vals = _samples(chunk, values, origin, h, dims)
-        table, n_used, faces, n_faces, *ebuf, n_new = K.mc_chunk(
-            chunk, vals, dims, EDGE_ORIGIN, EDGE_AXIS, _TRI, _N_TRI, table, n_used,
-            faces, n_faces, n_verts, *ebuf)
+        table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
         del vals
         e_c, e_a, e_f0, e_f1 = (a[:n_new] for a in ebuf)
         roots = _Roots(e_c, e_a, e_f0, e_f1, origin, h, tol * h,
@@ -112,7 +208,7 @@ def extract_mc(
         verts[rest.vid] = rest.points(np.empty((len(rest.vid), 3)))
     if progress:
         progress("roots", n_verts, n_verts)
-    return verts[:n_verts], faces[:n_faces]
+    return verts[:n_verts]
 
 
 def _samples(chunk: np.ndarray, values: Callable, origin: np.ndarray, h: float,

@@ -12,8 +12,8 @@ temporaries, ``ufunc.at``, batched SVD or sorted searches:
   singular value around the component's mass point, then clamped to half a voxel around
   its voxel; and for every crossed edge the quad of the four vertices around it, found
   by scattering each (voxel, edge) pair into its slot of the edge's quad (no search);
-* :func:`dc_quads`: the complete quads, wound by the edge's sign, and the midpoints of
-  both diagonals (where the field is evaluated);
+* :func:`dc_quads`, :func:`dc_midpoints`: the complete quads, wound by the edge's sign,
+  and the midpoints of both diagonals (where the field is evaluated);
 * :func:`dc_split`: each quad split along the diagonal whose midpoint is nearer the
   surface (first triangles, then second triangles, as the NumPy path orders them).
 """
@@ -25,7 +25,9 @@ from numba import njit
 
 from . import kernels as K
 
-__all__ = ["dc_chunk", "dc_vertices", "dc_quads", "dc_split", "edge_flags", "sym_eig3"]
+__all__ = [
+    "dc_chunk", "dc_vertices", "dc_quads", "dc_midpoints", "dc_split", "edge_flags", "sym_eig3",
+]
 
 _CUT = 0.05  # singular values below this fraction of the largest are dropped (as NumPy)
 
@@ -78,6 +80,9 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
                 origin, h, max_components):
     """Dual-contouring vertices and the quad of every crossed edge.
 
+    A voxel's pairs are consecutive, so each voxel's quadrics are summed (in the pairs'
+    order, as ``np.add.at`` sums them) and solved before the next voxel's.
+
     Args:
         vox: ``(A, 3)`` int64 active voxels (lower sample corner); vcase ``(A,)`` their
             marching-cubes cases.
@@ -90,121 +95,134 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
         origin ``(3,)``, h: the grid; max_components: components per voxel at most.
 
     Returns:
-        ``(verts (V, 3) float64, quads (E, 4) int64, found (E,) int64)``: the clamped QEF
+        ``(verts (V, 3) float64, quads (E, 4) int64, found (E,) int8)``: the clamped QEF
         vertices in (voxel, component) order; for each edge the vertex of the voxel at
         each corner of its quad (``(du, dv) = (0, 0), (1, 0), (1, 1), (0, 1)`` voxels
         below it along the axes after its own) and a bit mask of the corners found.
     """
     n_vox = vox.shape[0]
     n_edges = roots.shape[0]
-    # vertex ids: per voxel, its components in ascending order
-    base = np.empty(n_vox + 1, dtype=np.int64)
-    local = np.full((n_vox, max_components), -1, dtype=np.int64)
-    n_v = 0
-    for a in range(n_vox):
-        base[a] = n_v
-        c = vcase[a]
+    # rank[c, k]: the vertex of component k among case c's components (ascending order)
+    rank = np.full((256, max_components), -1, dtype=np.int64)
+    n_comp = np.zeros(256, dtype=np.int64)
+    for c in range(256):
         for k in range(max_components):
             for e in range(12):
                 if comp_table[c, e] == k:
-                    local[a, k] = n_v
-                    n_v += 1
+                    rank[c, k] = n_comp[c]
+                    n_comp[c] += 1
                     break
-    base[n_vox] = n_v
-    A = np.zeros((n_v, 6))  # xx, xy, xz, yy, yz, zz
-    bvec = np.zeros((n_v, 3))
-    mass = np.zeros((n_v, 3))
-    cnt = np.zeros(n_v)
-    quads = np.zeros((n_edges, 4), dtype=np.int64)
-    found = np.zeros(n_edges, dtype=np.int64)
-    owner = np.empty(n_v, dtype=np.int64)
-    p = 0
+    n_v = 0
     for a in range(n_vox):
-        c = vcase[a]
-        for e in range(12):
-            k = comp_table[c, e]
-            if k < 0:
-                continue
-            vid = local[a, k]
-            owner[vid] = a
-            u = inv[p]
-            p += 1
-            nx, ny, nz = normals[u, 0], normals[u, 1], normals[u, 2]
-            px, py, pz = roots[u, 0], roots[u, 1], roots[u, 2]
-            A[vid, 0] += nx * nx
-            A[vid, 1] += nx * ny
-            A[vid, 2] += nx * nz
-            A[vid, 3] += ny * ny
-            A[vid, 4] += ny * nz
-            A[vid, 5] += nz * nz
-            d = nx * px + ny * py + nz * pz
-            bvec[vid, 0] += nx * d
-            bvec[vid, 1] += ny * d
-            bvec[vid, 2] += nz * d
-            mass[vid, 0] += px
-            mass[vid, 1] += py
-            mass[vid, 2] += pz
-            cnt[vid] += 1.0
-            ax = uaxis[u]
-            du = edge_origin[e, (ax + 1) % 3]
-            dv = edge_origin[e, (ax + 2) % 3]
-            q = (0 if dv == 0 else 3) if du == 0 else (1 if dv == 0 else 2)
-            quads[u, q] = vid
-            found[u] |= 1 << q
+        n_v += n_comp[vcase[a]]
     verts = np.empty((n_v, 3))
+    quads = np.zeros((n_edges, 4), dtype=np.int64)
+    found = np.zeros(n_edges, dtype=np.int8)
+    A = np.zeros((max_components, 6))  # xx, xy, xz, yy, yz, zz
+    bvec = np.zeros((max_components, 3))
+    mass = np.zeros((max_components, 3))
+    cnt = np.zeros(max_components)
     m = np.empty((3, 3))
     vec = np.empty((3, 3))
     rhs = np.empty(3)
     ms = np.empty(3)
-    for v in range(n_v):
-        for i in range(3):
-            ms[i] = mass[v, i] / cnt[v]
-        m[0, 0], m[0, 1], m[0, 2] = A[v, 0], A[v, 1], A[v, 2]
-        m[1, 0], m[1, 1], m[1, 2] = A[v, 1], A[v, 3], A[v, 4]
-        m[2, 0], m[2, 1], m[2, 2] = A[v, 2], A[v, 4], A[v, 5]
-        for i in range(3):
-            rhs[i] = bvec[v, i] - (m[i, 0] * ms[0] + m[i, 1] * ms[1] + m[i, 2] * ms[2])
-        sym_eig3(m, vec)
-        smax = max(abs(m[0, 0]), abs(m[1, 1]), abs(m[2, 2]))
-        cut = _CUT * max(smax, 1e-300)
-        x0, x1, x2 = ms[0], ms[1], ms[2]
-        for j in range(3):
-            s = abs(m[j, j])
-            if s > cut and s > 0.0:
-                w = (vec[0, j] * rhs[0] + vec[1, j] * rhs[1] + vec[2, j] * rhs[2]) / s
-                x0 += vec[0, j] * w
-                x1 += vec[1, j] * w
-                x2 += vec[2, j] * w
-        o = vox[owner[v]]
-        for i, xi in enumerate((x0, x1, x2)):
-            lo = (origin[i] + o[i] * h) - 0.5 * h
-            hi = (origin[i] + (o[i] + 1) * h) + 0.5 * h
-            verts[v, i] = min(max(xi, lo), hi)
+    p = 0
+    base = 0
+    for a in range(n_vox):
+        c = vcase[a]
+        A[:] = 0.0
+        bvec[:] = 0.0
+        mass[:] = 0.0
+        cnt[:] = 0.0
+        for e in range(12):
+            k = comp_table[c, e]
+            if k < 0:
+                continue
+            r = rank[c, k]
+            u = inv[p]
+            p += 1
+            nx, ny, nz = normals[u, 0], normals[u, 1], normals[u, 2]
+            px, py, pz = roots[u, 0], roots[u, 1], roots[u, 2]
+            A[r, 0] += nx * nx
+            A[r, 1] += nx * ny
+            A[r, 2] += nx * nz
+            A[r, 3] += ny * ny
+            A[r, 4] += ny * nz
+            A[r, 5] += nz * nz
+            d = nx * px + ny * py + nz * pz
+            bvec[r, 0] += nx * d
+            bvec[r, 1] += ny * d
+            bvec[r, 2] += nz * d
+            mass[r, 0] += px
+            mass[r, 1] += py
+            mass[r, 2] += pz
+            cnt[r] += 1.0
+            ax = uaxis[u]
+            du = edge_origin[e, (ax + 1) % 3]
+            dv = edge_origin[e, (ax + 2) % 3]
+            q = (0 if dv == 0 else 3) if du == 0 else (1 if dv == 0 else 2)
+            quads[u, q] = base + r
+            found[u] |= 1 << q
+        for r in range(n_comp[c]):
+            v = base + r
+            for i in range(3):
+                ms[i] = mass[r, i] / cnt[r]
+            m[0, 0], m[0, 1], m[0, 2] = A[r, 0], A[r, 1], A[r, 2]
+            m[1, 0], m[1, 1], m[1, 2] = A[r, 1], A[r, 3], A[r, 4]
+            m[2, 0], m[2, 1], m[2, 2] = A[r, 2], A[r, 4], A[r, 5]
+            for i in range(3):
+                rhs[i] = bvec[r, i] - (m[i, 0] * ms[0] + m[i, 1] * ms[1] + m[i, 2] * ms[2])
+            sym_eig3(m, vec)
+            smax = max(abs(m[0, 0]), abs(m[1, 1]), abs(m[2, 2]))
+            cut = _CUT * max(smax, 1e-300)
+            x0, x1, x2 = ms[0], ms[1], ms[2]
+            for j in range(3):
+                s = abs(m[j, j])
+                if s > cut and s > 0.0:
+                    w = (vec[0, j] * rhs[0] + vec[1, j] * rhs[1] + vec[2, j] * rhs[2]) / s
+                    x0 += vec[0, j] * w
+                    x1 += vec[1, j] * w
+                    x2 += vec[2, j] * w
+            # keep the vertex within half a voxel of its voxel
+            for i, xi in enumerate((x0, x1, x2)):
+                lo = (origin[i] + vox[a, i] * h) - 0.5 * h
+                hi = (origin[i] + (vox[a, i] + 1) * h) + 0.5 * h
+                verts[v, i] = min(max(xi, lo), hi)
+        base += n_comp[c]
     return verts, quads, found
 
 
 @njit(cache=True, nogil=True)
-def dc_quads(quads, found, f0, verts):
-    """The complete quads ``(Q, 4)`` (all four corners found), reversed where the edge's
-    lower end is outside (``f0 >= 0``), and the midpoints ``(2 Q, 3)`` of their diagonals
-    0-2 (first ``Q`` rows) and 1-3."""
+def dc_quads(quads, found, f0):
+    """The complete quads ``(Q, 4)`` of ``quads (E, 4)`` (all four corners found:
+    ``found (E,) == 15``), reversed where the edge's lower end is outside
+    (``f0 (E,) >= 0``)."""
     n = 0
     for u in range(quads.shape[0]):
         if found[u] == 15:
             n += 1
     out = np.empty((n, 4), dtype=np.int64)
-    mid = np.empty((2 * n, 3))
     r = 0
     for u in range(quads.shape[0]):
         if found[u] != 15:
             continue
         for q in range(4):
             out[r, q] = quads[u, 3 - q] if f0[u] >= 0 else quads[u, q]
-        for i in range(3):
-            mid[r, i] = 0.5 * (verts[out[r, 0], i] + verts[out[r, 2], i])
-            mid[n + r, i] = 0.5 * (verts[out[r, 1], i] + verts[out[r, 3], i])
         r += 1
-    return out, mid
+    return out
+
+
+@njit(cache=True, nogil=True)
+def dc_midpoints(quads, verts):
+    """Midpoints ``(2 m, 3)`` of the diagonals 0-2 (first ``m`` rows) and 1-3 of quads
+    ``(m, 4)`` with vertices ``verts (V, 3)``."""
+    m = quads.shape[0]
+    mid = np.empty((2 * m, 3))
+    for r in range(m):
+        for i in range(3):
+            mid[r, i] = 0.5 * (verts[quads[r, 0], i] + verts[quads[r, 2], i])
+            mid[m + r, i] = 0.5 * (verts[quads[r, 1], i] + verts[quads[r, 3], i])
+    return mid
 
 
 @njit(cache=True, nogil=True)

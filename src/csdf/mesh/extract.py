@@ -371,17 +371,42 @@ def _dual_contour_compiled(grid, vox, vcase, inv, roots, normals, f0, uaxis, val
                            gradients_values):
     """:func:`_dual_contour` after the normals, with its per-cell work compiled
     (:mod:`.dc_kernels`): the same vertices, quads and triangles."""
+    verts, quads, found = _dc_solve(grid, vox, vcase, inv, roots, normals, uaxis)
+    return _dc_finish(grid, verts, quads, found, f0, values, gradients_values)
+
+
+def _dc_solve(grid: Grid, vox: np.ndarray, vcase: np.ndarray, inv: np.ndarray,
+              roots: np.ndarray, normals: np.ndarray, uaxis: np.ndarray) -> tuple:
+    """Compiled QEF vertices ``(V, 3)`` and edge quads ``(E, 4)`` with their found-corner
+    masks ``(E,)`` (:func:`.dc_kernels.dc_vertices`; arguments as there)."""
     from . import dc_kernels as D
 
-    verts, quads, found = D.dc_vertices(
-        vox, vcase.astype(np.int64), inv.astype(np.int64), roots, normals,
-        uaxis.astype(np.int64), COMPONENT_TABLE.astype(np.int64),
+    return D.dc_vertices(
+        np.asarray(vox, dtype=np.int64), np.asarray(vcase, dtype=np.int64),
+        np.asarray(inv, dtype=np.int64), roots, normals, np.asarray(uaxis, dtype=np.int64),
+        COMPONENT_TABLE.astype(np.int64),
         EDGE_ORIGIN.astype(np.int64), np.asarray(grid.origin, dtype=np.float64),
         float(grid.h), MAX_COMPONENTS)
-    verts = _project(verts, gradients_values, grid.h)
-    quads, mid = D.dc_quads(quads, found, f0, verts)
-    del found
-    fm = np.asarray(values(mid), dtype=np.float64)
+
+
+def _dc_finish(grid: Grid, verts: np.ndarray, quads: np.ndarray, found: np.ndarray,
+               f0: np.ndarray, values: Callable, gradients_values: Callable,
+               block: int = 1 << 18) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``(V, 3)`` projected to the surface and the split, wound triangles
+    ``(F, 3)`` of the complete quads; the field is evaluated ``block`` points at a time
+    (the result does not depend on it)."""
+    from . import dc_kernels as D
+
+    for s in range(0, len(verts), block):
+        verts[s:s + block] = _project(verts[s:s + block], gradients_values, grid.h)
+    quads = D.dc_quads(quads, found, f0)
+    fm = np.empty(2 * len(quads))
+    n = len(quads)
+    for s in range(0, n, block):
+        q = quads[s:s + block]
+        f = np.asarray(values(D.dc_midpoints(q, verts)), dtype=np.float64)
+        fm[s:s + len(q)] = f[:len(q)]
+        fm[n + s:n + s + len(q)] = f[len(q):]
     return verts, D.dc_split(quads, fm, _TIE * grid.h)
 
 

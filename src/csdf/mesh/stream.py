@@ -107,7 +107,7 @@ def extract_dc(
         from outside.
     """
     from . import dc_kernels as D
-    from .extract import _dual_contour_compiled, _edge_normals
+    from .extract import _dc_finish, _dc_solve, _edge_normals
 
     bricks = _sorted_bricks(grid, intervals, progress)
     if len(bricks) == 0:
@@ -148,10 +148,11 @@ def extract_dc(
     def gradients_values(p):
         return values(p), gradients(p)
 
-    n_vox, n_pairs = st["n_vox"], st["n_pairs"]
-    return _dual_contour_compiled(grid, st["vox"][:n_vox], st["vcase"][:n_vox],
-                                  st["pairs"][:n_pairs], roots, normals, st["f0"][:n_e],
-                                  uaxis, values, gradients_values)
+    n_vox, n_pairs = st.pop("n_vox"), st.pop("n_pairs")
+    verts, quads, found = _dc_solve(grid, st.pop("vox")[:n_vox], st.pop("vcase")[:n_vox],
+                                    st.pop("pairs")[:n_pairs], roots, normals, uaxis)
+    del normals, roots, on_box  # (the working arrays go before the faces are made)
+    return _dc_finish(grid, verts, quads, found, st["f0"][:n_e], values, gradients_values)
 
 
 def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:

@@ -73,8 +73,11 @@ cProfile and per-kernel thread CPU time), not part of the timed runs above:
   per face), 134 MB at 512^3 = 0.174x the dense peak on its own. Everything else csdf
   holds at its peak (edge hash map, one chunk of samples and edges) is the *working*
   column: 29 MB = 0.038x.
-* **dc** (extra rows) still runs the NumPy dual contouring of `extract.py` (global
-  `unique` / `argsort` / `add.at` over all active voxels); only `mc` is compiled so far.
+* **dc** (extra rows) streams over the same bricks (`extract_dc`): a compiled kernel
+  records the active voxels and their edges' vertices, the QEF of each voxel is solved
+  in compiled code (3x3 symmetric Jacobi eigensolver, the same pseudo-inverse rule as the
+  NumPy path in `extract.py`, which stays the fallback), and quads are assembled by
+  scatter; edge normals and the final projection still run as NumPy in blocks.
 """
 MEMORY_GUARD = 0.85  # skip a run projected to need more than this share of MemAvailable
 
@@ -483,9 +486,10 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
         f"* **csdf**: `csdf.mesh(shape, resolution=N, method=..., progress=False)` (sparse "
         f"octree pruned by interval arithmetic, fast backend; `mc` is the compiled "
         f"marching cubes streamed over the octree's bricks, `src/csdf/mesh/stream.py`, "
-        f"`dc` the NumPy dual contouring of `src/csdf/mesh/extract.py`); its grid has h = longest "
-        f"side / N, origin = bounds[0] - h (2 + jitter) and ceil(extent / h) + 5 voxels "
-        f"per axis. The call's time includes building the `trimesh.Trimesh`.\n"
+        f"`dc` the dual contouring streamed the same way, with compiled QEF solves); its "
+        f"grid has h = longest side / N, origin = bounds[0] - h (2 + jitter) and "
+        f"ceil(extent / h) + 5 voxels per axis. The call's time includes building the "
+        f"`trimesh.Trimesh`.\n"
         f"* **dense + skimage MC** (baseline): the same grid without the jitter (origin = "
         f"bounds[0] - 2h, the same voxel counts, i.e. voxels + 1 samples per axis); "
         f"`prog(points, backend='fast')` over every sample, x-slab by x-slab ((ny nz, 3) "

@@ -24,7 +24,6 @@ import os
 import resource
 import shlex
 import statistics
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -34,7 +33,14 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import loadavg, machine_info, md_table, read_text, thread_scaling  # noqa: E402
+from common import (  # noqa: E402
+    loadavg,
+    machine_info,
+    md_table,
+    read_text,
+    run_child,
+    thread_scaling,
+)
 
 HERE = Path(__file__).resolve().parent
 MODELS = ("sphere", "csg", "union20")
@@ -299,30 +305,6 @@ def child_memory(model: str, n: int, backend: str) -> dict:
     return {"n": n, "input_bytes": pts.nbytes, "output_bytes": out.nbytes, **snap}
 
 
-def run_child(args: list[str], timeout: float = 600, via_shell: bool = False
-              ) -> tuple[dict | None, float, str]:
-    """Run this file as a child; returns (its JSON result, wall seconds, error text).
-
-    ``via_shell``: start it from a small ``/bin/sh`` that forks it (``"$@"; exit $?``
-    is not exec'd in place), so that its ``ru_maxrss`` starts from the shell's size
-    instead of this process's (Linux keeps the peak RSS across exec, not across fork).
-    """
-    cmd = [sys.executable, str(Path(__file__).resolve()), *args]
-    if via_shell and Path("/bin/sh").exists():
-        cmd = ["/bin/sh", "-c", '"$@"; exit $?', "sh", *cmd]
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
-    except subprocess.TimeoutExpired:
-        return None, time.perf_counter() - t0, f"timed out after {timeout:.0f} s"
-    wall = time.perf_counter() - t0
-    lines = proc.stdout.strip().splitlines()
-    if proc.returncode != 0 or not lines:
-        tail = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
-        return None, wall, f"exit {proc.returncode}: {tail}"
-    return json.loads(lines[-1]), wall, ""
-
-
 def kernel_cache_dir() -> Path | None:
     """The fast backend's on-disk kernel cache (generated sources + Numba's files), if any.
 
@@ -511,8 +493,9 @@ def bench_startup(cfg: Config) -> dict:
             kdir = kernel_cache_dir()
             for model in cfg.startup_models:
                 n_cleared = clear_numba_cache()
-                cold, cold_wall, cold_err = run_child(["--child", "startup", "--model", model])
-                warm, warm_wall, warm_err = run_child(["--child", "startup", "--model", model])
+                child = ["--child", "startup", "--model", model]
+                cold, cold_wall, cold_err = run_child(__file__, child)
+                warm, warm_wall, warm_err = run_child(__file__, child)
                 out[model] = {
                     "cleared": n_cleared, "cold": cold, "cold_wall": cold_wall,
                     "cold_err": cold_err, "warm": warm, "warm_wall": warm_wall,
@@ -542,7 +525,7 @@ def bench_memory(cfg: Config) -> dict:
     runs = [(m, "fast") for m in cfg.models] + [("sphere", "numpy")]
     for model, backend in runs:
         r, wall, err = run_child(
-            ["--child", "memory", "--model", model, "--n", str(n), "--backend", backend],
+            __file__, ["--child", "memory", "--model", model, "--n", str(n), "--backend", backend],
             via_shell=True,
         )
         out[(model, backend)] = (r, err)

@@ -27,7 +27,6 @@ import os
 import resource
 import shlex
 import statistics
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -36,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import loadavg, machine_info, md_table, read_text  # noqa: E402
+from common import loadavg, machine_info, md_table, read_text, run_child  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 METHODS = ("mc", "dc")
@@ -209,29 +208,6 @@ def child_dense(resolution: int) -> dict:
     return rec
 
 
-def run_child(args: list[str], timeout: float) -> tuple[dict | None, float, str]:
-    """Run this file as a child, from a small ``/bin/sh`` (``"$@"; exit $?`` forks it,
-    so its ``ru_maxrss`` starts from the shell's, not this process's: Linux keeps
-    ``ru_maxrss`` across exec). Returns (its JSON record, wall seconds, error text)."""
-    cmd = [sys.executable, str(Path(__file__).resolve()), *args]
-    if Path("/bin/sh").exists():
-        cmd = ["/bin/sh", "-c", '"$@"; exit $?', "sh", *cmd]
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
-    except subprocess.TimeoutExpired:
-        return None, time.perf_counter() - t0, f"timed out after {timeout:.0f} s"
-    wall = time.perf_counter() - t0
-    lines = proc.stdout.strip().splitlines()
-    if proc.returncode != 0 or not lines:
-        tail = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
-        return None, wall, f"exit {proc.returncode}: {tail}"
-    try:
-        return json.loads(lines[-1]), wall, ""
-    except json.JSONDecodeError:
-        return None, wall, f"bad output: {lines[-1][:200]}"
-
-
 def peak_mb(r: dict) -> float:
     """Peak memory of the call: VmHWM after it - VmRSS just before it, in MB."""
     return max(0, r["hwm_after_kib"] - r["rss_before_kib"]) * 1024 / MB
@@ -358,7 +334,7 @@ def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
                     continue
                 args = ["--child", kind, "--resolution", str(n), "--method", method]
                 timeout = 3600.0 if n >= 1024 else 1800.0
-                rec, wall, err = run_child(args, timeout)
+                rec, wall, err = run_child(__file__, args, timeout, via_shell=True)
                 if rec is None:
                     s.errors.append(err)
                     log(f"  {s.label:20s} run {i + 1}: ERROR {err}")

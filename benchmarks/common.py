@@ -1,12 +1,15 @@
-"""Helpers shared by the benchmark scripts: machine description, load, Markdown tables."""
+"""Helpers shared by the benchmark scripts: machine description, load, Markdown tables,
+child processes."""
 
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import os
 import platform
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +30,35 @@ def loadavg() -> str:
         return " ".join(f"{v:.2f}" for v in os.getloadavg()) + " (1, 5, 15 min)"
     except OSError:
         return "unknown"
+
+
+def run_child(script: str | Path, args: list[str], timeout: float = 600,
+              via_shell: bool = False) -> tuple[dict | None, float, str]:
+    """Run a benchmark ``script`` as a child process whose last stdout line is JSON.
+
+    Returns ``(that JSON record or None, wall seconds, error text)``.
+
+    ``via_shell``: start it from a small ``/bin/sh`` that forks it (``"$@"; exit $?`` is
+    not exec'd in place), so that its ``ru_maxrss`` starts from the shell's size instead
+    of this process's (Linux keeps the peak RSS across exec, not across fork).
+    """
+    cmd = [sys.executable, str(Path(script).resolve()), *args]
+    if via_shell and Path("/bin/sh").exists():
+        cmd = ["/bin/sh", "-c", '"$@"; exit $?', "sh", *cmd]
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
+    except subprocess.TimeoutExpired:
+        return None, time.perf_counter() - t0, f"timed out after {timeout:.0f} s"
+    wall = time.perf_counter() - t0
+    lines = proc.stdout.strip().splitlines()
+    if proc.returncode != 0 or not lines:
+        tail = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
+        return None, wall, f"exit {proc.returncode}: {tail}"
+    try:
+        return json.loads(lines[-1]), wall, ""
+    except json.JSONDecodeError:
+        return None, wall, f"bad output: {lines[-1][:200]}"
 
 
 def md_table(head: list[str], rows: list[list[str]]) -> str:

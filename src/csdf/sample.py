@@ -39,15 +39,9 @@ _MIN_NORMAL_COS = 0.99      # the gradient at a point vs. just off it: agreement
 # ---------------------------------------------------------------------- helpers
 def _program(shape: Any, what: str):
     """``(Program, Shape or None)`` of a 3D shape or program."""
-    from .compiler.program import Program
-    from .shapes.base import Shape
+    from .compiler.program import as_program
 
-    if isinstance(shape, Program):
-        prog, shp = shape, None
-    elif isinstance(shape, Shape):
-        prog, shp = shape.compile(), shape
-    else:
-        raise CsdfError(f"{what} expects a Shape or Program, got {type(shape).__name__}")
+    prog, shp = as_program(shape, what)
     if prog.dim != 3:
         raise CsdfError(f"{what} needs a 3D shape; extrude or revolve a 2D shape first")
     return prog, shp

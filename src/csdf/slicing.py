@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .compiler.program import as_program
 from .errors import CsdfError
 
 __all__ = ["slice", "save_slice", "slice_values", "AXES", "ZERO_CONTOUR_GID",
@@ -39,15 +40,6 @@ MAX_SLICE_RESOLUTION = 4096
 _NAMES = "xyz"
 
 
-def _program(shape: Any):
-    from .compiler.program import Program
-    from .shapes.base import Shape
-
-    if isinstance(shape, Program):
-        return shape, None
-    if isinstance(shape, Shape):
-        return shape.compile(), shape
-    raise CsdfError(f"slice expects a Shape or Program, got {type(shape).__name__}")
 
 
 def _default_extent(prog, shp, axis: str, params: dict) -> tuple[tuple[float, float], ...]:
@@ -123,7 +115,7 @@ def slice_values(
             not 2 <= resolution <= MAX_SLICE_RESOLUTION:
         raise CsdfError(f"resolution must be an integer in [2, {MAX_SLICE_RESOLUTION}], "
                         f"got {resolution!r}")
-    prog, shp = _program(shape)
+    prog, shp = as_program(shape, "slice")
     pv = dict(params or {})
     prog.param_values(pv)
     ext = _check_extent(_default_extent(prog, shp, axis, pv) if extent is None else extent)

@@ -43,7 +43,7 @@ import re
 
 import numpy as np
 
-from ..compiler.program import Program
+from ..compiler.program import Program, as_program
 from ..errors import CsdfError
 from ..ops import OPS_BY_CODE
 
@@ -173,15 +173,7 @@ def uniform_name(param_name: str, index: int) -> str:
 
 def _program(shape_or_program) -> Program:
     """The program of a Shape (compiled, cached) or the Program itself."""
-    if isinstance(shape_or_program, Program):
-        return shape_or_program
-    from ..shapes import Shape
-
-    if isinstance(shape_or_program, Shape):
-        return shape_or_program.compile()
-    raise CsdfError(
-        f"expected a csdf.Shape or csdf.Program, got {type(shape_or_program).__name__}"
-    )
+    return as_program(shape_or_program, "GLSL export")[0]
 
 
 def _check_name(name: str) -> None:

@@ -17,9 +17,25 @@ from ..errors import CsdfError, ParamError
 from ..expr import Param
 from ..ops import CATEGORIES, OPS_BY_CODE
 
-__all__ = ["Program", "Call"]
+__all__ = ["Program", "Call", "as_program"]
 
 INSTR_REF = 0x80000000
+
+
+def as_program(shape, what: str):
+    """``(Program, Shape or None)`` for a :class:`csdf.Shape` (compiled; cached on the
+    shape) or a :class:`Program` (returned as is, with no shape).
+
+    Raises:
+        CsdfError: anything else, as ``"{what} expects a Shape or Program, got T"``.
+    """
+    from ..shapes.base import Shape
+
+    if isinstance(shape, Program):
+        return shape, None
+    if isinstance(shape, Shape):
+        return shape.compile(), shape
+    raise CsdfError(f"{what} expects a Shape or Program, got {type(shape).__name__}")
 
 
 @dataclass(frozen=True)

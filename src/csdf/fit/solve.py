@@ -206,16 +206,10 @@ def _resolve_backend(backend: str, prog, n: int) -> str:
 def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
             f_scale=None, backend="auto") -> Problem:
     """Validate the inputs of :func:`fit` and build the starting state."""
-    from ..compiler.program import Program
-    from ..shapes.base import Shape
+    from ..compiler.program import as_program
 
-    if isinstance(shape, Shape):
-        prog = shape.compile()
-        bounds = shape.bounds
-    elif isinstance(shape, Program):
-        prog, bounds = shape, None
-    else:
-        raise CsdfError(f"fit expects a Shape or Program, got {type(shape).__name__}")
+    prog, shp = as_program(shape, "fit")
+    bounds = None if shp is None else shp.bounds
     if prog.dim != 3:
         raise CsdfError("fit needs a 3D shape")
     P = _as_points(points)

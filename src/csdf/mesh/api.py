@@ -19,16 +19,14 @@ MAX_VOXELS = 4096**3
 
 
 def _program(shape):
-    from ..compiler.program import Program
-    from ..shapes.base import Shape
+    """``(Program, Shape or None)``; a 2D Shape is refused (a 2D Program, an infinite
+    prism, can still be meshed inside given bounds)."""
+    from ..compiler.program import as_program
 
-    if isinstance(shape, Program):
-        return shape, None
-    if isinstance(shape, Shape):
-        if shape.dim != 3:
-            raise CsdfError("mesh needs a 3D shape; extrude or revolve a 2D shape first")
-        return shape.compile(), shape
-    raise CsdfError(f"mesh expects a Shape or Program, got {type(shape).__name__}")
+    prog, shp = as_program(shape, "mesh")
+    if shp is not None and shp.dim != 3:
+        raise CsdfError("mesh needs a 3D shape; extrude or revolve a 2D shape first")
+    return prog, shp
 
 
 def auto_bounds(prog, params: dict | None = None, extent: float = 1e4, rel: float = 1 / 128):

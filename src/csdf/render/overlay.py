@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compiler.program import as_program
 from ..errors import CsdfError
 from .image import auto_camera, render
 from .trace import Field
@@ -50,7 +51,7 @@ def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
     t = np.asarray(result.translation, dtype=np.float64)
     q = (pts - t) @ R / s  # object frame: q = R^T (p - t) / s
     params = dict(result.params)
-    prog = shape.compile() if hasattr(shape, "compile") else shape
+    prog, _ = as_program(shape, "fit_overlay")
     # frame the model and the points (their 1-99 % box: a few outliers far away must not
     # shrink the view to nothing)
     box = Field(prog, params, "numpy", None).bounds

@@ -81,16 +81,14 @@ PAD_REL = 1e-3
 
 
 def _program(shape):
-    from ..compiler.program import Program
-    from ..shapes.base import Shape
+    """``(Program, Shape or None)``; a 2D Shape is refused (a 2D Program renders as an
+    infinite prism inside given bounds)."""
+    from ..compiler.program import as_program
 
-    if isinstance(shape, Program):
-        return shape, None
-    if isinstance(shape, Shape):
-        if shape.dim != 3:
-            raise CsdfError("rendering needs a 3D shape; extrude or revolve a 2D shape first")
-        return shape.compile(), shape
-    raise CsdfError(f"expected a csdf Shape or Program, got {type(shape).__name__}")
+    prog, shp = as_program(shape, "rendering")
+    if shp is not None and shp.dim != 3:
+        raise CsdfError("rendering needs a 3D shape; extrude or revolve a 2D shape first")
+    return prog, shp
 
 
 def _shape_bounds_valid(shape, prog, params: dict) -> bool:

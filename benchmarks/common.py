@@ -158,12 +158,14 @@ def thread_scaling(seconds: float = 0.5) -> dict[str, str]:
     latency_job(10)
 
     def calibrate(run) -> int:
+        """Repetitions for one job to take about ``seconds``."""
         n = 1
         while True:
             t0 = time.perf_counter()
             run(0, n)
-            if time.perf_counter() - t0 > seconds / 4:
-                return max(1, int(n * seconds / 4 / (time.perf_counter() - t0) * 4))
+            dt = time.perf_counter() - t0
+            if dt > seconds / 4:
+                return max(1, int(n * seconds / dt))
             n *= 4
 
     jobs = {

@@ -6,7 +6,7 @@ Run from the repository root::
     .venv/bin/python benchmarks/bench_mesh.py            # full run: 256, 512 (+ 1024 for csdf)
     .venv/bin/python benchmarks/bench_mesh.py --quick --output /tmp/mesh_quick.md   # 128, 256
 
-Every timed call runs in its own fresh subprocess (this file with ``--child csdf|dense``,
+Every timed call runs in its own fresh subprocess (this file with ``--child csdf|dense|plain``,
 started from a small ``/bin/sh``), so each run's peak memory is its own: the child warms
 up (meshes once at resolution 32, which loads or compiles the Numba kernels), resets its
 peak-RSS counter, times one call and reports its wall time, peak memory (VmHWM after the
@@ -46,6 +46,9 @@ TARGET_SPEEDUP = 10.0  # dense+MC time / csdf time at 512^3
 TARGET_MEMORY = 0.1  # csdf peak memory / dense+MC peak memory at 512^3
 TARGET_SCALING = 4.5  # time(2N) / time(N), csdf, 256 -> 512 and 512 -> 1024
 
+BASELINES = ("dense", "plain")
+LABELS = {"dense": "dense + skimage MC", "plain": "plain dense + skimage MC"}
+
 SHAPE_DESC = ("`(sphere(1.0) & box(1.5)) - c - c.orient('x') - c.orient('y')`, "
               "c = cylinder(0.5, 3.0)")
 MB = 1e6  # memory is reported in MB = 10^6 bytes
@@ -58,20 +61,26 @@ cProfile and per-kernel thread CPU time), not part of the timed runs above:
   holds surface (the pruning is already tight), so csdf scans 14.9 M voxels and evaluates
   21.3 M samples (9^3 per brick), against 138.2 M voxels and 139.0 M samples for the dense
   baseline: 9.2x fewer voxels and 6.5x fewer samples.
-* **Time** (~0.55 s): the compiled marching-cubes kernel ~0.26 s (0.17 s of CPU, ~11 ns
-  per scanned voxel, the rest first writes to the 89 MB face array), sample evaluation
-  ~0.15 s, the root search ~0.12 s (3.5 M evaluations: the linear guess, then secant /
-  Illinois steps until |f| <= 1e-6 voxel; scikit-image only interpolates linearly), the
-  octree ~0.03 s. Per voxel the kernel costs about what scikit-image's marching cubes
-  costs (~12.5 ns per voxel here), so the speedup is bounded by the work ratios above
-  (6.5x to 9x) before the root search: ~5x measured. 10x would need several times fewer
-  voxels scanned per surface voxel than 8^3 bricks give (about 12 % of the scanned voxels are
-  active), or more free cores than this shared 2-core machine has.
-* **Memory.** The target cannot be met as defined while the peak includes the returned
-  mesh: `trimesh.Trimesh` stores float64 vertices and int64 faces (24 bytes per vertex and
-  per face), 134 MB at 512^3 = 0.174x the dense peak on its own. Everything else csdf
-  holds at its peak (edge hash map, one chunk of samples and edges) is the *working*
-  column: 29 MB = 0.038x.
+* **Time** (~0.22 s first call; measured with per-stage timers and the main thread's
+  waits): the stages overlap. One thread runs the compiled marching-cubes kernel, the
+  only stage that must go in chunk order (~0.15 s: ~0.13 s of compute, the rest first
+  writes to the 89 MB face array), and waits ~0.015 s in all for samples; one worker
+  thread evaluates the chunks' samples ahead of it (21 M samples, ~0.12 s) and searches
+  the roots of the chunks behind it (~0.05 s: the linear guess, then secant / Illinois
+  steps until |f| <= 1e-6 voxel; scikit-image only interpolates linearly). Before the
+  stream the octree takes ~0.025 s. The kernel skips a brick's empty voxel columns with
+  bit masks of inside samples (one 9-bit mask per sample column), and the edge hash map
+  places a brick's face edges side by side and neighbouring bricks near each other, so
+  its working set moves through the table with the sweep (a scattering hash made 1024^3
+  ~6x slower than 512^3). On this VM the first write to fresh memory costs ~2 us per
+  4 KB page; huge pages make it ~5x cheaper but stalled calls for 0.2-0.6 s when the
+  OS had to compact memory first, so only the hash map asks for them.
+* **Memory.** Against the slab-streamed dense baseline the memory target cannot be met
+  while the peak includes the returned mesh: `trimesh.Trimesh` stores float64 vertices
+  and int64 faces (24 bytes per vertex and per face), 134 MB at 512^3 = 0.174x that
+  baseline's peak on its own. Everything else csdf holds at its peak (edge hash map, a
+  few chunks of samples and edges) is the *working* column: ~34 MB = ~0.04x. Against the
+  plain dense pipeline (one array of all samples) csdf's whole peak is 0.025x.
 * **dc** (extra rows) streams over the same bricks (`extract_dc`): a compiled kernel
   records the active voxels and their edges' vertices, the QEF of each voxel is solved
   in compiled code (3x3 symmetric Jacobi eigensolver, the same pseudo-inverse rule as the
@@ -104,13 +113,18 @@ def dense_grid(bounds, resolution: int) -> tuple[np.ndarray, float, tuple[int, .
     return origin, h, dims
 
 
-def dense_mesh(shape, resolution: int) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+def dense_mesh(shape, resolution: int, plain: bool = False
+               ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """The baseline: evaluate every sample of the grid, then scikit-image marching cubes.
 
     The field is evaluated x-slab by x-slab (``(ny * nz, 3)`` float64 points, one buffer
     reused) with ``prog(points, backend='fast')`` into a float32 ``(nx, ny, nz)`` volume;
     ``skimage.measure.marching_cubes(vol, 0.0, spacing=(h, h, h))`` then meshes it and the
     vertices are moved to model coordinates. Returns ``(verts, faces, seconds by stage)``.
+
+    ``plain``: the textbook way instead: every sample's coordinates in one ``(M, 3)``
+    float64 array (``np.meshgrid``), one ``prog(points, backend='fast')`` call, the float64
+    values reshaped into the volume.
     """
     from skimage.measure import marching_cubes
 
@@ -118,13 +132,18 @@ def dense_mesh(shape, resolution: int) -> tuple[np.ndarray, np.ndarray, dict[str
     prog = shape.compile()  # cached on the shape (compiled during the warm-up)
     origin, h, dims = dense_grid(shape.bounds, resolution)
     nx, ny, nz = (d + 1 for d in dims)
-    vol = np.empty((nx, ny, nz), dtype=np.float32)
-    pts = np.empty((ny * nz, 3), dtype=np.float64)
-    pts[:, 1] = np.repeat(origin[1] + h * np.arange(ny), nz)
-    pts[:, 2] = np.tile(origin[2] + h * np.arange(nz), ny)
-    for i in range(nx):
-        pts[:, 0] = origin[0] + h * i
-        vol[i] = prog(pts, backend="fast").reshape(ny, nz)
+    if plain:
+        axes = [origin[d] + h * np.arange(n) for d, n in enumerate((nx, ny, nz))]
+        pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        vol = prog(pts, backend="fast").reshape(nx, ny, nz)
+    else:
+        vol = np.empty((nx, ny, nz), dtype=np.float32)
+        pts = np.empty((ny * nz, 3), dtype=np.float64)
+        pts[:, 1] = np.repeat(origin[1] + h * np.arange(ny), nz)
+        pts[:, 2] = np.tile(origin[2] + h * np.arange(nz), ny)
+        for i in range(nx):
+            pts[:, 0] = origin[0] + h * i
+            vol[i] = prog(pts, backend="fast").reshape(ny, nz)
     del pts
     t1 = time.perf_counter()
     verts, faces, _normals, _values = marching_cubes(vol, 0.0, spacing=(h, h, h))
@@ -190,15 +209,15 @@ def child_csdf(resolution: int, method: str) -> dict:
     return rec
 
 
-def child_dense(resolution: int) -> dict:
+def child_dense(resolution: int, plain: bool = False) -> dict:
     """Fresh process: warm up, then time one dense evaluation + marching cubes."""
     import trimesh
 
     shape = build_shape()
     t0 = time.perf_counter()
-    dense_mesh(shape, WARMUP_RESOLUTION)
+    dense_mesh(shape, WARMUP_RESOLUTION, plain)
     warmup = time.perf_counter() - t0
-    (verts, faces, stages), rec = _measure(lambda: dense_mesh(shape, resolution))
+    (verts, faces, stages), rec = _measure(lambda: dense_mesh(shape, resolution, plain))
     _, h, dims = dense_grid(shape.bounds, resolution)
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     rec.update(
@@ -257,6 +276,7 @@ class Config:
     resolutions: list[int]  # compared with the dense baseline
     scaling_resolution: int | None  # csdf only (1024), or None
     dense_at_scaling: bool  # --with-dense-1024
+    plain: bool  # also the plain dense baseline (not --no-plain)
     methods: list[str]
     runs_small: int  # runs at resolutions <= 256
     runs_large: int  # runs at resolutions > 256
@@ -275,7 +295,7 @@ class Config:
 
 @dataclass
 class Series:
-    """The runs of one (kind, method, resolution): kind 'csdf' or 'dense'."""
+    """The runs of one (kind, method, resolution): kind 'csdf', 'dense' or 'plain'."""
 
     kind: str
     method: str
@@ -286,7 +306,7 @@ class Series:
 
     @property
     def label(self) -> str:
-        return f"csdf {self.method}" if self.kind == "csdf" else "dense + skimage MC"
+        return f"csdf {self.method}" if self.kind == "csdf" else LABELS[self.kind]
 
     def med(self, fn) -> float | None:
         vals = [fn(r) for r in self.records]
@@ -315,6 +335,8 @@ def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
         kinds = [("csdf", m) for m in cfg.methods]
         if n in cfg.resolutions or (n == cfg.scaling_resolution and cfg.dense_at_scaling):
             kinds.append(("dense", "mc"))
+        if n in cfg.resolutions and cfg.plain:
+            kinds.append(("plain", "mc"))
         runs = cfg.runs(n)
         log(f"\n== resolution {n} ({runs} run{'s' if runs > 1 else ''} each, fresh "
             "subprocesses) ==")
@@ -342,7 +364,7 @@ def run_series(cfg: Config) -> dict[tuple[str, str, int], Series]:
                 rec["process_wall"] = wall
                 s.records.append(rec)
                 extra = (f"eval {fmt_s(rec['eval_seconds'])} + MC {fmt_s(rec['mc_seconds'])}"
-                         if kind == "dense" else f"mesher {fmt_s(rec['mesher_seconds'])}")
+                         if kind != "csdf" else f"mesher {fmt_s(rec['mesher_seconds'])}")
                 log(f"  {s.label:20s} run {i + 1}: {fmt_s(rec['seconds']):>9s} ({extra}), "
                     f"peak {fmt_mb(peak_mb(rec))}, {rec['faces']:,} faces, watertight "
                     f"{rec['watertight']}, load {rec['load1']:.2f}")
@@ -391,7 +413,9 @@ def main(argv: list[str] | None = None) -> int:
                    f"{MEMORY_GUARD * 100:.0f}%% of MemAvailable")  # %% for argparse
     p.add_argument("--output", type=Path, default=HERE / "MESH_RESULTS.md",
                    help="Markdown results file (default benchmarks/MESH_RESULTS.md)")
-    p.add_argument("--child", choices=("csdf", "dense"), help=argparse.SUPPRESS)
+    p.add_argument("--no-plain", action="store_true",
+                   help="skip the second baseline (all samples in one array)")
+    p.add_argument("--child", choices=("csdf", "dense", "plain"), help=argparse.SUPPRESS)
     p.add_argument("--resolution", type=int, default=WARMUP_RESOLUTION, help=argparse.SUPPRESS)
     p.add_argument("--method", choices=METHODS, default="mc", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
@@ -399,8 +423,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.child == "csdf":
         print(json.dumps(child_csdf(a.resolution, a.method)))
         return 0
-    if a.child == "dense":
-        print(json.dumps(child_dense(a.resolution)))
+    if a.child in ("dense", "plain"):
+        print(json.dumps(child_dense(a.resolution, a.child == "plain")))
         return 0
 
     runs_small = a.runs_small if a.runs_small is not None else (1 if a.quick else 3)
@@ -418,6 +442,7 @@ def main(argv: list[str] | None = None) -> int:
         resolutions=[128, 256] if a.quick else [256, 512],
         scaling_resolution=None if a.quick else 1024,
         dense_at_scaling=a.with_dense_1024,
+        plain=not a.no_plain,
         methods=list(dict.fromkeys(a.methods)),
         runs_small=runs_small,
         runs_large=a.runs_large,
@@ -473,7 +498,11 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
         f"`skimage.measure.marching_cubes(vol, 0.0, spacing=(h, h, h))` (single-threaded) "
         f"and a shift of the vertices to model coordinates. *eval* and *MC* are the two "
         f"parts of its time.\n"
-        f"* Each run is a **fresh subprocess** (`bench_mesh.py --child csdf|dense`, started "
+        f"* **plain dense + skimage MC** (second baseline, the textbook pipeline): the same "
+        f"grid, but every sample's coordinates in one (M, 3) float64 array (`np.meshgrid`), "
+        f"one `prog(points, backend='fast')` call, and its float64 values as the volume; "
+        f"then the same marching cubes.\n"
+        f"* Each run is a **fresh subprocess** (`bench_mesh.py --child csdf|dense|plain`, started "
         f"from a small `/bin/sh`): it builds the shape, **warms up** with the same pipeline "
         f"at resolution {WARMUP_RESOLUTION} (loads / JIT-compiles the Numba kernels, imports "
         f"scikit-image), runs `gc.collect()`, resets its peak RSS (`/proc/self/clear_refs` "
@@ -500,7 +529,7 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
             continue
         peaks = [peak_mb(r) for r in s.records]
         parts = (f"eval {fmt_s(s.med(lambda r: r['eval_seconds']))} + MC "
-                 f"{fmt_s(s.med(lambda r: r['mc_seconds']))}" if kind == "dense"
+                 f"{fmt_s(s.med(lambda r: r['mc_seconds']))}" if kind != "csdf"
                  else f"mesher {fmt_s(s.med(lambda r: r['mesher_seconds']))}")
         wt = {r["watertight"] for r in s.records}
         notes = []
@@ -521,33 +550,38 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
 
     # csdf vs dense
     L.append("## csdf vs dense + marching cubes\n")
-    L.append("Speedup = dense time / csdf time; memory ratio = csdf peak / dense peak "
-             "(medians).\n")
+    L.append("Speedup = baseline time / csdf time; memory ratio = csdf peak / baseline "
+             "peak (medians).\n")
     rows = []
-    compare: dict[tuple[str, int], tuple[float | None, float | None]] = {}
-    for n in cfg.csdf_resolutions:
-        d = series.get(("dense", "mc", n))
-        if d is None:
-            continue
-        for m in cfg.methods:
-            c = series.get(("csdf", m, n))
-            if c is None:
+    compare: dict[tuple[str, str, int], tuple[float | None, float | None]] = {}
+    for base in BASELINES:
+        for n in cfg.csdf_resolutions:
+            d = series.get((base, "mc", n))
+            if d is None:
                 continue
-            sp = d.time / c.time if c.time and d.time else None
-            mr = c.peak / d.peak if c.peak is not None and d.peak else None
-            compare[(m, n)] = (sp, mr)
-            work = c.peak - c.output if c.peak is not None and c.output is not None else None
-            rows.append([str(n), f"csdf {m}", fmt_s(c.time), fmt_s(d.time), fmt_x(sp, 2),
-                         fmt_mb(c.peak), fmt_mb(d.peak), fmt_x(mr, 3), fmt_mb(c.output),
-                         fmt_x(c.output / d.peak if c.output and d.peak else None, 3),
-                         fmt_mb(work), fmt_x(work / d.peak if work and d.peak else None, 3)])
+            for m in cfg.methods:
+                c = series.get(("csdf", m, n))
+                if c is None:
+                    continue
+                sp = d.time / c.time if c.time and d.time else None
+                mr = c.peak / d.peak if c.peak is not None and d.peak else None
+                compare[(base, m, n)] = (sp, mr)
+                work = (c.peak - c.output if c.peak is not None and c.output is not None
+                        else None)
+                rows.append([str(n), f"csdf {m}", LABELS[base], fmt_s(c.time),
+                             fmt_s(d.time), fmt_x(sp, 2), fmt_mb(c.peak), fmt_mb(d.peak),
+                             fmt_x(mr, 3), fmt_mb(c.output),
+                             fmt_x(c.output / d.peak if c.output and d.peak else None, 3),
+                             fmt_mb(work),
+                             fmt_x(work / d.peak if work and d.peak else None, 3)])
     L.append("*output*: the returned mesh alone (trimesh keeps float64 vertices and int64 "
              "faces: 24 bytes per vertex and per face), part of csdf's peak; *working*: "
              "csdf peak - output, everything else the call held at its peak. Both are "
-             "shown as a share of the dense peak.\n")
-    L.append(md_table(["N", "csdf", "csdf time", "dense+MC time", "speedup", "csdf peak",
-                       "dense+MC peak", "memory ratio", "output", "output / dense peak",
-                       "working", "working / dense peak"], rows) + "\n")
+             "shown as a share of the baseline's peak.\n")
+    L.append(md_table(["N", "csdf", "baseline", "csdf time", "baseline time", "speedup",
+                       "csdf peak", "baseline peak", "memory ratio", "output",
+                       "output / baseline peak", "working", "working / baseline peak"],
+                      rows) + "\n")
 
     # scaling
     L.append("## Scaling\n")
@@ -556,7 +590,7 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
     rows = []
     scaling: dict[tuple[str, int], float | None] = {}
     res = cfg.csdf_resolutions
-    pipelines = [("csdf", m) for m in cfg.methods] + [("dense", "mc")]
+    pipelines = [("csdf", m) for m in cfg.methods] + [(b, "mc") for b in BASELINES]
     for kind, m in pipelines:
         cells = []
         for n in res:
@@ -568,7 +602,9 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
             if kind == "csdf":
                 scaling[(m, n2)] = ratio
             cells.append(fmt_x(ratio, 2))
-        rows.append([f"csdf {m}" if kind == "csdf" else "dense + skimage MC", *cells])
+        if kind != "csdf" and not any(series.get((kind, m, n)) for n in res):
+            continue
+        rows.append([f"csdf {m}" if kind == "csdf" else LABELS[kind], *cells])
     head = ["pipeline", *(f"time {n}" for n in res),
             *(f"{n2}/{n1}" for n1, n2 in zip(res, res[1:]))]
     L.append(md_table(head, rows) + "\n")
@@ -583,22 +619,26 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
     rows = []
     for m in [primary, *(x for x in cfg.methods if x != primary)]:
         tag = "" if m == primary else " (extra)"
-        sp, mr = compare.get((m, big), (None, None))
-        c, d = series.get(("csdf", m, big)), series.get(("dense", "mc", big))
-        detail = (f"{sp:.2f}x ({fmt_s(d.time)} / {fmt_s(c.time)})"
-                  if sp is not None and c and d else "not measured")
-        rows.append([f"{big}^3, {m}{tag}: csdf >= {TARGET_SPEEDUP:g}x faster than dense+MC",
-                     detail, status(None if sp is None else sp >= TARGET_SPEEDUP)])
-        detail = (f"{mr:.3f} ({fmt_mb(c.peak)} / {fmt_mb(d.peak)})"
-                  if mr is not None and c and d else "not measured")
-        rows.append([f"{big}^3, {m}{tag}: csdf peak memory <= {TARGET_MEMORY:g} x dense+MC",
-                     detail, status(None if mr is None else mr <= TARGET_MEMORY)])
-        if c and d and c.output and d.peak and c.peak is not None:
-            rows.append([f"({big}^3, {m}{tag}: the output mesh alone vs dense+MC peak; "
-                         "working memory vs dense+MC peak)",
-                         f"{c.output / d.peak:.3f} ({fmt_mb(c.output)}); "
-                         f"{(c.peak - c.output) / d.peak:.3f} ({fmt_mb(c.peak - c.output)})",
-                         "info"])
+        for base in BASELINES:
+            c, d = series.get(("csdf", m, big)), series.get((base, "mc", big))
+            if d is None or not d.records:
+                continue
+            sp, mr = compare.get((base, m, big), (None, None))
+            vs = "dense+MC" if base == "dense" else "plain dense+MC"
+            detail = (f"{sp:.2f}x ({fmt_s(d.time)} / {fmt_s(c.time)})"
+                      if sp is not None and c else "not measured")
+            rows.append([f"{big}^3, {m}{tag}: csdf >= {TARGET_SPEEDUP:g}x faster than {vs}",
+                         detail, status(None if sp is None else sp >= TARGET_SPEEDUP)])
+            detail = (f"{mr:.3f} ({fmt_mb(c.peak)} / {fmt_mb(d.peak)})"
+                      if mr is not None and c else "not measured")
+            rows.append([f"{big}^3, {m}{tag}: csdf peak memory <= {TARGET_MEMORY:g} x {vs}",
+                         detail, status(None if mr is None else mr <= TARGET_MEMORY)])
+            if c and c.output and d.peak and c.peak is not None:
+                rows.append([f"({big}^3, {m}{tag}: the output mesh alone vs {vs} peak; "
+                             f"working memory vs {vs} peak)",
+                             f"{c.output / d.peak:.3f} ({fmt_mb(c.output)}); "
+                             f"{(c.peak - c.output) / d.peak:.3f} "
+                             f"({fmt_mb(c.peak - c.output)})", "info"])
         for n1, n2 in zip(res, res[1:]):
             ratio = scaling.get((m, n2))
             rows.append([f"{m}{tag}: time({n2}) / time({n1}) <= {TARGET_SCALING:g}",
@@ -620,7 +660,7 @@ def report(cfg: Config, info: dict, series: dict, elapsed: float) -> str:
     rows = []
     for (kind, _method, n), s in series.items():
         for i, r in enumerate(s.records):
-            parts = (f"{r['eval_seconds']:.3f} + {r['mc_seconds']:.3f}" if kind == "dense"
+            parts = (f"{r['eval_seconds']:.3f} + {r['mc_seconds']:.3f}" if kind != "csdf"
                      else f"{r['mesher_seconds']:.3f}")
             rows.append([str(n), s.label, str(i + 1), f"{r['seconds']:.3f}", parts,
                          f"{peak_mb(r):,.0f}", f"{maxrss_mb(r):,.0f}",

@@ -158,3 +158,79 @@ def test_large_mesh_on_mapped_memory_is_watertight():
         root = root.base
     assert isinstance(root, memoryview)  # np.frombuffer over an mmap, not a copy
     assert m.is_watertight and m.euler_number == 0
+
+
+@pytest.mark.parametrize("method", ["mc", "dc"])
+def test_pipelined_stream_gives_the_sequential_mesh(method):
+    """With a single-threaded evaluator the stages overlap on worker threads (value and
+    edge buffers recycled between chunks); the mesh must be the same, bit for bit."""
+    from csdf.backends import fast
+    from csdf.mesh.stream import extract_dc
+
+    shape = _csg()
+    grid, values, gradients, intervals = _setup(shape, 36)
+    prog = shape.compile()
+    serial = fast.serial_values(prog, prog.param_values({}))
+    for chunk in (1, 3000, 1 << 18):  # one brick per chunk, a few, one chunk
+        if method == "mc":
+            a = extract_mc(grid, values, intervals, chunk_samples=chunk)
+            b = extract_mc(grid, values, intervals, chunk_samples=chunk, serial=serial)
+        else:
+            a = extract_dc(grid, values, gradients, intervals, chunk_samples=chunk)
+            b = extract_dc(grid, values, gradients, intervals, chunk_samples=chunk,
+                           serial=serial)
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_serial_values_match_the_fast_backend():
+    from csdf.backends import fast
+
+    prog = _csg().compile()
+    pts = np.random.default_rng(1).uniform(-1, 1, (5000, 3))
+    f = fast.serial_values(prog, prog.param_values({}))
+    np.testing.assert_array_equal(f(pts), prog(pts, backend="fast"))
+    out = np.full(6000, 7.0)
+    r = f(pts, out=out)
+    assert r.base is out and np.array_equal(out[:5000], r) and out[5000] == 7.0
+    sph = csdf.sphere(csdf.param("r", 1.0)).compile()
+    g = fast.serial_values(sph, sph.param_values({"r": float("nan")}))
+    assert np.isnan(g(pts)).all()  # NaN parameter in, NaN out, as the backend
+
+
+def test_column_masks_give_every_voxel_case():
+    """The bit-parallel case computation against the corner-by-corner definition."""
+    rng = np.random.default_rng(3)
+    B = 8
+    vals = rng.normal(size=(2, B + 1, B + 1, B + 1))
+    vals[1] = np.abs(vals[1])  # a brick all outside ...
+    vals[1, 3:6, 2:7, 4:8] *= -1  # ... but for a block inside
+    masks = np.empty((B + 1, B + 1), dtype=np.int64)
+    for b in range(2):
+        K.neg_columns(vals, b, masks)
+        for x in range(B):
+            for y in range(B):
+                m = (masks[x, y], masks[x + 1, y], masks[x, y + 1], masks[x + 1, y + 1])
+                crossed = K.column_crossed(*m, B)
+                for z in range(B):
+                    case = sum(1 << c for c in range(8)
+                               if vals[b, x + (c & 1), y + (c >> 1 & 1), z + (c >> 2 & 1)] < 0)
+                    assert bool(crossed >> z & 1) == (case not in (0, 255))
+                    if case not in (0, 255):
+                        assert K.voxel_case(*m, z) == case
+                if crossed:
+                    assert K.lowest_bit(crossed) == min(
+                        z for z in range(B) if crossed >> z & 1)
+
+
+def test_face_index_numbers_a_bricks_face_edges_compactly():
+    B = 8
+    seen = set()
+    for a in range(3):
+        for r in np.ndindex(B, B, B):
+            others = [r[d] for d in range(3) if d != a]
+            if 0 not in others:
+                continue  # not on a lower face
+            seen.add(K.face_index(*r, a, B))
+    assert seen == set(range(3 * B * (2 * B - 1)))
+    assert 3 * B * (2 * B - 1) <= 1 << K._LOCAL_BITS

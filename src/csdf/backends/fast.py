@@ -19,6 +19,7 @@ import os
 import sys
 import tempfile
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,7 @@ import numpy as np
 from .codegen import BLOCK, generate, structure_key
 from .lowering import lowered, numba_available, run_parallel
 
-__all__ = ["evaluate", "available", "is_ready", "cache_dir", "kernel_mode"]
+__all__ = ["evaluate", "serial_values", "available", "is_ready", "cache_dir", "kernel_mode"]
 
 _MEM: dict[str, object] = {}
 _LOCK = threading.Lock()
@@ -103,13 +104,11 @@ def _kernel(low, kmode: str):
 _EXTRA = np.array([0.0, 1.0, 2.0, 0.5, np.nan])
 
 
-def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
-    """Same contract as :func:`csdf.backends.numpy_backend.evaluate`."""
+def _prepare(prog, pvals: np.ndarray, mode: str, dtype):
+    """``(kernel, u, du, spatial, wrt)`` for one program, parameter values and mode."""
     low = lowered(prog)
     kmode = kernel_mode(mode)
     kernel = _kernel(low, kmode)
-    dtype = pts.dtype
-    n = pts.shape[0]
     P = len(prog.params)
     spatial = kmode != "value"
     wrt = kmode == "all"
@@ -119,9 +118,17 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
         u = np.concatenate([uvals, _EXTRA]).astype(dtype)
         du = (utans[:, off:off + P] if wrt else np.zeros((1, 1))).astype(dtype)
     du = np.ascontiguousarray(du) if du.size else np.zeros((1, 1), dtype)
+    return kernel, u, du, spatial, wrt
+
+
+def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
+    """Same contract as :func:`csdf.backends.numpy_backend.evaluate`."""
+    dtype = pts.dtype
+    n = pts.shape[0]
+    kernel, u, du, spatial, wrt = _prepare(prog, pvals, mode, dtype)
     out = np.empty(n, dtype)
     grad = np.empty((n if spatial else 0, 3), dtype)
-    jac = np.empty((n if wrt else 0, P), dtype)
+    jac = np.empty((n if wrt else 0, len(prog.params)), dtype)
     run_parallel(lambda r: kernel(pts, u, du, out, grad, jac, r[0], r[1]), n, BLOCK)
     res = {"value": out}
     if mode in ("grad", "all"):
@@ -132,3 +139,24 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
         for arr in res.values():
             arr[:] = np.nan
     return res
+
+
+def serial_values(prog, pvals: np.ndarray) -> Callable[..., np.ndarray]:
+    """Field values on the calling thread, bound to parameter values: the returned
+    ``f(pts (M, 3) float64, C-contiguous, out=None) -> (M,) float64`` gives what
+    ``evaluate(prog, pts, pvals, 'value')`` gives, with no per-call preparation and no
+    thread hand-off, written into ``out (>= M,)`` when given. For callers that run many
+    small evaluations on threads of their own (the streaming mesher)."""
+    kernel, u, du, _, _ = _prepare(prog, pvals, "value", np.float64)
+    empty2 = np.empty((0, 3))
+    nan = bool(np.isnan(pvals).any())
+
+    def f(pts: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        out = np.empty(pts.shape[0]) if out is None else out[:pts.shape[0]]
+        if nan:
+            out[:] = np.nan
+        else:
+            kernel(pts, u, du, out, empty2, empty2, 0, pts.shape[0])
+        return out
+
+    return f

@@ -25,12 +25,12 @@ import numpy as np
 from ..ops import OPS_BY_CODE
 from .numpy_backend import uniform_prefix
 
-__all__ = ["Lowered", "lowered", "run_parallel", "N_THREADS", "numba_available"]
+__all__ = ["Lowered", "lowered", "run_parallel", "executor", "N_THREADS", "numba_available"]
 
 N_THREADS = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                 else (os.cpu_count() or 1))
 _MIN_PER_THREAD = 8192
-_pool: ThreadPoolExecutor | None = None
+_pools: dict[tuple[str, int], ThreadPoolExecutor] = {}
 _pool_lock = threading.Lock()
 
 
@@ -43,12 +43,14 @@ def numba_available() -> bool:
     return True
 
 
-def _executor() -> ThreadPoolExecutor:
-    global _pool
+def executor(name: str = "csdf", workers: int = N_THREADS) -> ThreadPoolExecutor:
+    """A process-wide pool of ``workers`` threads named ``name`` (made on first use)."""
     with _pool_lock:
-        if _pool is None:
-            _pool = ThreadPoolExecutor(max_workers=N_THREADS, thread_name_prefix="csdf")
-        return _pool
+        pool = _pools.get((name, workers))
+        if pool is None:
+            pool = _pools[(name, workers)] = ThreadPoolExecutor(
+                max_workers=workers, thread_name_prefix=name)
+        return pool
 
 
 def run_parallel(job, n: int, align: int) -> None:
@@ -62,7 +64,7 @@ def run_parallel(job, n: int, align: int) -> None:
     if len(ranges) == 1:
         job(ranges[0])
     else:
-        list(_executor().map(job, ranges))
+        list(executor().map(job, ranges))
 
 
 class Lowered:

@@ -170,10 +170,12 @@ def mesh(
             from .stream import extract_dc, extract_mc
 
             update = reporter.update if reporter else None
+            serial = fast.serial_values(prog, prog.param_values(pv))
             if method == "mc":
-                verts, faces = extract_mc(grid, values, intervals, update)
+                verts, faces = extract_mc(grid, values, intervals, update, serial=serial)
             else:
-                verts, faces = extract_dc(grid, values, gradients, intervals, update)
+                verts, faces = extract_dc(grid, values, gradients, intervals, update,
+                                          serial=serial)
         else:
             verts, faces = extract(grid, values, gradients, intervals, method,
                                    reporter.update if reporter else None)

@@ -244,9 +244,9 @@ def dc_split(quads, fm, tie):
 
 
 @njit(cache=True, nogil=True)
-def _dc_brick(b, bricks, vals, nbx, nby, edge_origin, edge_axis, comp_table, table, n_used,
+def _dc_brick(b, bricks, vals, nby, nbz, edge_origin, edge_axis, comp_table, table, n_used,
               vert_base, stamp, slot_vid, e_corner, e_axis, e_f0, e_f1, n_new, vox, vcase,
-              n_vox, pairs, n_pairs):
+              n_vox, pairs, n_pairs, masks):
     """The active voxels of brick ``b`` of :func:`dc_chunk` (arrays with room for them).
     Crossed edges get vertex ids exactly as :func:`csdf.mesh.kernels.mc_chunk` gives them
     (per-brick scratch slots, the hash map for edges on brick faces). Returns the new
@@ -254,15 +254,18 @@ def _dc_brick(b, bricks, vals, nbx, nby, edge_origin, edge_axis, comp_table, tab
     n = vals.shape[1]
     B = n - 1
     bx, by, bz = bricks[b, 0], bricks[b, 1], bricks[b, 2]
+    K.neg_columns(vals, b, masks)
     for x in range(B):
         for y in range(B):
-            for z in range(B):
-                case = 0
-                for c in range(8):
-                    if vals[b, x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)] < 0:
-                        case |= 1 << c
-                if case == 0 or case == 255:
-                    continue
+            m0 = masks[x, y]
+            m1 = masks[x + 1, y]
+            m2 = masks[x, y + 1]
+            m3 = masks[x + 1, y + 1]
+            crossed = K.column_crossed(m0, m1, m2, m3, B)
+            while crossed:
+                z = K.lowest_bit(crossed)
+                crossed &= crossed - 1
+                case = K.voxel_case(m0, m1, m2, m3, z)
                 vox[n_vox, 0] = bricks[b, 0] + x
                 vox[n_vox, 1] = bricks[b, 1] + y
                 vox[n_vox, 2] = bricks[b, 2] + z
@@ -290,8 +293,8 @@ def _dc_brick(b, bricks, vals, nbx, nby, edge_origin, edge_axis, comp_table, tab
                             qx, rx = divmod(bx + lx, B)
                             qy, ry = divmod(by + ly, B)
                             qz, rz = divmod(bz + lz, B)
-                            key = ((((qz * nby + qy) * nbx + qx) << K._LOCAL_BITS)
-                                   | (((rx * B + ry) * B + rz) * 3 + a))
+                            key = ((((qx * nby + qy) * nbz + qz) << K._LOCAL_BITS)
+                                   | K.face_index(rx, ry, rz, a, B))
                             hs = K._slot(table, key)
                             if table[hs, 0] == key:
                                 vid = table[hs, 1]
@@ -337,11 +340,12 @@ def dc_chunk(bricks, vals, dims, edge_origin, edge_axis, comp_table, table, n_us
     """
     n = vals.shape[1]
     B = n - 1
-    nbx = dims[0] // B + 2  # bricks per axis, with room for the upper faces
-    nby = dims[1] // B + 2
+    nby = dims[1] // B + 2  # bricks per axis, with room for the upper faces
+    nbz = dims[2] // B + 2
     n_slots = 3 * n * n * n
     stamp = np.full(n_slots, -1, dtype=np.int64)
     slot_vid = np.zeros(n_slots, dtype=np.int32)
+    masks = np.empty((n, n), dtype=np.int64)
     n_new = 0
     for b in range(bricks.shape[0]):
         while 2 * (n_used + n_slots) > table.shape[0]:
@@ -355,9 +359,9 @@ def dc_chunk(bricks, vals, dims, edge_origin, edge_axis, comp_table, table, n_us
             e_f0 = K._grow1(e_f0, n_new + n_slots)
             e_f1 = K._grow1(e_f1, n_new + n_slots)
         n_new, n_used, n_vox, n_pairs = _dc_brick(
-            b, bricks, vals, nbx, nby, edge_origin, edge_axis, comp_table, table, n_used,
+            b, bricks, vals, nby, nbz, edge_origin, edge_axis, comp_table, table, n_used,
             vert_base, stamp, slot_vid, e_corner, e_axis, e_f0, e_f1, n_new, vox, vcase,
-            n_vox, pairs, n_pairs)
+            n_vox, pairs, n_pairs, masks)
     return (table, n_used, e_corner, e_axis, e_f0, e_f1, n_new, vox, vcase, n_vox, pairs,
             n_pairs)
 

@@ -17,7 +17,7 @@ chunk plus the outputs:
   :func:`csdf.mesh.extract._refine_roots`), driven from Python because the field is
   evaluated by the program's own backend.
 
-* :func:`fresh_array`: the big outputs on memory advised to use huge pages.
+* :func:`fresh_array`: the big outputs on memory maps of their own.
 """
 
 from __future__ import annotations
@@ -28,16 +28,22 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "all_points", "brick_points", "close_on_box", "mc_chunk", "new_hash", "root_points",
-    "root_start", "root_update", "clip_to_box", "edge_on_box", "fresh_array",
+    "all_points", "brick_points", "brick_points_into", "close_on_box", "mc_chunk", "new_hash",
+    "root_points", "root_start", "root_update", "clip_to_box", "edge_on_box", "fresh_array",
+    "neg_columns", "column_crossed", "voxel_case", "lowest_bit", "face_index",
 ]
 
 _EMPTY = -1
-# Hash keys of edges: (brick index << _LOCAL_BITS) | local edge index in the brick, the
-# brick being the one that holds the edge's lower end; the hash scatters bricks and
-# keeps a brick's edges side by side (few cache lines and pages per brick)
-_LOCAL_BITS = 12  # room for 3 B^3 local edges: B <= 11
+# Hash keys of edges on brick faces: (brick index << _LOCAL_BITS) | face_index(...), the
+# brick being the one that holds the edge's lower end, numbered x-major like the sweep
+# (bricks sorted by x, y, z). The slot is brick index * _STRIDE + face index, modulo
+# the table: a brick's face edges sit side by side, and the sweep's working set (the
+# brick and its +x, +y, +z neighbours) is three regions that advance through the table
+# in step with it, instead of random lines (measured at 1024^3: a scattering hash made
+# the kernel ~6x slower than at 512^3 for 4x the work, cache and TLB misses)
+_LOCAL_BITS = 12  # room for the face index (3 B (2B - 1) <= 4096: B <= 26)
 _LOCAL_MASK = (1 << _LOCAL_BITS) - 1
+_STRIDE = 361  # >= 3 B (2B - 1) for B = 8; odd, so it does not alias power-of-two grids
 
 
 def new_hash(capacity: int) -> np.ndarray:
@@ -45,29 +51,35 @@ def new_hash(capacity: int) -> np.ndarray:
     (key and value side by side: one cache line per probe); ``H`` is the power of two at
     or above ``capacity``."""
     h = 1 << max(10, int(capacity - 1).bit_length())
-    table = fresh_array((h, 2), np.int64)
+    table = fresh_array((h, 2), np.int64, huge=True)
     table[:, 0] = _EMPTY
     return table
 
 
-def fresh_array(shape: tuple[int, ...], dtype) -> np.ndarray:
-    """``np.empty(shape, dtype)``, but a large array gets its own anonymous memory map
-    advised to use transparent huge pages (``MADV_HUGEPAGE``, where the OS has it).
+def fresh_array(shape: tuple[int, ...], dtype, huge: bool = False) -> np.ndarray:
+    """``np.empty(shape, dtype)``; a large array gets its own private anonymous memory
+    map, advised to use transparent huge pages when ``huge`` (``MADV_HUGEPAGE``, where
+    the OS has it).
 
-    Why: the first write to fresh memory costs a page fault per page; with 2 MB pages
-    instead of 4 KB ones the big outputs (faces, vertices, the edge hash map) fault
-    several times faster (measured ~3x on the benchmark machine). Pages never written
-    cost address space only, so generous capacities are cheap.
+    Why a map of its own: pages never written cost address space only, so generous
+    capacities (the faces, the vertices) are cheap and never copied. Why huge pages only
+    on request: 2 MB pages make the first writes ~5x cheaper and random access (the edge
+    hash map) cheaper still, when the OS has free huge pages; when it has to compact
+    memory first a fault can stall for a long time (measured on the benchmark VM: the
+    512^3 mesh took 0.44-0.61 s with every output on huge pages, 0.25-0.37 s with only
+    the hash map on them, in that state). NumPy itself advises huge pages for every
+    array of 4 MB or more.
     """
     dtype = np.dtype(dtype)
     nbytes = int(np.prod(shape)) * dtype.itemsize
     if nbytes < (4 << 20):
         return np.empty(shape, dtype)
-    buf = mmap.mmap(-1, nbytes)
-    try:
-        buf.madvise(mmap.MADV_HUGEPAGE)
-    except (AttributeError, OSError, ValueError):  # pragma: no cover - platform
-        pass
+    buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    if huge:
+        try:
+            buf.madvise(mmap.MADV_HUGEPAGE)
+        except (AttributeError, OSError, ValueError):  # pragma: no cover - platform
+            pass
     return np.frombuffer(buf, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
 
 
@@ -75,8 +87,7 @@ def fresh_array(shape: tuple[int, ...], dtype) -> np.ndarray:
 def _slot(table: np.ndarray, key: np.int64) -> int:
     """Row of ``key`` in the table, or the empty row where it would go (linear probing)."""
     mask = table.shape[0] - 1
-    x = np.uint64(key >> _LOCAL_BITS) * np.uint64(0x9E3779B97F4A7C15)
-    s = (int(x ^ (x >> np.uint64(31))) + (key & _LOCAL_MASK)) & mask
+    s = ((key >> _LOCAL_BITS) * _STRIDE + (key & _LOCAL_MASK)) & mask
     while table[s, 0] != key and table[s, 0] != _EMPTY:
         s = (s + 1) & mask
     return s
@@ -101,6 +112,15 @@ def brick_points(bricks: np.ndarray, origin: np.ndarray, h: float, B: int) -> np
     ``n = B + 1``, at ``origin + (brick + (i, j, k)) * h``."""
     n = B + 1
     out = np.empty((bricks.shape[0] * n * n * n, 3))
+    brick_points_into(bricks, origin, h, B, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def brick_points_into(bricks: np.ndarray, origin: np.ndarray, h: float, B: int,
+                      out: np.ndarray) -> None:
+    """:func:`brick_points` written into the first rows of ``out``."""
+    n = B + 1
     r = 0
     for b in range(bricks.shape[0]):
         for i in range(n):
@@ -112,7 +132,6 @@ def brick_points(bricks: np.ndarray, origin: np.ndarray, h: float, B: int) -> np
                     out[r, 1] = y
                     out[r, 2] = origin[2] + (bricks[b, 2] + k) * h
                     r += 1
-    return out
 
 
 @njit(cache=True, nogil=True)
@@ -156,27 +175,85 @@ def _grow1(a: np.ndarray, need: int) -> np.ndarray:
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def neg_columns(vals: np.ndarray, b: int, masks: np.ndarray) -> None:
+    """``masks[x, y]``: bit ``z`` set where sample ``(x, y, z)`` of brick ``b`` is inside
+    (``f < 0``); ``vals (C, n, n, n)``, ``masks (n, n)`` int64."""
+    n = vals.shape[1]
+    for x in range(n):
+        for y in range(n):
+            m = 0
+            for z in range(n):
+                if vals[b, x, y, z] < 0:
+                    m |= 1 << z
+            masks[x, y] = m
+
+
+@njit(cache=True, nogil=True, inline="always")
+def column_crossed(m0: int, m1: int, m2: int, m3: int, B: int) -> int:
+    """Bit ``z`` set where voxel ``z`` of a column (corner masks ``m0..m3`` of its four
+    sample columns, :func:`neg_columns`) has corners both inside and outside."""
+    a = m0 & m1 & m2 & m3
+    o = m0 | m1 | m2 | m3
+    return ((o | (o >> 1)) & ~(a & (a >> 1))) & ((1 << B) - 1)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def voxel_case(m0: int, m1: int, m2: int, m3: int, z: int) -> int:
+    """The corner pattern of voxel ``z`` of a column (bit ``c`` = corner ``c`` inside,
+    corner ``c`` at ``(c & 1, c >> 1 & 1, c >> 2 & 1)``)."""
+    return (((m0 >> z) & 1) | (((m1 >> z) & 1) << 1) | (((m2 >> z) & 1) << 2)
+            | (((m3 >> z) & 1) << 3) | (((m0 >> z) & 2) << 3) | (((m1 >> z) & 2) << 4)
+            | (((m2 >> z) & 2) << 5) | (((m3 >> z) & 2) << 6))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def lowest_bit(m: int) -> int:
+    """Index of the lowest set bit of ``m > 0``."""
+    z = 0
+    while not (m >> z) & 1:
+        z += 1
+    return z
+
+
+@njit(cache=True, nogil=True, inline="always")
+def face_index(rx: int, ry: int, rz: int, a: int, B: int) -> int:
+    """Index ``0 .. 3 B (2B - 1) - 1`` of an edge on a brick's lower faces: axis ``a``,
+    lower end at local sample ``r`` (``r[a] < B``, the other two ``< B`` and one of them
+    0). Compact, so a brick's face edges sit side by side in the hash map."""
+    if a == 0:
+        ra, ru, rv = rx, ry, rz
+    elif a == 1:
+        ra, ru, rv = ry, rx, rz
+    else:
+        ra, ru, rv = rz, rx, ry
+    return (a * B + ra) * (2 * B - 1) + (ru if rv == 0 else B - 1 + rv)
+
+
 @njit(cache=True, nogil=True)
-def _mc_brick(b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tri, table,
+def _mc_brick(b, bricks, vals, ny1, nz1, edge_origin, edge_axis, tri_table, n_tri, table,
               n_used, faces, n_faces, vert_base, stamp, slot_vid, e_corner, e_axis,
-              e_f0, e_f1, n_new):
+              e_f0, e_f1, n_new, masks):
     """Marching cubes in brick ``b`` of :func:`mc_chunk` (arrays with room for it; kept
     apart so that no array is reassigned inside its loops). Returns the new
     ``(n_faces, n_new, n_used)``."""
     n = vals.shape[1]
     B = n - 1
-    nbx = (nx1 - 1) // B + 2  # bricks per axis, with room for the upper faces
-    nby = (ny1 - 1) // B + 2
+    nby = (ny1 - 1) // B + 2  # bricks per axis, with room for the upper faces
+    nbz = (nz1 - 1) // B + 2
     bx, by, bz = bricks[b, 0], bricks[b, 1], bricks[b, 2]
+    neg_columns(vals, b, masks)
     for x in range(B):
         for y in range(B):
-            for z in range(B):
-                case = 0
-                for c in range(8):
-                    if vals[b, x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)] < 0:
-                        case |= 1 << c
-                if case == 0 or case == 255:
-                    continue
+            m0 = masks[x, y]
+            m1 = masks[x + 1, y]
+            m2 = masks[x, y + 1]
+            m3 = masks[x + 1, y + 1]
+            crossed = column_crossed(m0, m1, m2, m3, B)
+            while crossed:
+                z = lowest_bit(crossed)
+                crossed &= crossed - 1
+                case = voxel_case(m0, m1, m2, m3, z)
                 for t in range(n_tri[case]):
                     for q in range(3):
                         e = tri_table[case, t, q]
@@ -187,22 +264,18 @@ def _mc_brick(b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tr
                         s = ((a * n + lx) * n + ly) * n + lz
                         if stamp[s] != b:
                             stamp[s] = b
-                            on_face = False
-                            if a != 0 and (lx == 0 or lx == B):
-                                on_face = True
-                            if a != 1 and (ly == 0 or ly == B):
-                                on_face = True
-                            if a != 2 and (lz == 0 or lz == B):
-                                on_face = True
+                            on_face = ((a != 0 and (lx == 0 or lx == B))
+                                       or (a != 1 and (ly == 0 or ly == B))
+                                       or (a != 2 and (lz == 0 or lz == B)))
                             vid = -1
                             hs = 0
                             if on_face:
-                                # (brick holding the edge's lower end, local index)
+                                # (brick holding the edge's lower end, place in it)
                                 qx, rx = divmod(bx + lx, B)
                                 qy, ry = divmod(by + ly, B)
                                 qz, rz = divmod(bz + lz, B)
-                                key = ((((qz * nby + qy) * nbx + qx) << _LOCAL_BITS)
-                                       | (((rx * B + ry) * B + rz) * 3 + a))
+                                key = ((((qx * nby + qy) * nbz + qz) << _LOCAL_BITS)
+                                       | face_index(rx, ry, rz, a, B))
                                 hs = _slot(table, key)
                                 if table[hs, 0] == key:
                                     vid = table[hs, 1]
@@ -252,11 +325,12 @@ def mc_chunk(bricks, vals, dims, edge_origin, edge_axis, tri_table, n_tri, table
     """
     n = vals.shape[1]
     B = n - 1
-    nx1 = dims[0] + 1
     ny1 = dims[1] + 1
+    nz1 = dims[2] + 1
     n_slots = 3 * n * n * n
     stamp = np.full(n_slots, -1, dtype=np.int64)
     slot_vid = np.zeros(n_slots, dtype=np.int32)
+    masks = np.empty((n, n), dtype=np.int64)
     n_new = 0
     max_tris = tri_table.shape[1]
     for b in range(bricks.shape[0]):
@@ -271,9 +345,9 @@ def mc_chunk(bricks, vals, dims, edge_origin, edge_axis, tri_table, n_tri, table
             e_f0 = _grow1(e_f0, n_new + n_slots)
             e_f1 = _grow1(e_f1, n_new + n_slots)
         n_faces, n_new, n_used = _mc_brick(
-            b, bricks, vals, nx1, ny1, edge_origin, edge_axis, tri_table, n_tri, table,
+            b, bricks, vals, ny1, nz1, edge_origin, edge_axis, tri_table, n_tri, table,
             n_used, faces, n_faces, vert_base, stamp, slot_vid, e_corner, e_axis,
-            e_f0, e_f1, n_new)
+            e_f0, e_f1, n_new, masks)
     return table, n_used, faces, n_faces, e_corner, e_axis, e_f0, e_f1, n_new
 
 

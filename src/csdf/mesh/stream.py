@@ -8,21 +8,30 @@ bricks (sorted by x, y, z): evaluate the chunk's samples, run marching cubes on 
 vertices are the chunk's new crossed edges; an edge on a brick face that a neighbouring
 brick made first is found in a hash map keyed by the edge), take the new edges' roots a
 few search steps forward, and append vertices and faces. The few roots still unfinished
-(kinks, flat spots) are finished together at the end. Working memory is the chunk (a few
-MB), the hash map of crossed edges on brick faces and the output; no ``(A, 12)`` arrays
-and no global sort.
+(kinks, flat spots) are finished together at the end. Working memory is a few chunks
+(a few MB each), the hash map of crossed edges on brick faces and the output; no
+``(A, 12)`` arrays and no global sort.
 
-Measured (``benchmarks/MESH_RESULTS.md``): where the time goes at 512^3 on the CSG
-example is the marching-cubes kernel (~45 %), sample evaluation (~25 %), root search
-(~15 %) and first writes to the output's fresh memory.
+With the fast backend the stages run side by side: worker threads sample the chunks
+ahead and search the roots of the chunks behind while one thread runs the kernel, the
+only stage that must go in order (its hash map and vertex numbering). The kernel finds
+a brick's crossed voxels from bit masks of its inside samples, one 9-bit mask per
+column of samples, so empty columns cost a few instructions.
+
+Measured at 512^3 on the CSG example (2 cores, ``benchmarks/bench_mesh.py``): the
+kernel thread is the critical path (~0.15 s of ~0.21 s), then the octree (~0.02 s);
+sampling (~0.1 s) and the root search (~0.05 s) run beside it.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..backends.lowering import N_THREADS, executor
 from . import kernels as K
 from .cases import COMPONENT_TABLE, EDGE_AXIS, EDGE_ORIGIN, TRI_TABLE
 from .extract import BRICK, Grid, _octree
@@ -32,7 +41,13 @@ __all__ = ["extract_mc", "extract_dc", "CHUNK_SAMPLES"]
 CHUNK_SAMPLES = 1 << 18  # samples evaluated per call of the field (~6 MB of points)
 ITERATIONS = 40  # root search steps at most
 FIRST_ITERATIONS = 4  # steps per chunk; the few edges left go on together at the end
-assert 3 * BRICK**3 <= 1 << K._LOCAL_BITS, "hash keys need room for a brick's edges"
+LOOKAHEAD = 2  # chunks sampled ahead of the marching-cubes kernel
+# worker threads sampling and searching roots beside the thread running the kernel: one
+# core fewer than there are, so that thread, the critical path, keeps a core (measured at
+# 512^3 on 2 cores: 0.21-0.23 s with one worker, 0.26-0.36 s with two)
+WORKERS = max(1, N_THREADS - 1)
+_LOCAL = threading.local()  # per worker thread: its sample points buffer
+assert 3 * BRICK * (2 * BRICK - 1) <= K._STRIDE, "hash slots need room for a brick's edges"
 _N_TRI = (TRI_TABLE[:, :, 0] >= 0).sum(axis=1).astype(np.int64)
 _TRI = TRI_TABLE.astype(np.int64)
 _COMP = COMPONENT_TABLE.astype(np.int64)
@@ -45,6 +60,7 @@ def extract_mc(
     progress: Callable | None = None,
     tol: float = 1e-6,
     chunk_samples: int = CHUNK_SAMPLES,
+    serial: Callable | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes of the zero set on ``grid``, streamed over the octree's bricks.
 
@@ -55,6 +71,8 @@ def extract_mc(
         progress: optional ``callback(stage: str, done: int, total: int)``.
         tol: root tolerance on ``|f|`` in voxels.
         chunk_samples: samples per field evaluation (memory / call-overhead trade-off).
+        serial: optional single-threaded ``values`` (same results), which lets the
+            stages run side by side on worker threads (see :func:`_stream`).
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64 (what ``trimesh`` keeps, so
@@ -77,7 +95,7 @@ def extract_mc(
         return table, n_used, ebuf, n_new
 
     verts = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel,
-                    est_faces // 2)
+                    est_faces // 2, serial)
     return verts, out[0][:out[1]]
 
 
@@ -89,6 +107,7 @@ def extract_dc(
     progress: Callable | None = None,
     tol: float = 1e-6,
     chunk_samples: int = CHUNK_SAMPLES,
+    serial: Callable | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Manifold dual contouring of the zero set on ``grid``, streamed like
     :func:`extract_mc` and compiled (:mod:`.dc_kernels`): the same mesh as
@@ -100,7 +119,7 @@ def extract_dc(
 
     Args:
         values: ``(M, 3) -> (M,)`` field values; gradients: ``(M, 3) -> (M, 3)``.
-        intervals, progress, tol, chunk_samples: as for :func:`extract_mc`.
+        intervals, progress, tol, chunk_samples, serial: as for :func:`extract_mc`.
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64, counter-clockwise seen
@@ -135,7 +154,8 @@ def extract_dc(
         D.edge_flags(ebuf[0][:n_new], ebuf[1][:n_new], dims, st["on_box"][n_verts:need])
         return table, n_used, ebuf, n_new
 
-    roots = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel, est)
+    roots = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel, est,
+                    serial)
     n_e = len(roots)
     uaxis = st["axis"][:n_e].astype(np.int64)
     on_box = st["on_box"][:n_e].astype(bool)
@@ -163,18 +183,24 @@ def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None) -
 
 
 def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable | None,
-            tol: float, chunk_samples: int, kernel: Callable, est_verts: int) -> np.ndarray:
+            tol: float, chunk_samples: int, kernel: Callable, est_verts: int,
+            serial: Callable | None = None) -> np.ndarray:
     """Stream over ``bricks (K, 3)`` chunk by chunk: evaluate the samples, run ``kernel``
     (``(chunk, vals, table, n_used, n_verts, ebuf) -> (table, n_used, ebuf, n_new)``, which
     numbers the chunk's new crossed edges from ``n_verts`` in the edge hash map ``table``
     and writes them to the edge buffers ``ebuf``), search the new edges' roots; returns
-    the roots ``(V, 3)`` (vertex ``i`` on crossed edge ``i``)."""
+    the roots ``(V, 3)`` (vertex ``i`` on crossed edge ``i``).
+
+    With ``serial`` (a single-threaded ``values``, see
+    :func:`csdf.backends.fast.serial_values`) the stages overlap on a pool of
+    :data:`WORKERS` threads: chunks ahead are sampled, and the roots of chunks behind
+    searched, while this thread runs ``kernel`` (the one stage that must go in order).
+    The result is the same, vertex for vertex, as without ``serial``."""
     dims = np.array(grid.dims, dtype=np.int64)
     origin = np.asarray(grid.origin, dtype=np.float64)
     h = float(grid.h)
     per_chunk = max(1, chunk_samples // (BRICK + 1) ** 3)
-    box_lo = origin
-    box_hi = origin + h * dims
+    box = (origin, origin + h * dims)
     # ~2 B of a brick's crossed edges on its faces: the hash map's keys (at most half full)
     table = K.new_hash(len(bricks) * 4 * BRICK + 1024)
     n_used = 0  # occupied slots of the hash map
@@ -182,27 +208,74 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
     n_verts = 0
     stragglers: list[_Roots] = []
     cap = per_chunk * 2 * BRICK * BRICK  # edge buffers, grown on demand
-    ebuf = (np.empty((cap, 3), dtype=np.int64), np.empty(cap, dtype=np.int64),
-            np.empty(cap), np.empty(cap))
-    for s in range(0, len(bricks), per_chunk):
-        chunk = bricks[s:s + per_chunk]
-        vals = _samples(chunk, values, origin, h, dims)
-        table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
-        del vals
+
+    def new_ebuf():
+        return (np.empty((cap, 3), dtype=np.int64), np.empty(cap, dtype=np.int64),
+                np.empty(cap), np.empty(cap))
+
+    def search(ebuf, n_new, out, base, f):
+        """Roots of the new edges ``ebuf[:n_new]``, written to ``out``; the pending ones
+        (vertex ids from ``base``) or None."""
         e_c, e_a, e_f0, e_f1 = (a[:n_new] for a in ebuf)
         roots = _Roots(e_c, e_a, e_f0, e_f1, origin, h, tol * h,
-                       (box_lo, box_hi) if K.edge_on_box(e_c, e_a, dims) else None)
-        roots.run(values, FIRST_ITERATIONS)
-        if n_verts + len(e_a) > len(verts):
-            grown = K.fresh_array((max(n_verts + len(e_a), 2 * len(verts)), 3), np.float64)
-            grown[:n_verts] = verts[:n_verts]
-            verts = grown
-        roots.points(verts[n_verts:n_verts + len(e_a)])
-        if len(roots.idx):
-            stragglers.append(roots.pending(n_verts))
-        n_verts += len(e_a)
-        if progress:
-            progress("samples", s + len(chunk), len(bricks))
+                       box if K.edge_on_box(e_c, e_a, dims) else None)
+        roots.run(f, FIRST_ITERATIONS)
+        roots.points(out)
+        return roots.pending(base) if len(roots.idx) else None
+
+    starts = range(0, len(bricks), per_chunk)
+    ebuf = new_ebuf()
+    if serial is None:
+        for s in starts:
+            chunk = bricks[s:s + per_chunk]
+            vals = _samples(chunk, values, origin, h, dims)
+            table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
+            del vals
+            verts = _room(verts, n_verts, n_new)
+            rest = search(ebuf, n_new, verts[n_verts:n_verts + n_new], n_verts, values)
+            if rest is not None:
+                stragglers.append(rest)
+            n_verts += n_new
+            if progress:
+                progress("samples", s + len(chunk), len(bricks))
+    else:
+        pool = _pool()
+        ahead = {}  # chunk start -> future of its samples
+        searches = []  # futures of the root searches (-> pending roots or None)
+        spare_vals: list = []  # value buffers the kernel is done with
+        spare_ebuf: list = []  # edge buffers whose search is done
+
+        def sample(k):
+            if k < len(bricks) and k not in ahead:
+                ahead[k] = pool.submit(_samples, bricks[k:k + per_chunk], serial, origin,
+                                       h, dims, spare_vals)
+
+        def search_owning(ebuf, n_new, out, base):
+            rest = search(ebuf, n_new, out, base, serial)
+            spare_ebuf.append(ebuf)
+            return rest
+
+        for k in starts[:LOOKAHEAD]:
+            sample(k)
+        for s in starts:
+            chunk = bricks[s:s + per_chunk]
+            vals = ahead.pop(s).result()
+            sample(s + LOOKAHEAD * per_chunk)
+            table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
+            spare_vals.append(vals.base)  # (the buffer vals is a view of)
+            del vals
+            if n_verts + n_new > len(verts):  # (searches still running write to verts)
+                stragglers += [r for r in (f.result() for f in searches) if r is not None]
+                searches = []
+                verts = _room(verts, n_verts, n_new)
+            searches.append(pool.submit(search_owning, ebuf, n_new,
+                                        verts[n_verts:n_verts + n_new], n_verts))
+            # (the search owns the old buffers until it is done)
+            ebuf = spare_ebuf.pop() if spare_ebuf else new_ebuf()
+            n_verts += n_new
+            if progress:
+                progress("samples", s + len(chunk), len(bricks))
+        stragglers += [r for r in (f.result() for f in searches) if r is not None]
     if stragglers:  # the few slow roots (kinks, flat spots) of all chunks together
         rest = _Roots.concat(stragglers)
         rest.run(values, ITERATIONS)
@@ -212,13 +285,45 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
     return verts[:n_verts]
 
 
+def _room(verts: np.ndarray, n_verts: int, n_new: int) -> np.ndarray:
+    """``verts`` with room for ``n_new`` rows after the first ``n_verts`` (grown by
+    doubling, into fresh memory)."""
+    if n_verts + n_new <= len(verts):
+        return verts
+    grown = K.fresh_array((max(n_verts + n_new, 2 * len(verts)), 3), np.float64)
+    grown[:n_verts] = verts[:n_verts]
+    return grown
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The mesher's worker threads."""
+    return executor("csdf-mesh", WORKERS)
+
+
 def _samples(chunk: np.ndarray, values: Callable, origin: np.ndarray, h: float,
-             dims: np.ndarray) -> np.ndarray:
+             dims: np.ndarray, spare: list | None = None) -> np.ndarray:
     """Field values ``(C, n, n, n)`` at the samples of bricks ``chunk (C, 3)``, closed on
-    the grid box (``n = BRICK + 1``)."""
+    the grid box (``n = BRICK + 1``).
+
+    With ``spare`` (a list of free value buffers, see :func:`_stream`; ``values`` then
+    takes ``out=``) the values go into a buffer taken from it and the points into this
+    thread's own buffer, so a long stream does not keep faulting in fresh memory."""
     n = BRICK + 1
-    pts = K.brick_points(chunk, origin, h, BRICK)
-    vals = np.asarray(values(pts), dtype=np.float64).reshape(len(chunk), n, n, n)
+    m = len(chunk) * n**3
+    if spare is None:
+        pts = K.brick_points(chunk, origin, h, BRICK)
+        vals = np.asarray(values(pts), dtype=np.float64)
+    else:
+        pts = getattr(_LOCAL, "pts", None)
+        if pts is None or len(pts) < m:
+            pts = _LOCAL.pts = np.empty((m, 3))
+        K.brick_points_into(chunk, origin, h, BRICK, pts)
+        buf = spare.pop() if spare else None
+        if buf is None or len(buf) < m:
+            buf = np.empty(m)
+        vals = values(pts[:m], out=buf)
+        assert vals.base is buf  # (so the kernel's caller can give buf back)
+    vals = vals.reshape(len(chunk), n, n, n)
     K.close_on_box(chunk, vals, dims, h)
     return vals
 

@@ -10,6 +10,9 @@ differ only in constants or parameter values share a kernel.
 Before a cached source file is imported it is compared byte for byte with the source
 generated now; a file that differs is rewritten, so nothing but csdf's own generated
 code is ever loaded.
+
+Large results are written to recycled memory (:mod:`csdf.backends.reuse`), which spares
+a loop of evaluations the page faults of fresh memory.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 
 from .codegen import BLOCK, generate, structure_key
 from .lowering import lowered, numba_available, run_parallel
+from .reuse import result_array
 
 __all__ = ["evaluate", "serial_values", "available", "is_ready", "cache_dir", "kernel_mode"]
 
@@ -126,9 +130,9 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
     dtype = pts.dtype
     n = pts.shape[0]
     kernel, u, du, spatial, wrt = _prepare(prog, pvals, mode, dtype)
-    out = np.empty(n, dtype)
-    grad = np.empty((n if spatial else 0, 3), dtype)
-    jac = np.empty((n if wrt else 0, len(prog.params)), dtype)
+    out = result_array((n,), dtype)  # (recycled memory for large results, see reuse.py)
+    grad = result_array((n if spatial else 0, 3), dtype)
+    jac = result_array((n if wrt else 0, len(prog.params)), dtype)
     run_parallel(lambda r: kernel(pts, u, du, out, grad, jac, r[0], r[1]), n, BLOCK)
     res = {"value": out}
     if mode in ("grad", "all"):

@@ -93,3 +93,10 @@ def test_repeated_fast_evaluations_stay_independent():
     del d2, d3
     g = prog.gradient(pts, backend="fast")  # (another size: the idle maps make way)
     np.testing.assert_allclose(g, pts / np.linalg.norm(pts, axis=1)[:, None], atol=1e-12)
+
+
+def test_nothing_is_pooled_where_the_in_use_check_fails(monkeypatch):
+    assert reuse._WORKS  # (Linux: mremap tells held maps from free ones)
+    monkeypatch.setattr(reuse, "_WORKS", False)
+    a = reuse.result_array((2 * MB,), np.uint8)
+    assert a.flags.owndata and reuse._maps == []

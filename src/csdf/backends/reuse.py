@@ -13,7 +13,8 @@ it: the map then has no exported buffer, which ``mmap.resize`` to its own size c
 (it raises ``BufferError`` while any export is alive), so a result the caller still
 holds is never overwritten. Bounds: only results of ``MIN_BYTES`` to ``MAX_BYTES`` are
 pooled, at most ``MAX_MAPS`` maps are kept (idle ones of another size are dropped when
-a new size is asked for), and :func:`release_memory` drops every idle map.
+a new size is asked for), and :func:`release_memory` drops every idle map. Where that
+check does not work (probed once at import), nothing is pooled.
 """
 
 from __future__ import annotations
@@ -44,6 +45,24 @@ def _in_use(m: mmap.mmap) -> bool:
     return False
 
 
+def _check_works() -> bool:
+    """Whether :func:`_in_use` tells a held map from a free one on this platform (where
+    it cannot, nothing is pooled)."""
+    try:
+        m = mmap.mmap(-1, mmap.PAGESIZE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        a = np.frombuffer(m, dtype=np.uint8)
+        held = _in_use(m)
+        del a
+        ok = held and not _in_use(m)
+        m.close()
+        return ok
+    except Exception:  # pragma: no cover - platform
+        return False
+
+
+_WORKS = _check_works()
+
+
 def result_array(shape: tuple[int, ...], dtype) -> np.ndarray:
     """An uninitialised, writable, C-contiguous array like ``np.empty(shape, dtype)``,
     on recycled memory when its size is in the pooled range and a pooled map of exactly
@@ -51,7 +70,7 @@ def result_array(shape: tuple[int, ...], dtype) -> np.ndarray:
     dtype = np.dtype(dtype)
     count = int(np.prod(shape))
     nbytes = count * dtype.itemsize
-    if not MIN_BYTES <= nbytes <= MAX_BYTES:
+    if not (_WORKS and MIN_BYTES <= nbytes <= MAX_BYTES):
         return np.empty(shape, dtype)
     with _lock:
         idle = [m for m in _maps if not _in_use(m)]

@@ -174,8 +174,9 @@ def mesh(
             if method == "mc":
                 verts, faces = extract_mc(grid, values, intervals, update, serial=serial)
             else:
-                verts, faces = extract_dc(grid, values, gradients, intervals, update,
-                                          serial=serial)
+                verts, faces = extract_dc(
+                    grid, values, gradients, intervals, update, serial=serial,
+                    values_and_gradients=lambda p: prog.value_and_grad(p, pv, backend=backend))
         else:
             verts, faces = extract(grid, values, gradients, intervals, method,
                                    reporter.update if reporter else None)

@@ -26,7 +26,8 @@ from numba import njit
 from . import kernels as K
 
 __all__ = [
-    "dc_chunk", "dc_vertices", "dc_quads", "dc_midpoints", "dc_split", "edge_flags", "sym_eig3",
+    "dc_chunk", "dc_vertices", "dc_vertices_range", "dc_case_tables", "dc_found", "dc_quads",
+    "dc_midpoints", "dc_split", "edge_flags", "sym_eig3", "newton_step",
 ]
 
 _CUT = 0.05  # singular values below this fraction of the largest are dropped (as NumPy)
@@ -98,13 +99,28 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
         ``(verts (V, 3) float64, quads (E, 4) int64, found (E,) int8)``: the clamped QEF
         vertices in (voxel, component) order; for each edge the vertex of the voxel at
         each corner of its quad (``(du, dv) = (0, 0), (1, 0), (1, 1), (0, 1)`` voxels
-        below it along the axes after its own) and a bit mask of the corners found.
+        below it along the axes after its own; -1 where none) and a bit mask of the
+        corners found.
     """
-    n_vox = vox.shape[0]
-    n_edges = roots.shape[0]
-    # rank[c, k]: the vertex of component k among case c's components (ascending order)
+    rank, n_comp, n_pairs = dc_case_tables(comp_table, max_components)
+    n_v = 0
+    for a in range(vox.shape[0]):
+        n_v += n_comp[vcase[a]]
+    verts = np.empty((n_v, 3))
+    quads = np.full((roots.shape[0], 4), -1, dtype=np.int64)
+    dc_vertices_range(0, vox.shape[0], 0, 0, vox, vcase, inv, roots, normals, uaxis,
+                      comp_table, edge_origin, origin, h, rank, n_comp, verts, quads)
+    return verts, quads, dc_found(quads)
+
+
+@njit(cache=True, nogil=True)
+def dc_case_tables(comp_table, max_components):
+    """``(rank (256, K), n_comp (256,), n_pairs (256,))``: for each case the vertex of
+    each surface component among the case's components (ascending), the number of
+    components and the number of crossed edges."""
     rank = np.full((256, max_components), -1, dtype=np.int64)
     n_comp = np.zeros(256, dtype=np.int64)
+    n_pairs = np.zeros(256, dtype=np.int64)
     for c in range(256):
         for k in range(max_components):
             for e in range(12):
@@ -112,12 +128,33 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
                     rank[c, k] = n_comp[c]
                     n_comp[c] += 1
                     break
-    n_v = 0
-    for a in range(n_vox):
-        n_v += n_comp[vcase[a]]
-    verts = np.empty((n_v, 3))
-    quads = np.zeros((n_edges, 4), dtype=np.int64)
-    found = np.zeros(n_edges, dtype=np.int8)
+        for e in range(12):
+            if comp_table[c, e] >= 0:
+                n_pairs[c] += 1
+    return rank, n_comp, n_pairs
+
+
+@njit(cache=True, nogil=True)
+def dc_found(quads):
+    """Bit mask ``(E,)`` int8 of the quad corners found (``quads (E, 4) >= 0``)."""
+    found = np.zeros(quads.shape[0], dtype=np.int8)
+    for u in range(quads.shape[0]):
+        m = 0
+        for q in range(4):
+            if quads[u, q] >= 0:
+                m |= 1 << q
+        found[u] = m
+    return found
+
+
+@njit(cache=True, nogil=True)
+def dc_vertices_range(a0, a1, p0, base0, vox, vcase, inv, roots, normals, uaxis,
+                      comp_table, edge_origin, origin, h, rank, n_comp, verts, quads):
+    """:func:`dc_vertices` for the voxels ``[a0, a1)``, whose pairs start at ``p0`` and
+    vertices at ``base0`` (the counts over the voxels before ``a0``): writes their rows
+    of ``verts`` and their corners of ``quads`` (each (edge, corner) slot belongs to one
+    voxel), so disjoint ranges can run on separate threads."""
+    max_components = rank.shape[1]
     A = np.zeros((max_components, 6))  # xx, xy, xz, yy, yz, zz
     bvec = np.zeros((max_components, 3))
     mass = np.zeros((max_components, 3))
@@ -126,9 +163,9 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
     vec = np.empty((3, 3))
     rhs = np.empty(3)
     ms = np.empty(3)
-    p = 0
-    base = 0
-    for a in range(n_vox):
+    p = p0
+    base = base0
+    for a in range(a0, a1):
         c = vcase[a]
         A[:] = 0.0
         bvec[:] = 0.0
@@ -162,7 +199,6 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
             dv = edge_origin[e, (ax + 2) % 3]
             q = (0 if dv == 0 else 3) if du == 0 else (1 if dv == 0 else 2)
             quads[u, q] = base + r
-            found[u] |= 1 << q
         for r in range(n_comp[c]):
             v = base + r
             for i in range(3):
@@ -189,7 +225,6 @@ def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
                 hi = (origin[i] + (vox[a, i] + 1) * h) + 0.5 * h
                 verts[v, i] = min(max(xi, lo), hi)
         base += n_comp[c]
-    return verts, quads, found
 
 
 @njit(cache=True, nogil=True)
@@ -378,3 +413,33 @@ def edge_flags(e_corner, e_axis, dims, on_box):
             if c <= 0 or c1 <= 0 or c >= dims[d] or c1 >= dims[d]:
                 flag = 1
         on_box[r] = flag
+
+
+@njit(cache=True, nogil=True)
+def newton_step(verts, f, g, h):
+    """In place, one step ``v -= f grad f / |grad f|^2`` towards the zero set, limited to
+    half a voxel; a non-finite component of the step counts as 0 (the arithmetic and
+    its order are those of :func:`csdf.mesh.extract._project`). ``verts, g (V, 3)``,
+    ``f (V,)``."""
+    for r in range(verts.shape[0]):
+        g0, g1, g2 = g[r, 0], g[r, 1], g[r, 2]
+        gg = g0 * g0 + g1 * g1 + g2 * g2
+        k = f[r] / gg if gg > 0 else 0.0
+        s0, s1, s2 = k * g0, k * g1, k * g2
+        n = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        if n > 0.5 * h:
+            c = 0.5 * h / max(n, 1e-300)
+            s0, s1, s2 = s0 * c, s1 * c, s2 * c
+        verts[r, 0] -= _finite(s0)
+        verts[r, 1] -= _finite(s1)
+        verts[r, 2] -= _finite(s2)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _finite(x):
+    """``np.nan_to_num`` of a scalar."""
+    if np.isnan(x):
+        return 0.0
+    if np.isinf(x):
+        return 1.7976931348623157e308 if x > 0 else -1.7976931348623157e308
+    return x

@@ -235,16 +235,21 @@ def _clip_box(values: Callable, grid: Grid, on_box: np.ndarray) -> Callable:
     return clipped
 
 
-def _project(verts: np.ndarray, fg: Callable, h: float, steps: int = 3) -> np.ndarray:
+_PROJECT_STEPS = 3
+_SPLIT_MIN = 65536  # active voxels worth solving on several threads
+
+
+def _project(verts: np.ndarray, fg: Callable, h: float, steps: int = _PROJECT_STEPS
+             ) -> np.ndarray:
     """Newton steps ``v -= f grad f / |grad f|^2`` towards the zero set, each limited to
     half a voxel; vertices already on it (sharp edges and corners) stay put."""
     for _ in range(steps):
         f, g = fg(verts)
         gg = np.sum(g * g, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             step = np.where(gg > 0, f / gg, 0.0)[:, None] * g
-        n = np.linalg.norm(step, axis=1, keepdims=True)
-        step = np.where(n > 0.5 * h, step * (0.5 * h / np.maximum(n, 1e-300)), step)
+            n = np.linalg.norm(step, axis=1, keepdims=True)
+            step = np.where(n > 0.5 * h, step * (0.5 * h / np.maximum(n, 1e-300)), step)
         verts = verts - np.nan_to_num(step)
     return verts
 
@@ -376,17 +381,36 @@ def _dual_contour_compiled(grid, vox, vcase, inv, roots, normals, f0, uaxis, val
 
 
 def _dc_solve(grid: Grid, vox: np.ndarray, vcase: np.ndarray, inv: np.ndarray,
-              roots: np.ndarray, normals: np.ndarray, uaxis: np.ndarray) -> tuple:
+              roots: np.ndarray, normals: np.ndarray, uaxis: np.ndarray,
+              threads: int = 1) -> tuple:
     """Compiled QEF vertices ``(V, 3)`` and edge quads ``(E, 4)`` with their found-corner
-    masks ``(E,)`` (:func:`.dc_kernels.dc_vertices`; arguments as there)."""
+    masks ``(E,)`` (:func:`.dc_kernels.dc_vertices`; arguments as there). With
+    ``threads > 1`` the voxels are split into that many ranges solved side by side (the
+    same results)."""
     from . import dc_kernels as D
 
-    return D.dc_vertices(
-        np.asarray(vox, dtype=np.int64), np.asarray(vcase, dtype=np.int64),
-        np.asarray(inv, dtype=np.int64), roots, normals, np.asarray(uaxis, dtype=np.int64),
-        COMPONENT_TABLE.astype(np.int64),
-        EDGE_ORIGIN.astype(np.int64), np.asarray(grid.origin, dtype=np.float64),
-        float(grid.h), MAX_COMPONENTS)
+    args = (np.asarray(vox, dtype=np.int64), np.asarray(vcase, dtype=np.int64),
+            np.asarray(inv, dtype=np.int64), roots, normals,
+            np.asarray(uaxis, dtype=np.int64), COMPONENT_TABLE.astype(np.int64),
+            EDGE_ORIGIN.astype(np.int64), np.asarray(grid.origin, dtype=np.float64),
+            float(grid.h))
+    if threads <= 1 or len(vox) < _SPLIT_MIN:
+        return D.dc_vertices(*args, MAX_COMPONENTS)
+    from ..backends.lowering import executor
+
+    rank, n_comp, n_pairs = D.dc_case_tables(args[6], MAX_COMPONENTS)
+    case = args[1]
+    vstart = np.concatenate([[0], np.cumsum(n_comp[case])])  # first vertex of each voxel
+    pstart = np.concatenate([[0], np.cumsum(n_pairs[case])])  # first pair of each voxel
+    verts = np.empty((int(vstart[-1]), 3))
+    quads = np.full((len(roots), 4), -1, dtype=np.int64)
+    cuts = np.linspace(0, len(vox), threads + 1).astype(np.int64)
+    jobs = [executor("csdf-dc", threads).submit(
+        D.dc_vertices_range, int(a0), int(a1), int(pstart[a0]), int(vstart[a0]), *args,
+        rank, n_comp, verts, quads) for a0, a1 in zip(cuts[:-1], cuts[1:])]
+    for j in jobs:
+        j.result()
+    return verts, quads, D.dc_found(quads)
 
 
 def _dc_finish(grid: Grid, verts: np.ndarray, quads: np.ndarray, found: np.ndarray,
@@ -398,7 +422,11 @@ def _dc_finish(grid: Grid, verts: np.ndarray, quads: np.ndarray, found: np.ndarr
     from . import dc_kernels as D
 
     for s in range(0, len(verts), block):
-        verts[s:s + block] = _project(verts[s:s + block], gradients_values, grid.h)
+        v = verts[s:s + block]
+        for _ in range(_PROJECT_STEPS):  # (_project's steps, compiled)
+            f, g = gradients_values(v)
+            D.newton_step(v, np.asarray(f, dtype=np.float64), np.asarray(g, dtype=np.float64),
+                          float(grid.h))
     quads = D.dc_quads(quads, found, f0)
     fm = np.empty(2 * len(quads))
     n = len(quads)

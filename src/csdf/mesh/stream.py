@@ -108,6 +108,7 @@ def extract_dc(
     tol: float = 1e-6,
     chunk_samples: int = CHUNK_SAMPLES,
     serial: Callable | None = None,
+    values_and_gradients: Callable | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Manifold dual contouring of the zero set on ``grid``, streamed like
     :func:`extract_mc` and compiled (:mod:`.dc_kernels`): the same mesh as
@@ -120,6 +121,8 @@ def extract_dc(
     Args:
         values: ``(M, 3) -> (M,)`` field values; gradients: ``(M, 3) -> (M, 3)``.
         intervals, progress, tol, chunk_samples, serial: as for :func:`extract_mc`.
+        values_and_gradients: optional ``(M, 3) -> ((M,), (M, 3))`` in one pass (for the
+            projection of the vertices; else ``values`` and ``gradients``).
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64, counter-clockwise seen
@@ -166,11 +169,14 @@ def extract_dc(
         normals[sl] = _edge_normals(grid, roots[sl], uaxis[sl], gradients, on_box[sl])
 
     def gradients_values(p):
+        if values_and_gradients is not None:
+            return values_and_gradients(p)
         return values(p), gradients(p)
 
     n_vox, n_pairs = st.pop("n_vox"), st.pop("n_pairs")
     verts, quads, found = _dc_solve(grid, st.pop("vox")[:n_vox], st.pop("vcase")[:n_vox],
-                                    st.pop("pairs")[:n_pairs], roots, normals, uaxis)
+                                    st.pop("pairs")[:n_pairs], roots, normals, uaxis,
+                                    threads=N_THREADS if serial is not None else 1)
     del normals, roots, on_box  # (the working arrays go before the faces are made)
     return _dc_finish(grid, verts, quads, found, st["f0"][:n_e], values, gradients_values)
 

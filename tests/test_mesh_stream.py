@@ -234,3 +234,17 @@ def test_face_index_numbers_a_bricks_face_edges_compactly():
             seen.add(K.face_index(*r, a, B))
     assert seen == set(range(3 * B * (2 * B - 1)))
     assert 3 * B * (2 * B - 1) <= 1 << K._LOCAL_BITS
+
+
+def test_concurrent_meshes_share_the_workers_safely():
+    """Two meshes at once (the editor's server can be asked for two exports) share the
+    mesher's worker threads and still give the meshes they give alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    shapes = [_csg(), csdf.torus(0.6, 0.25).twist(0.8)]
+    alone = [csdf.mesh(s, resolution=48, progress=False) for s in shapes]
+    with ThreadPoolExecutor(2) as ex:
+        together = list(ex.map(lambda s: csdf.mesh(s, resolution=48, progress=False), shapes))
+    for a, b in zip(alone, together):
+        np.testing.assert_array_equal(a.vertices, b.vertices)
+        np.testing.assert_array_equal(a.faces, b.faces)

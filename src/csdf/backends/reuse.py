@@ -24,7 +24,8 @@ import threading
 
 import numpy as np
 
-__all__ = ["result_array", "release_memory", "MIN_BYTES", "MAX_BYTES", "MAX_MAPS"]
+__all__ = ["result_array", "release_memory", "private_map", "map_array", "MIN_BYTES",
+           "MAX_BYTES", "MAX_MAPS"]
 
 MIN_BYTES = 4 << 20  # smaller results come from np.empty (malloc reuses its memory)
 MAX_BYTES = 512 << 20  # larger ones too: the pool never holds more than MAX_MAPS of these
@@ -32,6 +33,25 @@ MAX_MAPS = 2
 
 _maps: list[mmap.mmap] = []
 _lock = threading.Lock()
+
+
+def private_map(nbytes: int, huge: bool = False) -> mmap.mmap:
+    """A private anonymous memory map of ``nbytes`` (pages never written cost address
+    space only), advised to use transparent huge pages when ``huge`` (``MADV_HUGEPAGE``,
+    where the OS has it). Private, not Python's default shared mapping: shared anonymous
+    memory never gets huge pages."""
+    m = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    if huge:
+        try:
+            m.madvise(mmap.MADV_HUGEPAGE)
+        except (AttributeError, OSError, ValueError):  # pragma: no cover - platform
+            pass
+    return m
+
+
+def map_array(m: mmap.mmap, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """An array ``shape, dtype`` over the start of map ``m`` (which it exports)."""
+    return np.frombuffer(m, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
 
 
 def _in_use(m: mmap.mmap) -> bool:
@@ -49,8 +69,8 @@ def _check_works() -> bool:
     """Whether :func:`_in_use` tells a held map from a free one on this platform (where
     it cannot, nothing is pooled)."""
     try:
-        m = mmap.mmap(-1, mmap.PAGESIZE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
-        a = np.frombuffer(m, dtype=np.uint8)
+        m = private_map(mmap.PAGESIZE)
+        a = map_array(m, (mmap.PAGESIZE,), np.uint8)
         held = _in_use(m)
         del a
         ok = held and not _in_use(m)
@@ -82,12 +102,12 @@ def result_array(shape: tuple[int, ...], dtype) -> np.ndarray:
             if len(_maps) >= MAX_MAPS:
                 return np.empty(shape, dtype)
             try:
-                mine = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+                mine = private_map(nbytes)
             except (OSError, ValueError, AttributeError):  # pragma: no cover - platform
                 return np.empty(shape, dtype)
             _maps.append(mine)
         # exported before the lock is released, so no other caller can take it
-        return np.frombuffer(mine, dtype=dtype, count=count).reshape(shape)
+        return map_array(mine, shape, dtype)
 
 
 def release_memory() -> int:

@@ -4,7 +4,7 @@ The same computation as :func:`csdf.mesh.extract._dual_contour` (tested equal to
 the arrays that :func:`csdf.mesh.extract.extract` builds, without its ``(pairs, ...)``
 temporaries, ``ufunc.at``, batched SVD or sorted searches:
 
-* :func:`dc_vertices`: one vertex per surface component of each active voxel (ids in
+* :func:`dc_vertices_range`: one vertex per surface component of each active voxel (ids in
   (voxel, component) order, as ``np.unique`` gives them), its quadric accumulated in the
   same order as ``np.add.at``, minimised by the pseudo-inverse of the 3x3 normal matrix
   (a symmetric positive semi-definite matrix, so its SVD is its eigendecomposition, found
@@ -26,7 +26,7 @@ from numba import njit
 from . import kernels as K
 
 __all__ = [
-    "dc_chunk", "dc_vertices", "dc_vertices_range", "dc_case_tables", "dc_found", "dc_quads",
+    "dc_chunk", "dc_vertices_range", "dc_case_tables", "dc_found", "dc_quads",
     "dc_midpoints", "dc_split", "edge_flags", "sym_eig3", "newton_step",
 ]
 
@@ -77,43 +77,6 @@ def sym_eig3(a: np.ndarray, v: np.ndarray) -> None:
 
 
 @njit(cache=True, nogil=True)
-def dc_vertices(vox, vcase, inv, roots, normals, uaxis, comp_table, edge_origin,
-                origin, h, max_components):
-    """Dual-contouring vertices and the quad of every crossed edge.
-
-    A voxel's pairs are consecutive, so each voxel's quadrics are summed (in the pairs'
-    order, as ``np.add.at`` sums them) and solved before the next voxel's.
-
-    Args:
-        vox: ``(A, 3)`` int64 active voxels (lower sample corner); vcase ``(A,)`` their
-            marching-cubes cases.
-        inv: ``(P,)`` unique edge of each (voxel, crossed local edge) pair, the pairs in
-            (voxel, local edge) order (``np.nonzero(COMPONENT_TABLE[vcase] >= 0)``).
-        roots, normals: ``(E, 3)`` float64 root and unit normal of each unique edge;
-            uaxis ``(E,)`` its axis.
-        comp_table: ``(256, 12)`` component of each crossed edge (-1: not crossed);
-            edge_origin ``(12, 3)``: lower corner of each local edge.
-        origin ``(3,)``, h: the grid; max_components: components per voxel at most.
-
-    Returns:
-        ``(verts (V, 3) float64, quads (E, 4) int64, found (E,) int8)``: the clamped QEF
-        vertices in (voxel, component) order; for each edge the vertex of the voxel at
-        each corner of its quad (``(du, dv) = (0, 0), (1, 0), (1, 1), (0, 1)`` voxels
-        below it along the axes after its own; -1 where none) and a bit mask of the
-        corners found.
-    """
-    rank, n_comp, n_pairs = dc_case_tables(comp_table, max_components)
-    n_v = 0
-    for a in range(vox.shape[0]):
-        n_v += n_comp[vcase[a]]
-    verts = np.empty((n_v, 3))
-    quads = np.full((roots.shape[0], 4), -1, dtype=np.int64)
-    dc_vertices_range(0, vox.shape[0], 0, 0, vox, vcase, inv, roots, normals, uaxis,
-                      comp_table, edge_origin, origin, h, rank, n_comp, verts, quads)
-    return verts, quads, dc_found(quads)
-
-
-@njit(cache=True, nogil=True)
 def dc_case_tables(comp_table, max_components):
     """``(rank (256, K), n_comp (256,), n_pairs (256,))``: for each case the vertex of
     each surface component among the case's components (ascending), the number of
@@ -150,10 +113,30 @@ def dc_found(quads):
 @njit(cache=True, nogil=True)
 def dc_vertices_range(a0, a1, p0, base0, vox, vcase, inv, roots, normals, uaxis,
                       comp_table, edge_origin, origin, h, rank, n_comp, verts, quads):
-    """:func:`dc_vertices` for the voxels ``[a0, a1)``, whose pairs start at ``p0`` and
-    vertices at ``base0`` (the counts over the voxels before ``a0``): writes their rows
-    of ``verts`` and their corners of ``quads`` (each (edge, corner) slot belongs to one
-    voxel), so disjoint ranges can run on separate threads."""
+    """Dual-contouring vertices and the quad corners of the voxels ``[a0, a1)``, whose
+    pairs start at ``p0`` and vertices at ``base0`` (the counts over the voxels before
+    ``a0``): writes their rows of ``verts`` and their corners of ``quads``. Each (edge,
+    corner) slot belongs to one voxel, so disjoint ranges can run on separate threads.
+
+    A voxel's pairs are consecutive, so each voxel's quadrics are summed (in the pairs'
+    order, as ``np.add.at`` sums them) and solved before the next voxel's.
+
+    Args:
+        vox: ``(A, 3)`` int64 active voxels (lower sample corner); vcase ``(A,)`` their
+            marching-cubes cases.
+        inv: ``(P,)`` unique edge of each (voxel, crossed local edge) pair, the pairs in
+            (voxel, local edge) order (``np.nonzero(COMPONENT_TABLE[vcase] >= 0)``).
+        roots, normals: ``(E, 3)`` float64 root and unit normal of each unique edge;
+            uaxis ``(E,)`` its axis.
+        comp_table: ``(256, 12)`` component of each crossed edge (-1: not crossed);
+            edge_origin ``(12, 3)``: lower corner of each local edge.
+        origin ``(3,)``, h: the grid; rank, n_comp: :func:`dc_case_tables`.
+        verts: ``(V, 3)`` float64, written: the clamped QEF vertices in (voxel,
+            component) order.
+        quads: ``(E, 4)`` int64, -1 where no voxel has written: for each edge the
+            vertex of the voxel at each corner of its quad (``(du, dv) = (0, 0), (1, 0),
+            (1, 1), (0, 1)`` voxels below it along the axes after its own).
+    """
     max_components = rank.shape[1]
     A = np.zeros((max_components, 6))  # xx, xy, xz, yy, yz, zz
     bvec = np.zeros((max_components, 3))
@@ -309,9 +292,10 @@ def _dc_brick(b, bricks, vals, nby, nbz, edge_origin, edge_axis, comp_table, tab
                 for e in range(12):
                     if comp_table[case, e] < 0:
                         continue
-                    # the vertex id of the edge, as kernels._mc_brick numbers it (the
-                    # same code, deliberately inline: moving it into a shared helper
-                    # made the marching-cubes kernel ~2.5x slower, measured)
+                    # the vertex id of the edge, as kernels._mc_brick numbers it: the
+                    # key is the shared scalar helper; the table and buffer updates stay
+                    # inline in both (a Numba helper taking these arrays made the
+                    # marching-cubes kernel 2.5-8x slower, measured)
                     a = edge_axis[e]
                     lx = x + edge_origin[e, 0]
                     ly = y + edge_origin[e, 1]
@@ -319,17 +303,11 @@ def _dc_brick(b, bricks, vals, nby, nbz, edge_origin, edge_axis, comp_table, tab
                     s = ((a * n + lx) * n + ly) * n + lz
                     if stamp[s] != b:
                         stamp[s] = b
-                        on_face = ((a != 0 and (lx == 0 or lx == B))
-                                   or (a != 1 and (ly == 0 or ly == B))
-                                   or (a != 2 and (lz == 0 or lz == B)))
+                        key = K.face_key(bx, by, bz, lx, ly, lz, a, B, nby, nbz)
+                        on_face = key >= 0
                         vid = -1
                         hs = 0
                         if on_face:
-                            qx, rx = divmod(bx + lx, B)
-                            qy, ry = divmod(by + ly, B)
-                            qz, rz = divmod(bz + lz, B)
-                            key = ((((qx * nby + qy) * nbz + qz) << K._LOCAL_BITS)
-                                   | K.face_index(rx, ry, rz, a, B))
                             hs = K._slot(table, key)
                             if table[hs, 0] == key:
                                 vid = table[hs, 1]

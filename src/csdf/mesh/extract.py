@@ -384,9 +384,9 @@ def _dc_solve(grid: Grid, vox: np.ndarray, vcase: np.ndarray, inv: np.ndarray,
               roots: np.ndarray, normals: np.ndarray, uaxis: np.ndarray,
               threads: int = 1) -> tuple:
     """Compiled QEF vertices ``(V, 3)`` and edge quads ``(E, 4)`` with their found-corner
-    masks ``(E,)`` (:func:`.dc_kernels.dc_vertices`; arguments as there). With
-    ``threads > 1`` the voxels are split into that many ranges solved side by side (the
-    same results)."""
+    masks ``(E,)`` (:func:`.dc_kernels.dc_vertices_range`; arguments as there). With
+    ``threads > 1`` (and at least ``_SPLIT_MIN`` voxels) the voxels are split into that
+    many ranges solved side by side (the same results)."""
     from . import dc_kernels as D
 
     args = (np.asarray(vox, dtype=np.int64), np.asarray(vcase, dtype=np.int64),
@@ -394,22 +394,25 @@ def _dc_solve(grid: Grid, vox: np.ndarray, vcase: np.ndarray, inv: np.ndarray,
             np.asarray(uaxis, dtype=np.int64), COMPONENT_TABLE.astype(np.int64),
             EDGE_ORIGIN.astype(np.int64), np.asarray(grid.origin, dtype=np.float64),
             float(grid.h))
-    if threads <= 1 or len(vox) < _SPLIT_MIN:
-        return D.dc_vertices(*args, MAX_COMPONENTS)
-    from ..backends.lowering import executor
-
     rank, n_comp, n_pairs = D.dc_case_tables(args[6], MAX_COMPONENTS)
     case = args[1]
     vstart = np.concatenate([[0], np.cumsum(n_comp[case])])  # first vertex of each voxel
     pstart = np.concatenate([[0], np.cumsum(n_pairs[case])])  # first pair of each voxel
     verts = np.empty((int(vstart[-1]), 3))
     quads = np.full((len(roots), 4), -1, dtype=np.int64)
+    if threads <= 1 or len(vox) < _SPLIT_MIN:
+        threads = 1
     cuts = np.linspace(0, len(vox), threads + 1).astype(np.int64)
-    jobs = [executor("csdf-dc", threads).submit(
-        D.dc_vertices_range, int(a0), int(a1), int(pstart[a0]), int(vstart[a0]), *args,
-        rank, n_comp, verts, quads) for a0, a1 in zip(cuts[:-1], cuts[1:])]
-    for j in jobs:
-        j.result()
+    ranges = [(int(a0), int(a1), int(pstart[a0]), int(vstart[a0]), *args, rank, n_comp,
+               verts, quads) for a0, a1 in zip(cuts[:-1], cuts[1:])]
+    if threads == 1:
+        D.dc_vertices_range(*ranges[0])
+    else:
+        from ..backends.lowering import executor
+
+        pool = executor("csdf-dc", threads)
+        for job in [pool.submit(D.dc_vertices_range, *r) for r in ranges]:
+            job.result()
     return verts, quads, D.dc_found(quads)
 
 

@@ -22,15 +22,15 @@ chunk plus the outputs:
 
 from __future__ import annotations
 
-import mmap
-
 import numpy as np
 from numba import njit
+
+from ..backends.reuse import map_array, private_map
 
 __all__ = [
     "all_points", "brick_points", "brick_points_into", "close_on_box", "mc_chunk", "new_hash",
     "root_points", "root_start", "root_update", "clip_to_box", "edge_on_box", "fresh_array",
-    "neg_columns", "column_crossed", "voxel_case", "lowest_bit", "face_index",
+    "neg_columns", "column_crossed", "voxel_case", "lowest_bit", "face_index", "face_key",
 ]
 
 _EMPTY = -1
@@ -74,13 +74,7 @@ def fresh_array(shape: tuple[int, ...], dtype, huge: bool = False) -> np.ndarray
     nbytes = int(np.prod(shape)) * dtype.itemsize
     if nbytes < (4 << 20):
         return np.empty(shape, dtype)
-    buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
-    if huge:
-        try:
-            buf.madvise(mmap.MADV_HUGEPAGE)
-        except (AttributeError, OSError, ValueError):  # pragma: no cover - platform
-            pass
-    return np.frombuffer(buf, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
+    return map_array(private_map(nbytes, huge), shape, dtype)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -217,6 +211,23 @@ def lowest_bit(m: int) -> int:
 
 
 @njit(cache=True, nogil=True, inline="always")
+def face_key(bx: int, by: int, bz: int, lx: int, ly: int, lz: int, a: int, B: int,
+             nby: int, nbz: int) -> int:
+    """Hash key of the edge at local sample ``(lx, ly, lz)``, axis ``a``, of the brick at
+    lower sample corner ``(bx, by, bz)``: the brick holding the edge's lower end (x-major
+    index over ``nby, nbz`` bricks per y, z) and the edge's :func:`face_index` there; -1
+    for an edge inside the brick (no other brick has it). The one numbering of shared
+    edges for marching cubes and dual contouring."""
+    if not ((a != 0 and (lx == 0 or lx == B)) or (a != 1 and (ly == 0 or ly == B))
+            or (a != 2 and (lz == 0 or lz == B))):
+        return -1
+    qx, rx = divmod(bx + lx, B)
+    qy, ry = divmod(by + ly, B)
+    qz, rz = divmod(bz + lz, B)
+    return (((qx * nby + qy) * nbz + qz) << _LOCAL_BITS) | face_index(rx, ry, rz, a, B)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def face_index(rx: int, ry: int, rz: int, a: int, B: int) -> int:
     """Index ``0 .. 3 B (2B - 1) - 1`` of an edge on a brick's lower faces: axis ``a``,
     lower end at local sample ``r`` (``r[a] < B``, the other two ``< B`` and one of them
@@ -264,18 +275,11 @@ def _mc_brick(b, bricks, vals, ny1, nz1, edge_origin, edge_axis, tri_table, n_tr
                         s = ((a * n + lx) * n + ly) * n + lz
                         if stamp[s] != b:
                             stamp[s] = b
-                            on_face = ((a != 0 and (lx == 0 or lx == B))
-                                       or (a != 1 and (ly == 0 or ly == B))
-                                       or (a != 2 and (lz == 0 or lz == B)))
+                            key = face_key(bx, by, bz, lx, ly, lz, a, B, nby, nbz)
+                            on_face = key >= 0
                             vid = -1
                             hs = 0
                             if on_face:
-                                # (brick holding the edge's lower end, place in it)
-                                qx, rx = divmod(bx + lx, B)
-                                qy, ry = divmod(by + ly, B)
-                                qz, rz = divmod(bz + lz, B)
-                                key = ((((qx * nby + qy) * nbz + qz) << _LOCAL_BITS)
-                                       | face_index(rx, ry, rz, a, B))
                                 hs = _slot(table, key)
                                 if table[hs, 0] == key:
                                     vid = table[hs, 1]

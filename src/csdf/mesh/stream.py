@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -229,59 +229,49 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
         roots.points(out)
         return roots.pending(base) if len(roots.idx) else None
 
+    # with ``serial`` a pool of workers runs the sampling and the searches; without it,
+    # each job runs on this thread when it is submitted (the same loop, in sequence)
+    pool = _pool() if serial is not None else _Inline()
+    f = serial if serial is not None else values
     starts = range(0, len(bricks), per_chunk)
     ebuf = new_ebuf()
-    if serial is None:
-        for s in starts:
-            chunk = bricks[s:s + per_chunk]
-            vals = _samples(chunk, values, origin, h, dims)
-            table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
-            del vals
-            verts = _room(verts, n_verts, n_new)
-            rest = search(ebuf, n_new, verts[n_verts:n_verts + n_new], n_verts, values)
-            if rest is not None:
-                stragglers.append(rest)
-            n_verts += n_new
-            if progress:
-                progress("samples", s + len(chunk), len(bricks))
-    else:
-        pool = _pool()
-        ahead = {}  # chunk start -> future of its samples
-        searches = []  # futures of the root searches (-> pending roots or None)
-        spare_vals: list = []  # value buffers the kernel is done with
-        spare_ebuf: list = []  # edge buffers whose search is done
+    ahead = {}  # chunk start -> future of its samples
+    searches = []  # futures of the root searches (-> pending roots or None)
+    spare_vals: list | None = [] if serial is not None else None  # buffers done with
+    spare_ebuf: list = []  # edge buffers whose search is done
 
-        def sample(k):
-            if k < len(bricks) and k not in ahead:
-                ahead[k] = pool.submit(_samples, bricks[k:k + per_chunk], serial, origin,
-                                       h, dims, spare_vals)
+    def sample(k):
+        if k < len(bricks) and k not in ahead:
+            ahead[k] = pool.submit(_samples, bricks[k:k + per_chunk], f, origin, h, dims,
+                                   spare_vals)
 
-        def search_owning(ebuf, n_new, out, base):
-            rest = search(ebuf, n_new, out, base, serial)
-            spare_ebuf.append(ebuf)
-            return rest
+    def search_owning(ebuf, n_new, out, base):
+        rest = search(ebuf, n_new, out, base, f)
+        spare_ebuf.append(ebuf)
+        return rest
 
-        for k in starts[:LOOKAHEAD]:
-            sample(k)
-        for s in starts:
-            chunk = bricks[s:s + per_chunk]
-            vals = ahead.pop(s).result()
-            sample(s + LOOKAHEAD * per_chunk)
-            table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
+    for k in starts[:LOOKAHEAD]:
+        sample(k)
+    for s in starts:
+        chunk = bricks[s:s + per_chunk]
+        vals = ahead.pop(s).result()
+        sample(s + LOOKAHEAD * per_chunk)
+        table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
+        if spare_vals is not None:
             spare_vals.append(vals.base)  # (the buffer vals is a view of)
-            del vals
-            if n_verts + n_new > len(verts):  # (searches still running write to verts)
-                stragglers += [r for r in (f.result() for f in searches) if r is not None]
-                searches = []
-                verts = _room(verts, n_verts, n_new)
-            searches.append(pool.submit(search_owning, ebuf, n_new,
-                                        verts[n_verts:n_verts + n_new], n_verts))
-            # (the search owns the old buffers until it is done)
-            ebuf = spare_ebuf.pop() if spare_ebuf else new_ebuf()
-            n_verts += n_new
-            if progress:
-                progress("samples", s + len(chunk), len(bricks))
-        stragglers += [r for r in (f.result() for f in searches) if r is not None]
+        del vals
+        if n_verts + n_new > len(verts):  # (searches still running write to verts)
+            stragglers += [r for r in (j.result() for j in searches) if r is not None]
+            searches = []
+            verts = _room(verts, n_verts, n_new)
+        searches.append(pool.submit(search_owning, ebuf, n_new,
+                                    verts[n_verts:n_verts + n_new], n_verts))
+        # (the search owns the old buffers until it is done)
+        ebuf = spare_ebuf.pop() if spare_ebuf else new_ebuf()
+        n_verts += n_new
+        if progress:
+            progress("samples", s + len(chunk), len(bricks))
+    stragglers += [r for r in (j.result() for j in searches) if r is not None]
     if stragglers:  # the few slow roots (kinks, flat spots) of all chunks together
         rest = _Roots.concat(stragglers)
         rest.run(values, ITERATIONS)
@@ -304,6 +294,16 @@ def _room(verts: np.ndarray, n_verts: int, n_new: int) -> np.ndarray:
 def _pool() -> ThreadPoolExecutor:
     """The mesher's worker threads."""
     return executor("csdf-mesh", WORKERS)
+
+
+class _Inline:
+    """An executor that runs each job on the calling thread when it is submitted."""
+
+    @staticmethod
+    def submit(fn: Callable, *args) -> Future:
+        done: Future = Future()
+        done.set_result(fn(*args))
+        return done
 
 
 def _samples(chunk: np.ndarray, values: Callable, origin: np.ndarray, h: float,

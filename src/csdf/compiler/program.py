@@ -26,15 +26,19 @@ def as_program(shape, what: str):
     """``(Program, Shape or None)`` for a :class:`csdf.Shape` (compiled; cached on the
     shape) or a :class:`Program` (returned as is, with no shape).
 
+    A shape is anything with a ``compile()`` method that returns a :class:`Program`
+    (the compiler does not import the shapes layer).
+
     Raises:
         CsdfError: anything else, as ``"{what} expects a Shape or Program, got T"``.
     """
-    from ..shapes.base import Shape
-
     if isinstance(shape, Program):
         return shape, None
-    if isinstance(shape, Shape):
-        return shape.compile(), shape
+    compile_ = getattr(shape, "compile", None)
+    if callable(compile_) and not isinstance(shape, type):
+        prog = compile_()
+        if isinstance(prog, Program):
+            return prog, shape
     raise CsdfError(f"{what} expects a Shape or Program, got {type(shape).__name__}")
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import CsdfError, ParamError
 from ..expr import Param
+from ..layout import SlotLayout
 from ..ops import CATEGORIES, OPS_BY_CODE
 
 __all__ = ["Program", "Call", "as_program"]
@@ -105,13 +106,18 @@ class Program:
 
     # ------------------------------------------------------------------ layout
     @property
+    def layout(self) -> SlotLayout:
+        """The slot numbering of this program (:class:`csdf.layout.SlotLayout`)."""
+        return SlotLayout(len(self.params), len(self.consts), self.n_regs)
+
+    @property
     def n_fixed(self) -> int:
         """Number of preloaded slots (x, y, z, parameters, constants)."""
-        return 3 + len(self.params) + len(self.consts)
+        return self.layout.n_fixed
 
     @property
     def n_slots(self) -> int:
-        return self.n_fixed + self.n_regs
+        return self.layout.n_slots
 
     def __len__(self) -> int:
         return len(self.code)

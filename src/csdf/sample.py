@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from .errors import CsdfError
+from .field import Field, as_field
 
 __all__ = ["sample_surface", "sample_volume", "MAX_SAMPLES"]
 
@@ -37,14 +38,14 @@ _MIN_NORMAL_COS = 0.99      # the gradient at a point vs. just off it: agreement
 
 
 # ---------------------------------------------------------------------- helpers
-def _program(shape: Any, what: str):
-    """``(Program, Shape or None)`` of a 3D shape or program."""
-    from .compiler.program import as_program
-
-    prog, shp = as_program(shape, what)
-    if prog.dim != 3:
+def _field(shape: Any, what: str, params: dict | None, backend: str, n: int,
+           bounds: Any = None) -> Field:
+    """The :class:`csdf.field.Field` of a 3D shape or program (a point-set job of ``n``
+    points for the backend policy); its bounds follow the field layer's policy."""
+    fld = as_field(shape, params, bounds=bounds, backend=backend, work=n, what=what)
+    if fld.dim != 3:
         raise CsdfError(f"{what} needs a 3D shape; extrude or revolve a 2D shape first")
-    return prog, shp
+    return fld
 
 
 def _count(n: Any, what: str = "n") -> int:
@@ -62,23 +63,6 @@ def _rng(seed: Any) -> np.random.Generator:
         raise CsdfError(f"seed must be None, an integer or a numpy Generator: {exc}") from None
 
 
-def _shape_bounds(prog, shp, params: dict, bounds: Any = None) -> np.ndarray:
-    """``(2, 3)`` bounds: given, else the shape's analytic box, else interval arithmetic."""
-    from .mesh.api import auto_bounds
-
-    if bounds is not None:
-        try:
-            b = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
-        except (TypeError, ValueError):
-            raise CsdfError("bounds must be ((xmin, ymin, zmin), (xmax, ymax, zmax))") from None
-        if not np.all(np.isfinite(b)) or np.any(b[1] <= b[0]):
-            raise CsdfError(f"bounds must be finite with min < max, got {b.tolist()}")
-        return b
-    if shp is not None and shp.bounds is not None and not params:
-        return np.asarray(shp.bounds, dtype=np.float64).reshape(2, 3)
-    return np.asarray(auto_bounds(prog, params), dtype=np.float64)
-
-
 def _resolution(n: int, bounds: np.ndarray) -> int:
     """Mesh resolution (voxels along the longest side) for ``n`` samples.
 
@@ -91,8 +75,7 @@ def _resolution(n: int, bounds: np.ndarray) -> int:
     return int(min(max(res, math.ceil(8 * thin)), 512))
 
 
-def _project(prog, pv: dict, p: np.ndarray, hint: np.ndarray, tol: float, delta: float,
-             backend: str):
+def _project(fld: Field, p: np.ndarray, hint: np.ndarray, tol: float, delta: float):
     """Newton steps onto the zero set along the exact gradient, and unit normals there.
 
     Args:
@@ -119,7 +102,7 @@ def _project(prog, pv: dict, p: np.ndarray, hint: np.ndarray, tol: float, delta:
     for _ in range(_NEWTON_ITERS):
         if len(active) == 0:
             break
-        f, g = prog.value_and_grad(p[active], pv, backend=backend)
+        f, g = fld.value_and_grad(p[active])
         gg = np.einsum("ij,ij->i", g, g)
         with np.errstate(invalid="ignore"):
             done = np.abs(f) <= tol
@@ -134,9 +117,8 @@ def _project(prog, pv: dict, p: np.ndarray, hint: np.ndarray, tol: float, delta:
     if len(sel) == 0:
         return p, normals, ok
     q, h = p[sel], hint[sel]
-    f, g = prog.value_and_grad(q, pv, backend=backend)
-    g_near = prog.gradient(q + delta * h, pv, backend=backend) + \
-        prog.gradient(q - delta * h, pv, backend=backend)
+    f, g = fld.value_and_grad(q)
+    g_near = fld.gradient(q + delta * h) + fld.gradient(q - delta * h)
     norm = np.linalg.norm(g, axis=1)
     norm_near = np.linalg.norm(g_near, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -152,15 +134,15 @@ def _project(prog, pv: dict, p: np.ndarray, hint: np.ndarray, tol: float, delta:
     return p, normals, ok
 
 
-def _surface(prog, n: int, rng: np.random.Generator, pv: dict, bounds: np.ndarray,
-             resolution: int | None, backend: str) -> tuple[np.ndarray, np.ndarray]:
-    """The work of :func:`sample_surface` on validated arguments (``bounds`` (2, 3))."""
+def _surface(fld: Field, n: int, rng: np.random.Generator,
+             resolution: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """The work of :func:`sample_surface` on validated arguments."""
     from .mesh.api import mesh as mesh_fn
 
+    bounds = fld.bounds
     if resolution is None:
         resolution = _resolution(n, bounds)
-    m = mesh_fn(prog, resolution=resolution, bounds=bounds, method="dc", params=pv,
-                progress=False)
+    m = mesh_fn(fld, resolution=resolution, bounds=bounds, method="dc", progress=False)
     verts = np.asarray(m.vertices, dtype=np.float64)
     tris = verts[np.asarray(m.faces, dtype=np.int64)]
     if len(tris) == 0:
@@ -168,7 +150,7 @@ def _surface(prog, n: int, rng: np.random.Generator, pv: dict, bounds: np.ndarra
     voxel = float(m.metadata["csdf"]["voxel_size"])
     # drop triangles away from the zero set: the faces that close a shape cut by the
     # bounds (and any other stray part); first-order distance |f| / |grad f| of centroids
-    f, g = prog.value_and_grad(tris.mean(axis=1), pv, backend=backend)
+    f, g = fld.value_and_grad(tris.mean(axis=1))
     gn = np.linalg.norm(g, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         near = (f == 0) | (np.abs(f) <= _MAX_CENTROID_VOXELS * voxel * gn)
@@ -202,7 +184,7 @@ def _surface(prog, n: int, rng: np.random.Generator, pv: dict, bounds: np.ndarra
         e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
         hint = np.cross(e1, e2)
         hint /= np.maximum(np.linalg.norm(hint, axis=1), 1e-300)[:, None]
-        p, nrm, ok = _project(prog, pv, start, hint, tol, delta, backend)
+        p, nrm, ok = _project(fld, start, hint, tol, delta)
         ok &= np.linalg.norm(p - start, axis=1) <= max_move
         pts_out.append(p[ok])
         nrm_out.append(nrm[ok])
@@ -257,14 +239,12 @@ def sample_surface(
         CsdfError: bad arguments, a 2D shape, an empty shape (no surface found), or
             points that cannot be projected onto the surface.
     """
-    prog, shp = _program(shape, "sample_surface")
     n = _count(n)
+    fld = _field(shape, "sample_surface", params, backend, n)
     rng = _rng(seed)
-    pv = dict(params or {})
-    prog.param_values(pv)  # validates the names now
     if n == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    return _surface(prog, n, rng, pv, _shape_bounds(prog, shp, pv), resolution, backend)
+    return _surface(fld, n, rng, resolution)
 
 
 def sample_volume(
@@ -308,17 +288,15 @@ def sample_volume(
     Raises:
         CsdfError: bad arguments, a 2D shape, or an empty shape.
     """
-    prog, shp = _program(shape, "sample_volume")
     n = _count(n)
+    fld = _field(shape, "sample_volume", params, backend, n, bounds)
     if isinstance(near_surface, bool) or not isinstance(near_surface, (int, float, np.number)):
         raise CsdfError(f"near_surface must be a number in [0, 1], got {near_surface!r}")
     frac = float(near_surface)
     if not 0.0 <= frac <= 1.0:
         raise CsdfError(f"near_surface must be in [0, 1], got {near_surface}")
     rng = _rng(seed)
-    pv = dict(params or {})
-    prog.param_values(pv)
-    b = _shape_bounds(prog, shp, pv, bounds)
+    b = fld.bounds
     ext = b[1] - b[0]
     if sigma is None:
         sig = 0.01 * float(np.linalg.norm(ext))
@@ -331,13 +309,13 @@ def sample_volume(
     n_near = int(round(frac * n))
     parts = []
     if n_near:
-        surf, _ = _surface(prog, n_near, rng, pv, b, None, backend)
+        surf, _ = _surface(fld, n_near, rng, None)
         parts.append(surf + rng.normal(0.0, sig, size=(n_near, 3)) if sig > 0 else surf)
     if n - n_near:
         lo, hi = b[0] - 0.05 * ext, b[1] + 0.05 * ext
         parts.append(lo + (hi - lo) * rng.random((n - n_near, 3)))
     pts = np.concatenate(parts) if parts else np.zeros((0, 3))
     pts = pts[rng.permutation(len(pts))]
-    dist = np.asarray(prog(pts, pv, backend=backend), dtype=np.float64) if len(pts) else \
+    dist = np.asarray(fld.value(pts), dtype=np.float64) if len(pts) else \
         np.zeros(0)
     return pts, dist

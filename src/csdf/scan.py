@@ -15,33 +15,14 @@ import math
 import numpy as np
 
 from .errors import CsdfError
+from .pose import as_pose
 from .render.camera import Camera
-from .render.trace import Field, trace_hits
+from .render.trace import trace_field, trace_hits
 
 __all__ = ["scan", "MIN_COS"]
 
 #: returns with ``|normal . ray| <`` this (grazing incidence, ~87 degrees) are dropped
 MIN_COS = 0.05
-
-
-def _pose(object_pose) -> tuple[np.ndarray, np.ndarray]:
-    if object_pose is None:
-        return np.eye(3), np.zeros(3)
-    try:
-        T = np.asarray(object_pose, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CsdfError("object_pose must be a (4, 4) rigid transform") from None
-    if T.shape != (4, 4):
-        raise CsdfError(f"object_pose must have shape (4, 4), got {T.shape}")
-    if not np.all(np.isfinite(T)):
-        raise CsdfError("object_pose must be finite")
-    R, t = T[:3, :3], T[:3, 3]
-    if np.max(np.abs(T[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-9:
-        raise CsdfError("object_pose's last row must be (0, 0, 0, 1)")
-    if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
-        raise CsdfError("object_pose must be rigid: its 3x3 block must be a rotation "
-                        "(orthonormal, determinant +1)")
-    return R, t
 
 
 def _fraction(v, name: str, hi: float = math.inf) -> float:
@@ -75,9 +56,9 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
             with a random unit normal turned towards the camera.
         seed: seed of ``numpy.random.default_rng`` (an int or a Generator); equal seeds
             give identical clouds.
-        object_pose: ``(4, 4)`` rigid object-to-world transform placing the shape in
-            the world (default identity). Rays are moved into the object's frame; the
-            shape is not rebuilt.
+        object_pose: the rigid object-to-world :class:`csdf.Pose` placing the shape in
+            the world, or its ``(4, 4)`` matrix (default identity). Rays are moved into
+            the object's frame; the shape is not rebuilt.
         params: parameter values ``{name: value}``.
         min_cos: returns whose normal makes ``|n . ray| < min_cos`` are dropped (grazing
             incidence), as are back-facing ones (a camera inside the solid).
@@ -101,14 +82,14 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     noise = _fraction(noise, "noise")
     outliers = _fraction(outliers, "outliers", 1.0)
     min_cos = _fraction(min_cos, "min_cos", 1.0)
-    Rp, tp = _pose(object_pose)
+    pose = as_pose(object_pose, "object_pose", rigid=True)
     rng = np.random.default_rng(seed)
-    fld = Field(shape, params, backend, bounds)
+    fld = trace_field(shape, params, backend, bounds, what="scan")
 
     dcam = cam.pixel_directions()  # (N, 3) unit, camera frame
-    M = Rp.T @ cam.R  # camera frame -> object frame (rotation)
+    M = pose.rotation.T @ cam.R  # camera frame -> object frame (rotation)
     d_obj = dcam @ M.T
-    o_obj = Rp.T @ (cam.t - tp)
+    o_obj = pose.apply_inverse(cam.t)
     t, n_obj, _ = trace_hits(fld, o_obj, d_obj)
     with np.errstate(invalid="ignore"):
         facing = -(n_obj * d_obj).sum(1)

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .compiler.program import as_program
 from .errors import CsdfError
+from .field import Field, as_field
 
 __all__ = ["slice", "save_slice", "slice_values", "AXES", "ZERO_CONTOUR_GID",
            "SLICE_FORMATS"]
@@ -42,24 +42,22 @@ _NAMES = "xyz"
 
 
 
-def _default_extent(prog, shp, axis: str, params: dict) -> tuple[tuple[float, float], ...]:
-    """The shape's bounds in the plane's ``(u, v)`` coordinates, padded by 10%."""
-    from .mesh.api import auto_bounds
-
+def _default_extent(fld: Field, axis: str) -> tuple[tuple[float, float], ...]:
+    """The field's bounds in the plane's ``(u, v)`` coordinates, padded by 10% (a 2D
+    program's prism is taken as deep in z as it is wide in x and y)."""
     _, (iu, iv) = AXES[axis]
-    b = None
-    if shp is not None and shp.bounds is not None and not params:
-        b = np.asarray(shp.bounds, dtype=np.float64)
-    if b is not None and b.shape == (2, 2):  # a 2D shape: its prism; z as wide as xy
-        half = float(np.max(b[1] - b[0])) / 2
-        b = np.column_stack([b, [-half, half]])
-    if b is None:
-        if prog.dim != 3:
-            raise CsdfError("give extent= for a 2D program (its bounds are not known)")
-        try:
-            b = np.asarray(auto_bounds(prog, params), dtype=np.float64)
-        except CsdfError as exc:
-            raise CsdfError(f"cannot find the shape's bounds ({exc}); pass extent=") from None
+    try:
+        if fld.dim == 2:
+            b = fld.planar_bounds
+            half = float(np.max(b[1] - b[0])) / 2
+            b = np.column_stack([b, [-half, half]])
+        else:
+            b = fld.bounds
+    except CsdfError as exc:
+        if fld.dim == 2:
+            raise CsdfError("give extent= for a 2D program (its bounds are not known)"
+                            ) from None
+        raise CsdfError(f"cannot find the shape's bounds ({exc}); pass extent=") from None
     out = []
     for i in (iu, iv):
         lo, hi = float(b[0, i]), float(b[1, i])
@@ -115,10 +113,8 @@ def slice_values(
             not 2 <= resolution <= MAX_SLICE_RESOLUTION:
         raise CsdfError(f"resolution must be an integer in [2, {MAX_SLICE_RESOLUTION}], "
                         f"got {resolution!r}")
-    prog, shp = as_program(shape, "slice")
-    pv = dict(params or {})
-    prog.param_values(pv)
-    ext = _check_extent(_default_extent(prog, shp, axis, pv) if extent is None else extent)
+    fld = as_field(shape, params, what="slice")  # a sweep: one evaluator for the plane
+    ext = _check_extent(_default_extent(fld, axis) if extent is None else extent)
     (u0, u1), (v0, v1) = ext
     su, sv = u1 - u0, v1 - v0
     nu = resolution if su >= sv else max(2, round(resolution * su / sv))
@@ -133,10 +129,10 @@ def slice_values(
     out: dict[str, Any] = {"u": u, "v": v, "axis": axis, "at": float(at), "extent": ext,
                            "labels": (_NAMES[iu], _NAMES[iv])}
     if gradient:
-        f, g = prog.value_and_grad(pts, pv)
+        f, g = fld.value_and_grad(pts)
         out["grad"] = np.asarray(g, dtype=np.float64)
     else:
-        f = prog(pts, pv)
+        f = fld.value(pts)
     out["f"] = np.asarray(f, dtype=np.float64)
     return out
 

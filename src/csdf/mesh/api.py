@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CsdfError
+from ..field import Field, as_field, auto_bounds, check_bounds
 from .extract import Grid, extract
 
 __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_VOXELS"]
@@ -16,50 +17,6 @@ __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_VOXELS"]
 MAX_RESOLUTION = 4096
 _JITTER = np.array([0.3819660112501051, 0.2360679774997897, 0.1458980337503155])  # golden
 MAX_VOXELS = 4096**3
-
-
-def _program(shape):
-    """``(Program, Shape or None)``; a 2D Shape is refused (a 2D Program, an infinite
-    prism, can still be meshed inside given bounds)."""
-    from ..compiler.program import as_program
-
-    prog, shp = as_program(shape, "mesh")
-    if shp is not None and shp.dim != 3:
-        raise CsdfError("mesh needs a 3D shape; extrude or revolve a 2D shape first")
-    return prog, shp
-
-
-def auto_bounds(prog, params: dict | None = None, extent: float = 1e4, rel: float = 1 / 128):
-    """Bounding box ``(2, 3)`` of a program's zero set found by interval arithmetic.
-
-    Cubes of ``[-extent, extent]^3`` are split, keeping every cube whose interval may
-    contain the surface (``lo <= 0 <= hi``), until the cubes are smaller than ``rel``
-    times the box they span; the result is that box, so it contains the whole surface
-    (intervals are conservative) and overshoots it by at most about ``rel``.
-
-    Raises:
-        CsdfError: nothing found, or the surface reaches the search limit (unbounded
-            shapes such as planes need explicit bounds).
-    """
-    from ..backends.interval_eval import evaluate_intervals
-
-    lo = np.full((1, 3), -extent)
-    size = 2.0 * extent
-    offs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
-    for _ in range(60):
-        size /= 2.0
-        lo = (lo[:, None, :] + offs[None] * size).reshape(-1, 3)
-        flo, fhi = evaluate_intervals(prog, lo, lo + size, params=params)
-        lo = lo[(flo <= 0) & (fhi >= 0)]
-        if len(lo) == 0:
-            raise CsdfError(f"the shape has no surface inside +-{extent:g} (empty shape?)")
-        span = (lo + size).max(0) - lo.min(0)
-        if size <= rel * span.max() or len(lo) > 100_000:
-            break
-    b = np.array([lo.min(0), (lo + size).max(0)])
-    if np.any(np.abs(b) >= extent * 0.999):
-        raise CsdfError(f"the shape looks unbounded (it reaches +-{extent:g}); pass bounds=")
-    return b
 
 
 def mesh(
@@ -94,37 +51,18 @@ def mesh(
     """
     import trimesh
 
-    from ..backends.interval_eval import evaluate_intervals
-
-    prog, shp = _program(shape)
     if method not in ("mc", "dc"):
         raise CsdfError(f"method must be 'mc' or 'dc', got {method!r}")
     if resolution is not None and voxel_size is not None:
         raise CsdfError("give resolution or voxel_size, not both")
-    pv = dict(params or {})
-    prog.param_values(pv)  # validates names now
-    if bounds is None:
-        known = shp.bounds if shp is not None and shp.bounds is not None else None
-        if known is not None and not np.all(np.isfinite(known)):
-            known = None
-        b = known if not pv else None
-        if b is None:
-            try:
-                b = auto_bounds(prog, pv)
-            except CsdfError:
-                # interval arithmetic can be too loose to find the box (polygons' winding
-                # sign, blends); a shape's own bounds hold for every parameter value
-                # inside the declared ranges, so use them when the given values are
-                if known is None or not _in_ranges(prog, pv):
-                    raise
-                b = known
-    else:
-        try:
-            b = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
-        except ValueError:
-            raise CsdfError("bounds must be ((xmin, ymin, zmin), (xmax, ymax, zmax))") from None
-        if not np.all(np.isfinite(b)) or np.any(b[1] <= b[0]):
-            raise CsdfError(f"bounds must be finite with min < max, got {b.tolist()}")
+    # a sweep (csdf.field): one evaluator for the whole mesh, since a sample shared by
+    # two bricks must get the same value (and sign) whichever chunk evaluates it
+    fld = as_field(shape, params, what="mesh")
+    if fld.shape is not None and fld.shape.dim != 3:
+        raise CsdfError("mesh needs a 3D shape; extrude or revolve a 2D shape first")
+    if bounds is not None:
+        fld = Field(fld, bounds=check_bounds(bounds))
+    b = fld.bounds
     extent = b[1] - b[0]
     if voxel_size is not None:
         h = float(voxel_size)
@@ -147,36 +85,30 @@ def mesh(
         )
     grid = Grid(origin=origin, h=h, dims=dims)
 
-    # one backend for the whole mesh: a sample shared by two bricks must get the same
-    # value (and sign) whichever chunk evaluates it; backends differ in the last bits
-    from ..backends import fast
-
-    backend = "fast" if fast.available() else "numpy"
-
     def values(p):
-        return prog(p, pv, backend=backend)
+        return fld.value(p)
 
     def gradients(p):
-        return prog.gradient(p, pv, backend=backend)
+        return fld.gradient(p)
 
     def intervals(lo, hi):
-        return evaluate_intervals(prog, lo, hi, params=pv)
+        return fld.intervals(lo, hi)
 
     t0 = time.perf_counter()
     reporter = _Progress() if progress else None
     try:
-        if backend == "fast":
+        serial = fld.serial_values()
+        if serial is not None:
             # compiled, streamed over the octree's bricks (same results, see stream.py)
             from .stream import extract_dc, extract_mc
 
             update = reporter.update if reporter else None
-            serial = fast.serial_values(prog, prog.param_values(pv))
             if method == "mc":
                 verts, faces = extract_mc(grid, values, intervals, update, serial=serial)
             else:
                 verts, faces = extract_dc(
                     grid, values, gradients, intervals, update, serial=serial,
-                    values_and_gradients=lambda p: prog.value_and_grad(p, pv, backend=backend))
+                    values_and_gradients=fld.value_and_grad)
         else:
             verts, faces = extract(grid, values, gradients, intervals, method,
                                    reporter.update if reporter else None)
@@ -188,13 +120,6 @@ def mesh(
         "method": method, "voxel_size": h, "dims": dims, "seconds": time.perf_counter() - t0,
     }
     return m
-
-
-def _in_ranges(prog, pv: dict) -> bool:
-    """Every given parameter value lies inside its declared range (both ends finite)."""
-    decl = {p.name: p for p in prog.params}
-    return all(math.isfinite(decl[k].lo) and math.isfinite(decl[k].hi)
-               and decl[k].lo <= float(v) <= decl[k].hi for k, v in pv.items())
 
 
 class _Progress:

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CsdfError
+from ..field import Field
 from .camera import Camera
-from .trace import Field, trace_hits
+from .trace import trace_field, trace_frame, trace_hits
 
 __all__ = ["Render", "render", "auto_camera", "ALBEDO", "BACKGROUND"]
 
@@ -83,19 +84,20 @@ def _soft_shadow(fld: Field, p: np.ndarray, light: np.ndarray, steps: int = 64,
     from .trace import ray_box
 
     L = fld.lipschitz if math.isfinite(fld.lipschitz) else 2.0
+    frame = trace_frame(fld)
     res = np.ones(len(p))
     dirs = np.broadcast_to(light, p.shape)
-    _, t1 = ray_box(p, dirs, fld.box)
-    t = np.full(len(p), 2e-3 * fld.scale)
+    _, t1 = ray_box(p, dirs, frame.box)
+    t = np.full(len(p), 2e-3 * frame.scale)
     idx = np.arange(len(p))
-    lo, hi = 2e-3 * fld.scale, 0.1 * fld.scale
+    lo, hi = 2e-3 * frame.scale, 0.1 * frame.scale
     for _ in range(steps):
         if idx.size == 0:
             break
         r = fld.value(p[idx] + t[idx, None] * light) / L
         res[idx] = np.minimum(res[idx], k * r / t[idx])
         t[idx] += np.clip(r, lo, hi)
-        keep = (r > 1e-4 * fld.scale) & (t[idx] < t1[idx])
+        keep = (r > 1e-4 * frame.scale) & (t[idx] < t1[idx])
         idx = idx[keep]
     res = np.clip(res, 0.0, 1.0)
     return res * res * (3.0 - 2.0 * res)
@@ -107,11 +109,12 @@ def _ambient_occlusion(fld: Field, p: np.ndarray, n: np.ndarray,
     normals ``n`` ``(M, 3)`` at distances up to 6 % of the scene size (``L = inf``:
     assumes ``L = 2``)."""
     L = fld.lipschitz if math.isfinite(fld.lipschitz) else 2.0
+    scale = trace_frame(fld).scale
     occ = np.zeros(len(p))
     w = 1.0
     total = 0.0
     for i in range(1, samples + 1):
-        h = fld.scale * 0.06 * i / samples
+        h = scale * 0.06 * i / samples
         r = fld.value(p + h * n) / L
         occ += w * np.clip(h - r, 0.0, h) / h
         total += w
@@ -138,7 +141,8 @@ def _shade(fld: Field, cam: Camera, p: np.ndarray, n: np.ndarray, dirs: np.ndarr
         lit = ndl > 0
         sh = np.zeros(len(p))
         if lit.any():
-            sh[lit] = _soft_shadow(fld, p[lit] + n[lit] * (1e-3 * fld.scale), light)
+            sh[lit] = _soft_shadow(fld, p[lit] + n[lit] * (1e-3 * trace_frame(fld).scale),
+                                   light)
         ndl = ndl * sh
     # a faint rim from the view direction keeps silhouettes of dark sides readable
     rim = 0.08 * np.clip(1.0 + (n * dirs).sum(1), 0.0, 1.0) ** 3
@@ -175,7 +179,7 @@ def auto_camera(shape, width: int = 640, height: int = 480, fov: float = 40.0, *
     from .camera import _vector, check_resolution
 
     w, h = check_resolution(width, height)
-    b = Field(shape, params, "numpy", bounds).bounds
+    b = trace_field(shape, params, "numpy", bounds).bounds
     centre = 0.5 * (b[0] + b[1])
     tgt = centre if target is None else _vector(target, "target")
     if eye is None:
@@ -233,7 +237,7 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     h = camera.height if height is None else height
     cam = camera.scaled(w, h)
     t_start = time.perf_counter()
-    fld = Field(shape, params, backend, bounds)
+    fld = trace_field(shape, params, backend, bounds)
     dcam = cam.pixel_directions()
     dirs = dcam @ cam.R.T
     t, normals, stats = trace_hits(fld, cam.t, dirs)

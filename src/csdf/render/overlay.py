@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compiler.program import as_program
 from ..errors import CsdfError
 from .image import auto_camera, render
-from .trace import Field
+from .trace import trace_field
 
 __all__ = ["fit_overlay"]
 
@@ -51,10 +50,11 @@ def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
     t = np.asarray(result.translation, dtype=np.float64)
     q = (pts - t) @ R / s  # object frame: q = R^T (p - t) / s
     params = dict(result.params)
-    prog, _ = as_program(shape, "fit_overlay")
+    fld = trace_field(shape, params, "numpy", what="fit_overlay")
+    prog = fld.program
     # frame the model and the points (their 1-99 % box: a few outliers far away must not
     # shrink the view to nothing)
-    box = Field(prog, params, "numpy", None).bounds
+    box = fld.bounds
     if len(q):
         lo, hi = np.percentile(q, 1, axis=0), np.percentile(q, 99, axis=0)
         box = np.stack([np.minimum(box[0], lo), np.maximum(box[1], hi)])

@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CsdfError
+from ..field import Field, as_field
 
 try:
     from numba import njit
@@ -60,8 +61,8 @@ except Exception:  # pragma: no cover - numba is a dependency; plain Python then
         """Stand-in for ``numba.njit`` that returns the function unchanged."""
         return lambda fn: fn
 
-__all__ = ["Field", "TraceResult", "sphere_trace", "ray_box", "trace_hits", "EPS_REL",
-           "OMEGA", "MAX_ITER", "CHUNK"]
+__all__ = ["Field", "TraceResult", "TraceFrame", "sphere_trace", "ray_box", "trace_hits",
+           "trace_field", "trace_frame", "EPS_REL", "OMEGA", "MAX_ITER", "CHUNK"]
 
 #: hit tolerance relative to the bounding-box diagonal
 EPS_REL = 1e-4
@@ -80,119 +81,49 @@ NORMAL_BACKOFF = 1e-7
 PAD_REL = 1e-3
 
 
-def _program(shape):
-    """``(Program, Shape or None)``; a 2D Shape is refused (a 2D Program renders as an
-    infinite prism inside given bounds)."""
-    from ..compiler.program import as_program
-
-    prog, shp = as_program(shape, "rendering")
-    if shp is not None and shp.dim != 3:
-        raise CsdfError("rendering needs a 3D shape; extrude or revolve a 2D shape first")
-    return prog, shp
-
-
-def _shape_bounds_valid(shape, prog, params: dict) -> bool:
-    """``shape.bounds`` hold for the given parameter values: each value lies in its
-    parameter's finite ``[lo, hi]`` (see :mod:`csdf.shapes.base`)."""
-    if shape is None or shape.bounds is None:
-        return False
-    if not params:
-        return True
-    by_name = {p.name: p for p in prog.params}
-    for name, v in params.items():
-        p = by_name[name]
-        lo, hi = float(p.lo), float(p.hi)
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo <= float(v) <= hi):
-            return False
-    return True
+def trace_field(shape, params: dict | None = None, backend: str = "auto", bounds=None,
+                what: str = "rendering") -> Field:
+    """The :class:`csdf.field.Field` a tracer runs on (a sweep: one evaluator for every
+    ray); a 2D Shape is refused (a 2D Program renders as an infinite prism inside given
+    bounds), as is a field whose Lipschitz bound is not positive."""
+    fld = as_field(shape, params, backend=backend, bounds=bounds, what=what)
+    if fld.shape is not None and fld.shape.dim != 3:
+        raise CsdfError(f"{what} needs a 3D shape; extrude or revolve a 2D shape first")
+    if not fld.lipschitz > 0:
+        raise CsdfError(f"the program's Lipschitz bound must be positive, got "
+                        f"{fld.lipschitz}")
+    return fld
 
 
-class Field:
-    """A compiled program with parameter values, bounds and a backend, for tracing.
-
-    Args:
-        shape: a :class:`csdf.Shape` (3D) or :class:`csdf.Program`.
-        params: ``{name: value}`` parameter values (validated now).
-        backend: ``'auto'`` (the fast Numba backend when Numba is available, falling
-            back to ``'interp'`` if its kernel cannot be built), or any backend name.
-        bounds: ``(2, 3)`` box that contains the surface (model units); default the
-            shape's analytic box when it holds for ``params``, else one found by interval
-            arithmetic (:func:`csdf.mesh.api.auto_bounds`).
+@dataclass(frozen=True)
+class TraceFrame:
+    """Where and how finely a field is traced.
 
     Attributes:
-        prog: the :class:`csdf.Program`; lipschitz: its gradient bound ``L`` (may be inf).
-        box: ``(2, 3)`` padded tracing box; scale: diagonal of the unpadded box;
-        eps: hit tolerance (model units).
+        box: ``(2, 3)`` the field's bounds padded by :data:`PAD_REL` of their diagonal
+            (rays start where they enter it and stop where they leave).
+        scale: diagonal of the unpadded bounds (model units).
+        eps: hit tolerance, :data:`EPS_REL` times ``scale``.
     """
 
-    def __init__(self, shape, params: dict | None = None, backend: str = "auto", bounds=None):
-        from ..backends import BACKENDS
+    box: np.ndarray
+    scale: float
+    eps: float
 
-        self.prog, shp = _program(shape)
-        self.params = dict(params or {})
-        self.prog.param_values(self.params)  # validates names and values
-        if backend not in BACKENDS:
-            raise CsdfError(f"backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
-        self._auto = backend == "auto"
-        if self._auto:
-            from ..backends import fast
 
-            backend = "fast" if fast.available() else "auto"
-        self.backend = backend
-        self.lipschitz = float(self.prog.lipschitz)
-        if not self.lipschitz > 0:
-            raise CsdfError(f"the program's Lipschitz bound must be positive, got "
-                            f"{self.lipschitz}")
-        if bounds is not None:
-            try:
-                b = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
-            except (TypeError, ValueError):
-                raise CsdfError("bounds must be ((xmin, ymin, zmin), (xmax, ymax, zmax))"
-                                ) from None
-            if not np.all(np.isfinite(b)) or np.any(b[1] <= b[0]):
-                raise CsdfError(f"bounds must be finite with min < max, got {b.tolist()}")
-        elif _shape_bounds_valid(shp, self.prog, self.params):
-            b = np.asarray(shp.bounds, dtype=np.float64)
-        else:
-            from ..mesh.api import auto_bounds
+def trace_frame(field: Field) -> TraceFrame:
+    """The :class:`TraceFrame` of a field (from its bounds).
 
-            b = auto_bounds(self.prog, self.params)
-        if not np.all(np.isfinite(b)):
-            raise CsdfError("the shape is unbounded; pass bounds=((x0, y0, z0), (x1, y1, z1))")
-        self.bounds = b
-        self.scale = float(np.linalg.norm(b[1] - b[0]))
-        if not self.scale > 0:
-            raise CsdfError("the shape's bounding box is empty")
-        pad = PAD_REL * self.scale
-        self.box = np.array([b[0] - pad, b[1] + pad])
-        self.eps = EPS_REL * self.scale
-
-    def _eval(self, method: str, p: np.ndarray):
-        fn = getattr(self.prog, method)
-        try:
-            return fn(p, self.params, backend=self.backend)
-        except CsdfError:
-            raise
-        except Exception:  # a kernel the fast backend cannot build: same values elsewhere
-            if not self._auto or self.backend != "fast":
-                raise
-            self.backend = "interp"
-            return fn(p, self.params, backend=self.backend)
-
-    def value(self, p: np.ndarray) -> np.ndarray:
-        """Field values ``(N,)`` at points ``(N, 3)``."""
-        return self._eval("__call__", p)
-
-    def value_and_grad(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(values (N,), exact gradients (N, 3))`` at points ``(N, 3)``."""
-        return self._eval("value_and_grad", p)
-
-    def intervals(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Conservative bounds ``(flo (M,), fhi (M,))`` of the field over boxes
-        ``[lo, hi]`` (each ``(M, 3)``)."""
-        from ..backends.interval_eval import evaluate_intervals
-
-        return evaluate_intervals(self.prog, lo, hi, params=self.params)
+    Raises:
+        CsdfError: no bounds (an unbounded shape without ``bounds=``) or an empty box.
+    """
+    b = field.bounds
+    scale = float(np.linalg.norm(b[1] - b[0]))
+    if not scale > 0:
+        raise CsdfError("the shape's bounding box is empty")
+    pad = PAD_REL * scale
+    return TraceFrame(box=np.array([b[0] - pad, b[1] + pad]), scale=scale,
+                      eps=EPS_REL * scale)
 
 
 @dataclass
@@ -396,8 +327,8 @@ def _illinois(m, act, fm, ta, tb, fa, fb, side, tm, tol):  # pragma: no cover
     return k
 
 
-def _certified_steps(field: Field, o: np.ndarray, d: np.ndarray, ts: np.ndarray,
-                     s: np.ndarray) -> np.ndarray:
+def _certified_steps(field: Field, eps: float, o: np.ndarray, d: np.ndarray,
+                     ts: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Shorten candidate steps ``s`` (``(n,)``) from ``o + ts d`` (``o`` ``(n, 3)`` or
     ``(1, 3)``) until interval arithmetic proves the field positive on the segment's box
     (at most 4 quarterings; then the step is taken anyway). Used when the Lipschitz bound
@@ -415,15 +346,15 @@ def _certified_steps(field: Field, o: np.ndarray, d: np.ndarray, ts: np.ndarray,
         s[todo] *= 0.25
     if todo.size:
         s[todo] *= 4.0  # undo the last quartering: the step is taken uncertified
-    return np.maximum(s, field.eps)
+    return np.maximum(s, eps)
 
 
-def _refine(field: Field, o: np.ndarray, d: np.ndarray, ta: np.ndarray, tb: np.ndarray,
-            fa: np.ndarray, fb: np.ndarray) -> tuple[np.ndarray, int]:
+def _refine(field: Field, scale: float, o: np.ndarray, d: np.ndarray, ta: np.ndarray,
+            tb: np.ndarray, fa: np.ndarray, fb: np.ndarray) -> tuple[np.ndarray, int]:
     """Roots of ``f(o + t d)`` in brackets ``[ta, tb]`` (``fa > 0 >= fb``), all ``(m,)``
     (``o``, ``d`` ``(m, 3)``), by the Illinois variant of regula falsi, to
     :data:`REFINE_REL` of the scene size; returns ``(t (m,), evaluations)``."""
-    tol = REFINE_REL * field.scale
+    tol = REFINE_REL * scale
     ta, tb, fa, fb = ta.copy(), tb.copy(), fa.copy(), fb.copy()
     closed = fb == 0.0
     ta[closed] = tb[closed]
@@ -476,9 +407,10 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
     if not (np.all(np.isfinite(dirs)) and np.all(np.isfinite(origins))):
         raise CsdfError("ray origins and directions must be finite")
     n = len(dirs)
+    frame = trace_frame(field)
     L = field.lipschitz
     finite_L = math.isfinite(L)
-    eps = field.eps
+    eps = frame.eps
     t_out = np.full(n, np.inf)
     br = np.zeros(n, dtype=bool)
     br_ta, br_tb, br_fa, br_fb = (np.empty(n) for _ in range(4))
@@ -488,7 +420,7 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
     t = np.empty(n)
     tmax = np.empty(n)
     pts = np.empty((n, 3))
-    m = _start(origins, shared, dirs, field.box, float(t_near), idx, o, d, t, tmax, pts)
+    m = _start(origins, shared, dirs, frame.box, float(t_near), idx, o, d, t, tmax, pts)
     ts = t.copy()  # the last safe point of each ray
     rs = np.full(n, -1.0)  # its unbounding radius (-1: none yet)
     step = np.zeros(n)  # the step taken from ts to t
@@ -509,7 +441,7 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
             far = np.flatnonzero(step[:m] > eps)
             if far.size:
                 oo = o if shared else o[far]
-                s = _certified_steps(field, oo, d[far], ts[far], step[far])
+                s = _certified_steps(field, eps, oo, d[far], ts[far], step[far])
                 step[far] = s
                 t[far] = ts[far] + s
                 pts[far] = (o[0] if shared else o[far]) + t[far, None] * d[far]
@@ -519,7 +451,7 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
     bi = np.flatnonzero(br)
     if bi.size:
         ob = np.broadcast_to(origins[0], (bi.size, 3)) if shared else origins[bi]
-        troot, e = _refine(field, np.ascontiguousarray(ob), dirs[bi], br_ta[bi],
+        troot, e = _refine(field, frame.scale, np.ascontiguousarray(ob), dirs[bi], br_ta[bi],
                            br_tb[bi], br_fa[bi], br_fb[bi])
         t_out[bi] = troot
         evals += e
@@ -560,7 +492,7 @@ def trace_hits(field: Field, origins: np.ndarray, dirs: np.ndarray, *, t_near: f
         # the gradient is taken NORMAL_BACKOFF (relative) before the hit, on the outside:
         # exactly on the surface, fields built from kinks that meet there (a box's
         # ``|max(q, 0)| + min(max(q), 0)``) may give a one-sided gradient of zero
-        tn = t[hit] - NORMAL_BACKOFF * field.scale
+        tn = t[hit] - NORMAL_BACKOFF * trace_frame(field).scale
         p = (origins if shared else origins[hit]) + tn[:, None] * dirs[hit]
         _, g = field.value_and_grad(p)
         stats["evaluations"] += hit.size

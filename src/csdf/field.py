@@ -1,0 +1,449 @@
+"""The field layer: what every consumer stands on.
+
+A :class:`Field` is one signed distance field ready to use: a compiled
+:class:`~csdf.Program`, parameter values, a bounding box, a pose in the world and an
+evaluator. Consumers (meshing, rendering, scanning, sampling, slicing, fitting, the
+editor's server, the command line) take their inputs through :func:`as_field`, and so
+share one answer to each of the questions they all have:
+
+**Which box holds the surface?** (:func:`field_bounds`, the one bounds policy)
+    1. the ``bounds=`` the caller gave (validated: finite, ``min < max``);
+    2. else the program's own box (from its shape; it holds for every parameter value
+       inside the declared ranges) when no parameter values are given;
+    3. else a box found by interval arithmetic for the given values
+       (:func:`auto_bounds`: tighter than the program's when values are given);
+    4. where interval arithmetic is too loose to find one (polygons' winding sign,
+       blends), the program's box when every given value lies inside its parameter's
+       finite range;
+    5. else :class:`~csdf.CsdfError` (an unbounded shape needs ``bounds=``).
+
+**Which evaluator?** (:func:`choose_backend`, the one ``'auto'`` policy)
+    A named backend is used as given. ``'auto'`` gives the compiled ``'fast'`` backend
+    when Numba is available and the job is a sweep (``work=None``: meshing, rendering,
+    scanning, slicing, which evaluate one field on many points and need every value of
+    it from the same evaluator) or a point set of at least :data:`AUTO_FAST_POINTS`
+    points; otherwise ``'auto'`` stays, and each call picks its evaluator by its size
+    (:func:`csdf.backends.select`). Without Numba every job runs on ``'numpy'``. A
+    field whose ``'fast'`` kernel cannot be built falls back to ``'interp'`` (same
+    values).
+
+**Where is the object?** (:class:`~csdf.Pose`)
+    A field with a pose ``p = s R q + t`` is evaluated at world points: its value is
+    ``s f(q)``, its gradient ``R grad f(q)``, its parameter derivatives ``s df/dk``,
+    its intervals those of the object-frame box around the world box, times ``s``;
+    exactness and the Lipschitz bound are unchanged.
+
+Only this module and :mod:`csdf.backends` name evaluator modules; consumers ask a field.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .backends import BACKENDS
+from .backends import fast as _fast_backend
+from .backends.glsl import glsl_float, glsl_params, shadertoy, to_glsl
+from .backends.interval_eval import evaluate_intervals
+from .compiler.program import Program, as_program
+from .errors import CsdfError
+from .pose import as_pose
+
+__all__ = [
+    "Field", "as_field", "field_bounds", "planar_bounds", "auto_bounds", "choose_backend",
+    "check_bounds", "params_in_ranges", "AUTO_FAST_POINTS", "to_glsl", "shadertoy", "glsl_params",
+    "glsl_float", "numba_available",
+]
+
+#: point sets at least this large get the compiled backend under ``'auto'``
+AUTO_FAST_POINTS = 2000
+
+
+# ---------------------------------------------------------------------- backend policy
+def numba_available() -> bool:
+    """True when the compiled (Numba) evaluators can run on this machine."""
+    return bool(_fast_backend.available())
+
+
+def choose_backend(backend: str = "auto", work: int | None = None) -> str:
+    """The evaluator for a job (see the module docs).
+
+    Args:
+        backend: ``'auto'`` or a backend name (:data:`csdf.backends.BACKENDS`).
+        work: ``None`` for a sweep (many evaluations of one field, which must agree
+            with each other), else the number of points of a point-set job.
+
+    Returns:
+        ``'fast'``, ``'numpy'``, or ``'auto'`` (per-call choice) for small point sets.
+
+    Raises:
+        CsdfError: an unknown backend name.
+    """
+    if backend not in BACKENDS:
+        raise CsdfError(f"backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
+    if backend != "auto":
+        return backend
+    if not numba_available():
+        return "numpy"
+    if work is None or work >= AUTO_FAST_POINTS:
+        return "fast"
+    return "auto"
+
+
+# ---------------------------------------------------------------------- bounds policy
+def check_bounds(bounds: Any, dim: int = 3, what: str = "bounds") -> np.ndarray:
+    """Validate a user's box: ``(2, dim)`` float64, finite, ``min < max``.
+
+    Raises:
+        CsdfError: another shape, non-finite values or an empty box.
+    """
+    names = "((xmin, ymin, zmin), (xmax, ymax, zmax))" if dim == 3 else \
+        "((xmin, ymin), (xmax, ymax))"
+    try:
+        b = np.asarray(bounds, dtype=np.float64).reshape(2, dim)
+    except (TypeError, ValueError):
+        raise CsdfError(f"{what} must be {names}") from None
+    if not np.all(np.isfinite(b)) or np.any(b[1] <= b[0]):
+        raise CsdfError(f"{what} must be finite with min < max, got {b.tolist()}")
+    return b
+
+
+def params_in_ranges(prog: Program, params: Mapping[str, float] | None) -> bool:
+    """Every given parameter value lies inside its declared range (both ends finite):
+    then a program's own box holds for these values (see :mod:`csdf.shapes.base`)."""
+    decl = {p.name: p for p in prog.params}
+    for name, v in (params or {}).items():
+        p = decl.get(name)
+        if p is None:
+            return False
+        lo, hi = float(p.lo), float(p.hi)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo <= float(v) <= hi):
+            return False
+    return True
+
+
+def auto_bounds(prog: Program, params: Mapping[str, float] | None = None,
+                extent: float = 1e4, rel: float = 1 / 128) -> np.ndarray:
+    """Bounding box ``(2, 3)`` of a program's zero set found by interval arithmetic.
+
+    Cubes of ``[-extent, extent]^3`` are split, keeping every cube whose interval may
+    contain the surface (``lo <= 0 <= hi``), until the cubes are smaller than ``rel``
+    times the box they span; the result is that box, so it contains the whole surface
+    (intervals are conservative) and overshoots it by at most about ``rel``.
+
+    Raises:
+        CsdfError: nothing found, or the surface reaches the search limit (unbounded
+            shapes such as planes need explicit bounds).
+    """
+    lo = np.full((1, 3), -extent)
+    size = 2.0 * extent
+    offs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
+    for _ in range(60):
+        size /= 2.0
+        lo = (lo[:, None, :] + offs[None] * size).reshape(-1, 3)
+        flo, fhi = evaluate_intervals(prog, lo, lo + size, params=params)
+        lo = lo[(flo <= 0) & (fhi >= 0)]
+        if len(lo) == 0:
+            raise CsdfError(f"the shape has no surface inside +-{extent:g} (empty shape?)")
+        span = (lo + size).max(0) - lo.min(0)
+        if size <= rel * span.max() or len(lo) > 100_000:
+            break
+    b = np.array([lo.min(0), (lo + size).max(0)])
+    if np.any(np.abs(b) >= extent * 0.999):
+        raise CsdfError(f"the shape looks unbounded (it reaches +-{extent:g}); pass bounds=")
+    return b
+
+
+def _own_bounds(prog: Program, shape: Any = None) -> np.ndarray | None:
+    """The program's (or its shape's) analytic box when finite, else None."""
+    b = getattr(prog, "bounds", None)
+    if b is None and shape is not None:
+        b = getattr(shape, "bounds", None)
+    if b is None:
+        return None
+    b = np.asarray(b, dtype=np.float64)
+    return b if np.all(np.isfinite(b)) else None
+
+
+def field_bounds(prog: Program, params: Mapping[str, float] | None = None, bounds: Any = None,
+                 *, shape: Any = None) -> np.ndarray:
+    """The object-frame box ``(2, 3)`` holding the surface, by the one bounds policy
+    (module docs). ``shape`` supplies the analytic box of programs compiled without
+    one.
+
+    A 2D program is evaluated in 3D as its infinite prism, so it has a box only when
+    ``bounds`` are given (:func:`planar_bounds` gives its box in the plane).
+
+    Raises:
+        CsdfError: bad ``bounds``, or no box could be found (an unbounded shape, or a
+            2D program without ``bounds``).
+    """
+    if bounds is not None:
+        return check_bounds(bounds)
+    if prog.dim != 3:
+        raise CsdfError("a 2D program is an infinite prism in 3D; pass bounds=")
+    own = _own_bounds(prog, shape)
+    pv = dict(params or {})
+    if own is not None and not pv:
+        return own
+    try:
+        return auto_bounds(prog, pv)
+    except CsdfError:
+        # interval arithmetic can be too loose to find the box (polygons' winding sign,
+        # blends); a program's own box holds for every value inside the declared ranges
+        if own is None or not params_in_ranges(prog, pv):
+            raise
+        return own
+
+
+def planar_bounds(prog: Program, params: Mapping[str, float] | None = None, *,
+                  shape: Any = None) -> np.ndarray:
+    """The ``(2, 2)`` box in the xy plane of a 2D program's zero set: its own box when
+    no parameter values are given or all lie inside their finite ranges.
+
+    Raises:
+        CsdfError: a 3D program, or no box is known.
+    """
+    if prog.dim != 2:
+        raise CsdfError("planar_bounds needs a 2D program")
+    own = _own_bounds(prog, shape)
+    if own is None or not params_in_ranges(prog, params):
+        raise CsdfError("the bounds of this 2D program are not known; pass an extent")
+    return own
+
+
+# ---------------------------------------------------------------------- the field
+class Field:
+    """A signed distance field ready to evaluate: program, parameter values, bounds,
+    pose and evaluator (see the module docs for the policies).
+
+    Args:
+        model: a :class:`csdf.Shape`, a :class:`csdf.Program` or another Field (whose
+            program, and unless given here, parameters, bounds, pose and backend, are
+            kept).
+        params: ``{name: value}`` parameter values (validated now; others at their
+            defaults).
+        backend: ``'auto'`` or a backend name (:func:`choose_backend`).
+        bounds: ``(2, 3)`` object-frame box holding the surface (default: the bounds
+            policy, found when first asked for).
+        pose: where the object is in the world (a :class:`csdf.Pose`, a ``(4, 4)``
+            similarity matrix, or None for the identity).
+        work: the job's size for the ``'auto'`` policy: None for a sweep, else the
+            number of points.
+
+    Attributes:
+        program: the :class:`csdf.Program`; shape: the :class:`csdf.Shape` it was
+            compiled from, or None; params: the given values ``{name: value}``;
+            pvals: ``(P,)`` float64 all parameter values in program order; pose: the
+            :class:`csdf.Pose`; backend: the resolved evaluator name.
+
+    Raises:
+        CsdfError: not a shape or program, unknown parameters, a bad pose, backend or
+            box.
+    """
+
+    def __init__(self, model: Any, params: Mapping[str, float] | None = None,
+                 backend: str = "auto", bounds: Any = None, *, pose: Any = None,
+                 work: int | None = None):
+        if isinstance(model, Field):
+            base = model
+            self.program, self.shape = base.program, base.shape
+            merged = dict(base.params)
+            merged.update(params or {})
+            params = merged
+            pose = base.pose if pose is None else pose
+            if bounds is None and base._bounds_given is not None:
+                bounds = base._bounds_given
+        else:
+            self.program, self.shape = as_program(model, "field")
+        self.params = dict(params or {})
+        self.pvals = self.program.param_values(self.params)  # validates names and values
+        self.pose = as_pose(pose, "pose")
+        if self.program.dim != 3 and not self.pose.is_identity():
+            raise CsdfError("a 2D program cannot be posed in 3D; extrude or revolve it")
+        self._auto = backend == "auto"
+        self.backend = choose_backend(backend, work)
+        self._bounds_given = None if bounds is None else check_bounds(bounds)
+        self._model_bounds: np.ndarray | None = self._bounds_given
+
+    # ------------------------------------------------------------------ metadata
+    @property
+    def dim(self) -> int:
+        """3, or 2 for a planar program (evaluated as its infinite prism)."""
+        return self.program.dim
+
+    @property
+    def exactness(self) -> str:
+        """``'exact' | 'bound' | 'neither'`` (a similarity pose keeps it)."""
+        return self.program.exactness
+
+    @property
+    def lipschitz(self) -> float:
+        """Upper bound of ``|grad f|`` (may be inf; a similarity pose keeps it)."""
+        return float(self.program.lipschitz)
+
+    @property
+    def param_names(self) -> list[str]:
+        return self.program.param_names
+
+    @property
+    def model_bounds(self) -> np.ndarray:
+        """``(2, 3)`` box of the surface in the object frame (bounds policy; found on
+        first use and kept).
+
+        Raises:
+            CsdfError: no box can be found (pass ``bounds=``).
+        """
+        if self._model_bounds is None:
+            self._model_bounds = field_bounds(self.program, self.params, shape=self.shape)
+        return self._model_bounds
+
+    @property
+    def planar_bounds(self) -> np.ndarray:
+        """``(2, 2)`` xy box of a 2D program's zero set (:func:`planar_bounds`)."""
+        return planar_bounds(self.program, self.params, shape=self.shape)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """``(2, 3)`` box of the surface in the world frame (the object-frame box's
+        corners mapped by the pose, when there is one)."""
+        b = self.model_bounds
+        return b if self.pose.is_identity() else self.pose.apply_box(b)
+
+    @property
+    def diagonal(self) -> float:
+        """Length of the diagonal of :attr:`bounds` (world units): the field's scale."""
+        b = self.bounds
+        return float(np.linalg.norm(b[1] - b[0]))
+
+    def replace(self, *, params: Mapping[str, float] | None = None, pose: Any = None,
+                bounds: Any = None, backend: str | None = None) -> Field:
+        """A new field with some of its inputs changed (parameters are merged)."""
+        out = Field(self, params, self.backend if backend is None else backend, bounds,
+                    pose=pose)
+        out._auto = self._auto if backend is None else backend == "auto"
+        return out
+
+    def __repr__(self) -> str:
+        return (f"<Field {len(self.program)} instructions, params={self.params}, "
+                f"backend={self.backend!r}, {self.pose!r}>")
+
+    # ------------------------------------------------------------------ evaluation
+    def _call(self, method: str, p: np.ndarray):
+        fn = getattr(self.program, method)
+        try:
+            return fn(p, self.params, backend=self.backend)
+        except CsdfError:
+            raise
+        except Exception:  # a kernel the fast backend cannot build: same values elsewhere
+            if not self._auto or self.backend != "fast":
+                raise
+            self.backend = "interp"
+            return fn(p, self.params, backend=self.backend)
+
+    def _local(self, points: Any) -> Any:
+        return points if self.pose.is_identity() else self.pose.apply_inverse(points)
+
+    def value(self, points: Any) -> np.ndarray:
+        """Signed distances ``(...)`` at world points ``(..., 3)`` (see
+        :meth:`csdf.Program.__call__` for dtypes and NaN)."""
+        v = self._call("__call__", self._local(points))
+        return v if self.pose.is_identity() else v * self.pose.scale
+
+    __call__ = value
+
+    def gradient(self, points: Any) -> np.ndarray:
+        """Exact spatial gradients ``(..., 3)`` at world points."""
+        g = self._call("gradient", self._local(points))
+        return g if self.pose.is_identity() else self.pose.apply_dirs(g)
+
+    def value_and_grad(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
+        """``(values (...), gradients (..., 3))`` in one pass."""
+        v, g = self._call("value_and_grad", self._local(points))
+        if self.pose.is_identity():
+            return v, g
+        return v * self.pose.scale, self.pose.apply_dirs(g)
+
+    def param_jacobian(self, points: Any) -> np.ndarray:
+        """Derivatives by every parameter ``(..., P)`` (program order)."""
+        J = self._call("param_jacobian", self._local(points))
+        return J if self.pose.is_identity() else J * self.pose.scale
+
+    def value_grad_param_jacobian(self, points: Any):
+        """``(values, gradients (..., 3), parameter Jacobian (..., P))`` in one pass."""
+        v, g, J = self._call("value_grad_param_jacobian", self._local(points))
+        if self.pose.is_identity():
+            return v, g, J
+        s = self.pose.scale
+        return v * s, self.pose.apply_dirs(g), J * s
+
+    def contains(self, points: Any) -> np.ndarray:
+        """Boolean ``(...)``: True where the distance is ``<= 0`` (NaN gives False)."""
+        v = self.value(points)
+        with np.errstate(invalid="ignore"):
+            return v <= 0
+
+    def intervals(self, lo: Any, hi: Any,
+                  param_intervals: Mapping[str, tuple[float, float]] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Conservative bounds ``(flo (M,), fhi (M,))`` of the field over world boxes
+        ``[lo, hi]`` (each ``(M, 3)``; see
+        :func:`csdf.backends.interval_eval.evaluate_intervals`); with a pose, over the
+        object-frame box around each world box, times the scale."""
+        if self.pose.is_identity():
+            return evaluate_intervals(self.program, lo, hi, params=self.params,
+                                      param_intervals=param_intervals)
+        blo = np.asarray(lo, dtype=np.float64)
+        bhi = np.asarray(hi, dtype=np.float64)
+        if blo.ndim != 2 or blo.shape[1] != 3 or blo.shape != bhi.shape:
+            raise CsdfError(f"box lo and hi must both have shape (M, 3); got {blo.shape} "
+                            f"and {bhi.shape}")
+        sel = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        corners = np.where(sel[None, :, :] == 0, blo[:, None, :], bhi[:, None, :])
+        q = self.pose.apply_inverse(corners)  # (M, 8, 3)
+        flo, fhi = evaluate_intervals(self.program, q.min(axis=1), q.max(axis=1),
+                                      params=self.params, param_intervals=param_intervals)
+        s = self.pose.scale
+        return flo * s, fhi * s
+
+    def serial_values(self) -> Callable[..., np.ndarray] | None:
+        """A single-threaded value evaluator with no per-call setup,
+        ``f(pts (M, 3) float64 C-contiguous, out=None) -> (M,)``, for callers that run
+        many small evaluations on threads of their own (the streaming mesher); None
+        when this field's evaluator has none (only ``'fast'`` has) or it has a pose."""
+        if self.backend != "fast" or not self.pose.is_identity():
+            return None
+        return _fast_backend.serial_values(self.program, self.pvals)
+
+    def glsl(self, name: str = "sdf", gradient: bool = True) -> str:
+        """This field's program as GLSL (:func:`csdf.to_glsl`; parameters as
+        uniforms, no pose)."""
+        return to_glsl(self.program, name=name, gradient=gradient)
+
+
+def as_field(model: Any, params: Mapping[str, float] | None = None, pose: Any = None, *,
+             bounds: Any = None, backend: str = "auto", work: int | None = None,
+             what: str | None = None) -> Field:
+    """The :class:`Field` of a shape, program or field (a field given with nothing to
+    change is returned as is).
+
+    Args:
+        model: a :class:`csdf.Shape`, :class:`csdf.Program` or :class:`Field`.
+        params, pose, bounds, backend, work: as for :class:`Field`.
+        what: the caller's name for error messages (``"mesh expects a Shape or
+            Program, got int"``).
+
+    Raises:
+        CsdfError: as for :class:`Field`.
+    """
+    if isinstance(model, Field):
+        if not params and pose is None and bounds is None and backend == "auto":
+            return model
+        return model.replace(params=params, pose=pose, bounds=bounds,
+                             backend=None if backend == "auto" else backend)
+    if what is not None:
+        as_program(model, what)  # the caller's message for a wrong type
+    return Field(model, params, backend, bounds, pose=pose, work=work)

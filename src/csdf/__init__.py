@@ -14,13 +14,14 @@ Build shapes from primitives and operators, with named parameters::
 from __future__ import annotations
 
 from . import io
-from .backends.glsl import glsl_params, shadertoy, to_glsl
 from .compiler import Call, Program
 from .errors import BytecodeError, CsdfError, ModelError, ParamError, ShapeError
 from .expr import Expr, Param, param
+from .field import Field, as_field, glsl_params, shadertoy, to_glsl
 from .fit import FitResult, fit, icp
 from .lang import dumps, load, loads
 from .mesh import mesh
+from .pose import Pose
 from .render import Camera, Render, render
 from .sample import sample_surface, sample_volume
 from .scan import scan
@@ -45,5 +46,5 @@ __all__ = [
     "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
     "sample_surface", "sample_volume", "save_slice", "Camera", "Render", "render", "scan",
     "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit", "icp", "FitResult",
-    *_shape_names,
+    "Field", "as_field", "Pose", *_shape_names,
 ]

@@ -51,10 +51,12 @@ def _load(path: Path):
     raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .csdfb or .csdft")
 
 
-def _program(model):
-    from .compiler.program import Program
+def _field(model):
+    """The :class:`csdf.field.Field` of a loaded model (its program, own box and
+    parameters at their defaults)."""
+    from .field import as_field
 
-    return model if isinstance(model, Program) else model.compile()
+    return as_field(model, what="csdf")
 
 
 def _params(values: list[str]) -> dict[str, float]:
@@ -97,8 +99,8 @@ def info(model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft
     """Parameters, exactness, Lipschitz bound, bytecode sizes and Table-1 counts."""
 
     def go():
-        m = _load(model)
-        prog = _program(m)
+        fld = _field(_load(model))
+        prog = fld.program
         out.print(f"[bold]{model.name}[/]: {len(prog)} instructions, "
                   f"{len(prog.params)} parameter(s), {prog.exactness}, "
                   f"Lipschitz {prog.lipschitz:g}")
@@ -116,7 +118,7 @@ def info(model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft
             t.add_row(level, str(size), *(str(c[k]) for k in ("add", "mul", "div", "call",
                                                                "branch")))
         out.print(t)
-        bounds = getattr(m, "bounds", None)
+        bounds = fld.own_bounds
         if bounds is not None:
             out.print(f"bounds: {bounds[0].round(6).tolist()} .. {bounds[1].round(6).tolist()}")
 
@@ -165,7 +167,7 @@ def compile(  # noqa: A001 - the verb users type
     def go():
         from .io import atomic_path
 
-        prog = _program(_load(model))
+        prog = _field(_load(model)).program
         suffix = output.suffix.lower()
         if suffix not in (".csdfb", ".csdft"):
             raise CsdfError(f"{output}: the output must end in .csdfb or .csdft")
@@ -191,7 +193,7 @@ def export(
     """Export a model for other tools (--glsl: Shadertoy)."""
 
     def go():
-        from .backends.glsl import shadertoy, to_glsl
+        from .field import shadertoy, to_glsl
         from .io import atomic_path
 
         if not glsl:
@@ -243,8 +245,7 @@ def fit(
         import json
 
         from .fit import fit as fit_fn
-        from .io import atomic_path
-        from .pointio import read_points
+        from .io import atomic_path, read_points
 
         if overlay is not None and overlay.suffix.lower() != ".png":
             raise CsdfError(f"{overlay}: the overlay must end in .png")

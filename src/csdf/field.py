@@ -302,6 +302,12 @@ class Field:
         return self._model_bounds
 
     @property
+    def own_bounds(self) -> np.ndarray | None:
+        """The program's analytic box (object frame, finite), or None: what the shape
+        declares, with no interval search."""
+        return _own_bounds(self.program, self.shape)
+
+    @property
     def planar_bounds(self) -> np.ndarray:
         """``(2, 2)`` xy box of a 2D program's zero set (:func:`planar_bounds`)."""
         return planar_bounds(self.program, self.params, shape=self.shape)

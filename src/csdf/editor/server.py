@@ -52,6 +52,7 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from ..errors import CsdfError, ModelError
+from ..field import Field, as_field, glsl_float, glsl_params, shadertoy, to_glsl
 
 __all__ = ["create_app", "serve", "free_port", "model_info", "MAX_BODY_BYTES",
            "MAX_EXPORT_RESOLUTION", "DEFAULT_MODEL"]
@@ -88,14 +89,18 @@ class _ApiError(Exception):
 
 
 # ---------------------------------------------------------------------------- helpers
-def model_info(prog, shape=None) -> dict[str, Any]:
-    """The figures ``csdf info`` prints, as a JSON-ready dict.
+def model_info(model, shape=None) -> dict[str, Any]:
+    """The figures ``csdf info`` prints, as a JSON-ready dict, for a
+    :class:`csdf.field.Field`, a Shape or a Program (``shape``: where the Program's own
+    box comes from, for programs compiled without one).
 
     Returns:
         ``{'instructions', 'params', 'exactness', 'lipschitz', 'levels': {'expanded' |
         'primitive': {'bytes', 'add', 'mul', 'div', 'call', 'branch'}}, 'bounds'}``
         (``lipschitz`` is None when infinite; ``bounds`` None when unknown).
     """
+    fld = as_field(model if shape is None else shape, what="model_info")
+    prog = fld.program
     levels = {}
     for level, size in (("expanded", prog.nbytes), ("primitive", prog.compact_nbytes())):
         c = prog.counts(level)
@@ -108,19 +113,17 @@ def model_info(prog, shape=None) -> dict[str, Any]:
         "exactness": str(prog.exactness),
         "lipschitz": lip if math.isfinite(lip) else None,
         "levels": levels,
-        "bounds": _bounds(shape),
+        "bounds": _bounds(fld),
     }
 
 
-def _bounds(shape) -> list[list[float]] | None:
-    """The shape's box as nested lists, or None when it has none (or an infinite one)."""
-    b = getattr(shape, "bounds", None)
-    if b is None:
+def _bounds(fld: Field) -> list[list[float]] | None:
+    """The field's own 3D box as nested lists, or None when it has none (or an infinite
+    one): the analytic box, with no interval search."""
+    b = fld.own_bounds
+    if b is None or b.shape != (2, 3):
         return None
-    rows = [[float(v) for v in row] for row in b]
-    if len(rows) != 2 or len(rows[0]) != 3 or not all(math.isfinite(v) for r in rows for v in r):
-        return None
-    return rows
+    return [[float(v) for v in row] for row in b]
 
 
 def _step_scale(prog) -> float:
@@ -141,15 +144,15 @@ def _error_json(exc: CsdfError) -> dict[str, Any]:
             "text": str(exc)}
 
 
-def _load_text(text: str, name: str):
-    """Parse and compile ``text``: ``(shape, program)``; raises CsdfError."""
+def _load_text(text: str, name: str) -> Field:
+    """Parse and compile ``text`` into its :class:`csdf.field.Field`; raises CsdfError."""
     from ..lang import loads
 
     shape = loads(text, file=name)
     if getattr(shape, "dim", 3) != 3:
         raise CsdfError("the editor previews 3D models; this model is 2D (extrude or "
                         "revolve it)")
-    return shape, shape.compile()
+    return as_field(shape, what="the editor")
 
 
 def _params(value: Any, prog) -> dict[str, float]:
@@ -323,14 +326,13 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
                              "max_resolution": MAX_EXPORT_RESOLUTION})
 
     def _compile(text: str) -> tuple[int, dict[str, Any]]:
-        from ..backends.glsl import glsl_params, to_glsl
-
         try:
-            shape, prog = _load_text(text, ed.name())
+            fld = _load_text(text, ed.name())
+            prog = fld.program
             glsl = to_glsl(prog)
         except CsdfError as exc:
             return 422, {"ok": False, "error": _error_json(exc)}
-        info = model_info(prog, shape)
+        info = model_info(fld)
         return 200, {"ok": True, "glsl": glsl, "params": glsl_params(prog), "info": info,
                      "bounds": info["bounds"], "step": _step_scale(prog)}
 
@@ -349,9 +351,9 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
         from ..mesh.api import mesh
 
         try:
-            shape, prog = _load_text(text, ed.name())
-            pv = _params(params, prog)
-            m = mesh(shape, resolution=resolution, params=pv, progress=False)
+            fld = _load_text(text, ed.name())
+            pv = _params(params, fld.program)
+            m = mesh(fld, resolution=resolution, params=pv, progress=False)
         except CsdfError as exc:
             raise _ApiError(422, str(exc)) from None
         data = m.export(file_type=fmt)
@@ -374,12 +376,11 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
             "Content-Disposition": f'attachment; filename="{stem}.{fmt}"'})
 
     def _shadertoy(text: str, params: Any) -> str:
-        from ..backends.glsl import glsl_float, glsl_params, shadertoy
-
         try:
-            shape, prog = _load_text(text, ed.name())
+            fld = _load_text(text, ed.name())
+            prog = fld.program
             pv = _params(params, prog)
-            src = shadertoy(shape)
+            src = shadertoy(fld.shape)
         except CsdfError as exc:
             raise _ApiError(422, str(exc)) from None
         for p in glsl_params(prog):

@@ -169,25 +169,9 @@ class Shape:
         return self.compile().contains(points, params, **kw)
 
     # ------------------------------------------------------------------ operators
-    def __or__(self, other: Shape) -> Shape:
-        from .csg import union
-
-        return union(self, other)
-
-    def __and__(self, other: Shape) -> Shape:
-        from .csg import intersection
-
-        return intersection(self, other)
-
-    def __sub__(self, other: Shape) -> Shape:
-        from .csg import difference
-
-        return difference(self, other)
-
-    def __invert__(self) -> Shape:
-        from .csg import complement
-
-        return complement(self)
+    # ``|`` (union), ``&`` (intersection), ``-`` (difference) and ``~`` (complement) are
+    # attached by :mod:`csdf.shapes.csg`, which defines them (so this module does not
+    # import it: no cycle).
 
     def __repr__(self) -> str:
         parts = [repr(a) for a in self.args]

@@ -255,3 +255,30 @@ def complement(a: Shape) -> Shape:
         "complement", lambda p, ctx: -a.sdf(p, ctx), dim=a.dim, lipschitz=a.lipschitz,
         bounds=None, args=(a,), children=(a,), exactness=a.exactness,
     )
+
+
+# the operator overloads of Shape (see Shape's docs): a | b, a & b, a - b, ~a
+def _shape_or(self: Shape, other: Shape) -> Shape:
+    """``a | b``: :func:`union` (sharp)."""
+    return union(self, other)
+
+
+def _shape_and(self: Shape, other: Shape) -> Shape:
+    """``a & b``: :func:`intersection` (sharp)."""
+    return intersection(self, other)
+
+
+def _shape_sub(self: Shape, other: Shape) -> Shape:
+    """``a - b``: :func:`difference` (sharp)."""
+    return difference(self, other)
+
+
+def _shape_invert(self: Shape) -> Shape:
+    """``~a``: :func:`complement`."""
+    return complement(self)
+
+
+Shape.__or__ = _shape_or  # type: ignore[method-assign]
+Shape.__and__ = _shape_and  # type: ignore[method-assign]
+Shape.__sub__ = _shape_sub  # type: ignore[method-assign]
+Shape.__invert__ = _shape_invert  # type: ignore[method-assign]

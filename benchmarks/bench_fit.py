@@ -948,7 +948,7 @@ def report(args, command, info, models, model_note, scan_note, o3d_note, cells, 
     L.append(
         "* `csdf.fit pose`: `csdf.fit(shape, points, init=T0)` (defaults: `loss='auto'` with "
         "`f_scale` 1% of the diagonal of `shape.bounds`, one start, `solver='lm'`: the "
-        "hand-written coarse-to-fine robust Levenberg-Marquardt of `csdf.fit.gn`, whose "
+        "hand-written coarse-to-fine robust Levenberg-Marquardt of `csdf.fit.lm`, whose "
         "`escape` step tests turns about the model's axes and the cloud's principal axes "
         "after the coarse stage). `loss='auto'`: the fit is made with the Huber loss; if "
         "fewer than 99% of the points are then within 3 `f_scale` of the surface, the "
@@ -970,7 +970,7 @@ def report(args, command, info, models, model_note, scan_note, o3d_note, cells, 
         "whose optimum the outliers do not pull (Huber's they do).\n"
         "* `csdf.fit pose, viewpoint=sensor` (partial scans): the same with "
         "`viewpoint=(0, 0, 0)` (the sensor's position in the scan's frame): points matched "
-        "to back faces are re-matched to the first hit of their ray (`csdf.fit.gn`); with "
+        "to back faces are re-matched to the first hit of their ray (`csdf.fit.lm`); with "
         "outliers also with `loss='cauchy'`.\n"
         "* `csdf.fit pose+scale` / `pose+scale+params`: the same with `estimate=('pose', "
         "'scale')` / `('pose', 'scale', 'params')` (all parameters). With parameters, "

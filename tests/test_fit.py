@@ -202,8 +202,8 @@ def _plate_scan():
 
 
 def test_visibility_rejects_back_face_minimum():
-    from csdf.fit.gn import Visibility, _State, lm_solve
-    from csdf.fit.solve import prepare
+    from csdf.fit.lm import State, Visibility, lm_solve
+    from csdf.fit.problem import prepare
 
     plate, P, R, t = _plate_scan()
     # the plate pulled towards the sensor by its thickness (along its normal n): the
@@ -213,7 +213,7 @@ def test_visibility_rejects_back_face_minimum():
     M = np.eye(4)
     M[:3, :3], M[:3, 3] = R, t + 0.045 * n
     prob = prepare(plate, P, init=M)
-    start = _State(prob.R, prob.t, 0.0, np.zeros(0))
+    start = State(prob.R, prob.t, 0.0, np.zeros(0))
     fs = prob.f_scale
     plain = lm_solve(prob, P, start, [], fs, 50)[0]
     assert abs((plain.t - t) @ n) > 0.03  # stays on the back face

@@ -1,7 +1,15 @@
-"""Recovering pose, scale and shape from point clouds (``solve.py``), with a global
-initialisation (``init.py``) and the ICP baseline (``icp.py``)."""
+"""Recovering pose, scale and shape from point clouds (paper §4.5).
 
+Modules, in the order of the data flow: ``result`` (:class:`FitResult`), ``problem``
+(validated inputs, residuals, Jacobian, robust losses), ``lm`` (the Levenberg-Marquardt
+iteration, visibility term and escape step), ``bias`` (noise-bias correction),
+``stages`` (the staged ``solver='lm'`` engine), ``scipy_engine`` (``solver='scipy'``),
+``init`` (the global initialisation of ``multistart=True``), ``api`` (:func:`fit` and
+``loss='auto'``) and ``icp`` (the ICP baseline).
+"""
+
+from .api import fit
 from .icp import icp
-from .solve import FitResult, fit
+from .result import FitResult
 
 __all__ = ["fit", "icp", "FitResult"]

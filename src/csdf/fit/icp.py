@@ -15,7 +15,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .lie import exp_so3
-from .solve import FitResult, make_result, prepare
+from .problem import make_result, prepare
+from .result import FitResult
 
 __all__ = ["icp"]
 

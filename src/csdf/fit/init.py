@@ -13,8 +13,9 @@ import math
 
 import numpy as np
 
-from .gn import jacobian, normal_equations
 from .lie import cube_rotations, exp_so3, sphere_rotations
+from .lm import normal_equations
+from .problem import jacobian
 
 __all__ = ["multistart", "model_points"]
 

@@ -45,10 +45,9 @@ def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
     pts = pts[np.isfinite(pts).all(axis=1)]
     if len(pts) > MAX_DOTS:
         pts = pts[np.random.default_rng(seed).choice(len(pts), MAX_DOTS, replace=False)]
-    s = float(result.scale)
-    R = np.asarray(result.rotation, dtype=np.float64)
-    t = np.asarray(result.translation, dtype=np.float64)
-    q = (pts - t) @ R / s  # object frame: q = R^T (p - t) / s
+    pose = result.pose
+    s = pose.scale
+    q = pose.apply_inverse(pts)  # object frame: q = R^T (p - t) / s
     params = dict(result.params)
     fld = trace_field(shape, params, "numpy", what="fit_overlay")
     prog = fld.program

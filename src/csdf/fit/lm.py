@@ -1,18 +1,15 @@
-"""Hand-written robust Levenberg-Marquardt for :func:`csdf.fit` (the default engine).
+"""The hand-written robust Levenberg-Marquardt of :func:`csdf.fit` (``solver='lm'``, the
+default): the iteration (:func:`lm_solve`), the visibility term and the escape step. The
+stages that run it (coarse to fine, joint, bias correction) are in :mod:`.stages`.
 
 Each iteration evaluates the model's values, spatial gradients (and parameter derivatives
-when shape parameters are estimated) at all points in one call of the fast backend, forms
-the Jacobian of the residuals ``r = s f(R^T (p - t) / s; c)`` (see :mod:`.solve`), and
-solves the small normal equations ``(J^T W J + lambda D) dx = -J^T W r`` with iteratively
-reweighted least-squares weights ``W`` of the robust loss (``rho'(z)``, SciPy's loss
-conventions). No dense ``N x n`` factorisation, no finite differences: the cost of an
-iteration is one evaluation plus an ``N x n`` product (``n`` = 6 for a pose).
-
-Coarse to fine with a graduated residual scale: the first iterations run on a fixed
-subsample of the cloud with the loss's residual scale ``f_scale`` widened (8x, then 4x,
-2x, 1x); a wide scale turns the robust cost into a smooth, nearly quadratic bowl whose
-basin reaches much larger initial errors, and narrowing it then rejects outliers. The
-last iterations use every point and the requested ``f_scale``.
+when shape parameters are estimated) at all points in one call of the problem's
+evaluator, forms the Jacobian of the residuals ``r = s f(R^T (p - t) / s; c)`` (see
+:mod:`.problem`), and solves the small normal equations ``(J^T W J + lambda D) dx = -J^T
+W r`` with iteratively reweighted least-squares weights ``W`` of the robust loss
+(``rho'(z)``, SciPy's loss conventions). No dense ``N x n`` factorisation, no finite
+differences: the cost of an iteration is one evaluation plus an ``N x n`` product (``n``
+= 6 for a pose).
 
 Visibility (``viewpoint=``): a point seen by a sensor at ``c`` is the *first* surface
 along its ray. A point whose nearest model surface faces away from ``c`` (it is explained
@@ -29,47 +26,17 @@ import math
 import numpy as np
 
 from .lie import exp_so3, hat
+from .problem import jacobian, loss_rho, loss_weights
 
-__all__ = ["loss_weights", "lm_solve", "jacobian"]
+__all__ = ["State", "Visibility", "evaluate", "normal_equations", "lm_solve",
+           "lm_rounds", "escape", "axis_turns"]
 
-#: the graduated residual scales of the coarse stage (multiples of f_scale)
-GRADUATION = (8.0, 4.0, 2.0, 1.0)
-#: points in the coarse stage's subsample
-N_COARSE = 1500
 #: points on which escape() refines its turns (ranked on half as many)
 N_RANK = 1000
 #: escape() refines a turn only if its unrefined cost is below this times the current one
 PROMISING = 2.0
 #: residual scale (x f_scale) at which escape() ranks its turns
 RANK_SCALE = 2.0
-
-
-def loss_weights_rho(z: np.ndarray, loss: str) -> np.ndarray:
-    """SciPy's ``rho(z)`` of a robust loss at ``z = (r / f_scale)^2``."""
-    return _rho_w(z, loss)[0]
-
-
-def _rho_w(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
-    if loss == "linear":
-        return z, np.ones_like(z)
-    if loss == "huber":
-        sq = np.sqrt(z)
-        big = z > 1.0
-        return np.where(big, 2.0 * sq - 1.0, z), np.where(big, 1.0 / np.maximum(sq, 1.0), 1.0)
-    if loss == "soft_l1":
-        return 2.0 * (np.sqrt(1.0 + z) - 1.0), 1.0 / np.sqrt(1.0 + z)
-    if loss == "cauchy":
-        return np.log1p(z), 1.0 / (1.0 + z)
-    if loss == "arctan":
-        return np.arctan(z), 1.0 / (1.0 + z * z)
-    raise ValueError(loss)  # pragma: no cover - validated by prepare()
-
-
-def loss_weights(r: np.ndarray, fs: float, loss: str) -> tuple[float, np.ndarray]:
-    """Robust cost ``0.5 fs^2 sum rho((r / fs)^2)`` (SciPy's convention) and the IRLS
-    weights ``rho'((r / fs)^2)``, shape (N,), for residuals ``r`` (N,) in scene units."""
-    rho, w = _rho_w((r / fs) ** 2, loss)
-    return 0.5 * fs * fs * float(np.sum(rho)), w
 
 
 def _normal_equations_np(J: np.ndarray, w: np.ndarray, r: np.ndarray):
@@ -110,41 +77,17 @@ def normal_equations(J: np.ndarray, w: np.ndarray, r: np.ndarray):
     return _normal_equations_np(J, w, r)
 
 
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (N, 3) arrays (cheaper than ``np.cross``)."""
-    out = np.empty_like(u)
-    out[:, 0] = u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]
-    out[:, 1] = u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]
-    out[:, 2] = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-    return out
-
-
-def jacobian(pose: bool, scale: bool, s: float, a: np.ndarray, f: np.ndarray,
-             gw: np.ndarray, Jp: np.ndarray | None) -> np.ndarray:
-    """Jacobian (N, n) of ``r = s f(q)`` for a left rotation increment ``w`` (3), the
-    translation ``t`` (3), ``log s`` and the parameters, at the linearisation point.
-
-    ``a`` = ``p - t`` (N, 3), ``f`` model values (N,), ``gw``
-    model gradients turned into the scene frame (N, 3), ``Jp`` scaled parameter
-    derivatives ``s df/dc`` (N, k) or None."""
-    cols = []
-    if pose:
-        cols += [_cross(gw, a), -gw]
-    if scale:
-        gq = np.einsum("ij,ij->i", gw, a) / s  # g . q (rotation-invariant)
-        cols.append((s * (f - gq))[:, None])
-    if Jp is not None and Jp.shape[1]:
-        cols.append(Jp)
-    return np.concatenate(cols, axis=1) if cols else np.zeros((len(f), 0))
-
-
-class _State:
-    """Pose, log-scale and estimated parameter values."""
+class State:
+    """The unknowns of an LM solve: rotation ``R`` (3, 3), translation ``t`` (3,) (scene
+    units), log-scale ``sigma`` and the estimated parameter values ``cvals`` (k,)."""
 
     def __init__(self, R, t, sigma, cvals):
         self.R, self.t, self.sigma, self.cvals = R, t, sigma, cvals
 
-    def step(self, dx: np.ndarray, pose: bool, scale: bool, lo, hi) -> _State:
+    def step(self, dx: np.ndarray, pose: bool, scale: bool, lo, hi) -> State:
+        """The state moved by ``dx`` (rotation increment applied on the left, then
+        translation, log-scale, parameters; only the estimated ones present), the
+        parameters clipped to ``[lo, hi]`` (k,)."""
         k = 0
         R, t, sigma = self.R, self.t, self.sigma
         if pose:
@@ -155,7 +98,7 @@ class _State:
             sigma = sigma + dx[k]
             k += 1
         c = np.clip(self.cvals + dx[k:], lo, hi) if len(self.cvals) else self.cvals
-        return _State(R, t, sigma, c)
+        return State(R, t, sigma, c)
 
 
 def _raycast(prog, pv, backend, c_m: np.ndarray, D_m: np.ndarray, centre: np.ndarray,
@@ -201,7 +144,7 @@ class Visibility:
     def reset(self) -> None:
         self.sel = self.X = None
 
-    def match(self, prob, P, st: _State, pv: dict, gw: np.ndarray, fs: float) -> None:
+    def match(self, prob, P, st: State, pv: dict, gw: np.ndarray, fs: float) -> None:
         """Find the points whose nearest surface faces away from the sensor (model
         gradients ``gw`` (N, 3) in the scene frame) and their rays' first hits."""
         s = math.exp(st.sigma)
@@ -218,7 +161,7 @@ class Visibility:
             self.X = c_m + u[hit, None] * D_m[hit]
 
 
-def _evaluate(prob, P, st: _State, idx, fs, vis: Visibility | None = None):
+def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
     """Residuals (N,) and Jacobian (N, n) at state ``st``."""
     prog = prob.prog
     s = math.exp(st.sigma)
@@ -261,7 +204,7 @@ def _evaluate(prob, P, st: _State, idx, fs, vis: Visibility | None = None):
     return r, Jm
 
 
-def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_iter: int,
+def lm_solve(prob, P: np.ndarray, st: State, idx: list[int], fs: float, max_iter: int,
              prior: float = 0.0, vis: Visibility | None = None, tol: float = 1e-7,
              slack: float = 0.0):
     """Robust LM on points ``P`` (N, 3) from state ``st`` with residual scale ``fs``;
@@ -275,7 +218,7 @@ def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_ite
     span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
     lo, hi = lo - slack * span, hi + slack * span
     lam = 1e-3
-    r, Jm = _evaluate(prob, P, st, idx, fs, vis)
+    r, Jm = evaluate(prob, P, st, idx, fs, vis)
     cost, w = loss_weights(r, fs, prob.loss)
     kscale = 6 if prob.pose else 0
 
@@ -301,7 +244,7 @@ def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_ite
             if prob.pose and np.linalg.norm(dx[:3]) > 1.0:  # keep rotation steps sane
                 dx *= 1.0 / np.linalg.norm(dx[:3])
             new = st.step(dx, prob.pose, prob.scale, lo, hi)
-            r2, J2 = _evaluate(prob, P, new, idx, fs, vis)
+            r2, J2 = evaluate(prob, P, new, idx, fs, vis)
             nev += 1
             c2, w2 = loss_weights(r2, fs, prob.loss)
             c2 = with_prior(c2, new.sigma)
@@ -325,7 +268,7 @@ def lm_solve(prob, P: np.ndarray, st: _State, idx: list[int], fs: float, max_ite
     return st, cost, nev, converged
 
 
-def lm_rounds(prob, P: np.ndarray, st: _State, idx: list[int], max_iter: int,
+def lm_rounds(prob, P: np.ndarray, st: State, idx: list[int], max_iter: int,
               vis: Visibility | None, slack: float = 0.0):
     """:func:`lm_solve` at ``prob.f_scale``; with visibility, repeated (re-matching the
     back-facing points each time, like ICP) up to 3 times while the cost drops."""
@@ -369,8 +312,8 @@ def _turns(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
     return out.reshape(-1, 3, 3)
 
 
-def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 4, iters: int = 8,
-           vis: Visibility | None = None) -> tuple[_State, bool]:
+def escape(prob, P: np.ndarray, st: State, fs: float, keep: int = 4, iters: int = 8,
+           vis: Visibility | None = None) -> tuple[State, bool]:
     """Leave a local minimum of the pose by turns about the model's and the cloud's axes.
 
     Near-symmetric parts (a flange whose bolt holes are off by one hole spacing, a shaft
@@ -399,14 +342,14 @@ def escape(prob, P: np.ndarray, st: _State, fs: float, keep: int = 4, iters: int
     q = (np.transpose(QR, (1, 0, 2)) - np.einsum("ki,kij->kj", ts, Rs)[:, None]) / s
     f = np.asarray(prob.prog(q.reshape(-1, 3), pv, backend=prob.backend))
     z = (s * f.reshape(len(Ts), -1) / (RANK_SCALE * fs)) ** 2
-    costs = np.sum(loss_weights_rho(z, prob.loss), axis=1)
+    costs = np.sum(loss_rho(z, prob.loss), axis=1)
     f0 = np.asarray(prob.prog(((Qr - st.t) @ st.R) / s, pv, backend=prob.backend))
-    c0 = float(np.sum(loss_weights_rho((s * f0 / (RANK_SCALE * fs)) ** 2, prob.loss)))
+    c0 = float(np.sum(loss_rho((s * f0 / (RANK_SCALE * fs)) ** 2, prob.loss)))
     changed = False
     for j in np.argsort(costs)[:keep]:
         if costs[j] > PROMISING * c0:
             break  # sorted: the rest are worse
-        cand = _State(Rs[j], ts[j], st.sigma, st.cvals)
+        cand = State(Rs[j], ts[j], st.sigma, st.cvals)
         cand = lm_solve(prob, Q, cand, [], 2.0 * fs, iters // 2, tol=1e-5)[0]
         cand, cost, _, _ = lm_solve(prob, Q, cand, [], fs, iters // 2, vis=vis, tol=1e-5)
         if cost < best_cost * (1.0 - 1e-3):

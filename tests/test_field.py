@@ -85,7 +85,7 @@ def test_bounds_policy():
     b = as_field(s, {"r": 0.6}).bounds
     assert np.all(b[1] - b[0] < 1.4) and np.all(b[1] >= 0.6) and np.all(b[0] <= -0.6)
     with pytest.raises(csdf.CsdfError, match="unbounded"):
-        as_field(csdf.plane((0, 0, 1), 0.0)).bounds
+        _ = as_field(csdf.plane((0, 0, 1), 0.0)).bounds
     with pytest.raises(csdf.CsdfError, match="min < max"):
         as_field(s, bounds=((1, 1, 1), (0, 0, 0)))
     with pytest.raises(csdf.CsdfError, match="2D"):

@@ -90,7 +90,8 @@ def test_immutable_and_hashable():
         a.scale = 2.0
     with pytest.raises(ValueError):
         a.translation[0] = 1.0
-    assert a == Pose.from_rotvec([0.1, 0.2, 0.3]) and len({a, Pose.from_rotvec([0.1, 0.2, 0.3])}) == 1
+    b = Pose.from_rotvec([0.1, 0.2, 0.3])
+    assert a == b and len({a, b}) == 1
 
 
 def test_fit_result_pose_matches_its_transform():

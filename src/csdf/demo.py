@@ -76,14 +76,13 @@ def zoo_model(out: Path, name: str = "chair") -> csdf.Shape:
 
 
 def scan_and_fit(shape: csdf.Shape, seed: int = 7) -> None:
-    from csdf.fit.lie import exp_so3, rotation_angle
+    from csdf.fit.lie import rotation_angle
 
     rng = np.random.default_rng(seed)
     truth = {"seat_width": 0.52, "back_height": 0.5}
-    R = exp_so3(np.array([0.0, 0.0, rng.uniform(-1.0, 1.0)]))  # upright, turned about z
-    t = np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), 0.0])
-    pose = np.eye(4)
-    pose[:3, :3], pose[:3, 3] = R, t
+    # upright, turned about z, somewhere near the origin
+    pose = csdf.Pose.from_rotvec((0.0, 0.0, rng.uniform(-1.0, 1.0)),
+                                 (rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), 0.0))
     cam = csdf.Camera.look_at(eye=(0.4, -2.2, 1.5), target=(0, 0, 0.5), fov=45,
                               width=640, height=480)
     pts, _ = csdf.scan(shape, cam, noise=0.002, outliers=0.05, seed=seed, object_pose=pose,
@@ -91,9 +90,9 @@ def scan_and_fit(shape: csdf.Shape, seed: int = 7) -> None:
     world = cam.camera_to_world(pts)
     print(f"\nsynthetic scan of a chair at a random pose: {len(pts):,} points, "
           "noise 2 mm, 5% outliers")
-    init = np.eye(4)
-    init[:3, :3] = exp_so3(np.array([0.0, 0.0, 0.17])) @ R  # a coarse detection: 10 deg,
-    init[:3, 3] = t + np.array([0.05, -0.03, 0.0])  # about 6 cm off
+    # a coarse detection: 10 deg and about 6 cm off
+    turn = csdf.Pose.from_rotvec((0.0, 0.0, 0.17)).rotation
+    init = csdf.Pose(turn @ pose.rotation, pose.translation + np.array([0.05, -0.03, 0.0]))
     names = list(truth)
     # a single view: the sensor position lets the fit tell front faces from back faces
     kw = dict(init=init, estimate=("pose", "params"), params=names, viewpoint=cam.position)
@@ -102,8 +101,9 @@ def scan_and_fit(shape: csdf.Shape, seed: int = 7) -> None:
     res = csdf.fit(shape, world, **kw)
     dt = time.perf_counter() - t0
     print(f"  recovered in {dt * 1e3:.0f} ms: rotation error "
-          f"{np.rad2deg(rotation_angle(res.rotation, R)):.2f} deg, translation error "
-          f"{np.linalg.norm(res.translation - t) * 1e3:.1f} mm, rmse {res.rmse * 1e3:.2f} mm, "
+          f"{np.rad2deg(rotation_angle(res.rotation, pose.rotation)):.2f} deg, translation "
+          f"error {np.linalg.norm(res.translation - pose.translation) * 1e3:.1f} mm, "
+          f"rmse {res.rmse * 1e3:.2f} mm, "
           f"inliers {res.inlier_fraction:.0%}")
     for k, v in truth.items():
         print(f"  {k:12s} true {v:.4f}  recovered {res.params[k]:.4f}")

@@ -84,7 +84,7 @@ cProfile and per-kernel thread CPU time), not part of the timed runs above:
 * **dc** (extra rows) streams over the same bricks (`extract_dc`): a compiled kernel
   records the active voxels and their edges' vertices, the QEF of each voxel is solved
   in compiled code (3x3 symmetric Jacobi eigensolver, the same pseudo-inverse rule as the
-  NumPy path in `extract.py`, which stays the fallback; the voxels split into one range
+  NumPy reference mesher `reference.py`, which stays the fallback; the voxels split into one range
   per core), and quads are assembled by scatter; the vertices are projected onto the
   surface by compiled Newton steps (one value+gradient evaluation each); the edge
   normals still run as NumPy in blocks.

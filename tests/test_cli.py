@@ -90,7 +90,7 @@ def test_fit_recovers_a_translated_model(tmp_path):
 
     import numpy as np
 
-    from csdf.pointio import write_points
+    from csdf.io import write_points
 
     box = tmp_path / "box.csdf"
     box.write_text("param w = 0.4 in [0.2, 0.8]\nexport box((w, 0.3, 0.2))\n")
@@ -118,7 +118,7 @@ def test_fit_passes_the_sensor_options(tmp_path):
     import numpy as np
 
     import csdf
-    from csdf.pointio import write_points
+    from csdf.io import write_points
 
     model = tmp_path / "plate.csdf"
     model.write_text("export box((0.3, 0.2, 0.02)) - sphere(0.04).translate((0.08, 0.05, 0))\n")

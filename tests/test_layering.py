@@ -97,7 +97,7 @@ def _imports(name: str, path: Path) -> list[tuple[str, str, int]]:
 
 def _layer(name: str) -> int:
     best = None
-    for prefix, layer in LAYERS.items():
+    for prefix in LAYERS:
         if (name == prefix or name.startswith(prefix + ".")) and (
                 best is None or len(prefix) > len(best)):
             best = prefix

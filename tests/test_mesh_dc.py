@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import csdf
-from csdf.mesh.extract import extract
+from csdf.mesh.reference import extract
 
 pytest.importorskip("numba")
 
@@ -86,18 +86,18 @@ def test_random_shapes_dc_are_watertight_and_manifold(seed):
 
 def test_qef_solve_in_ranges_equals_one_pass(monkeypatch):
     """The voxels split into ranges solved side by side give the one-pass result."""
-    from csdf.mesh import extract as X
+    from csdf.mesh import dual as X
 
     grid, values, gradients, intervals = _setup(_csg(), 40)
-    monkeypatch.setattr(X, "_SPLIT_MIN", 1000)
+    monkeypatch.setattr(X, "SPLIT_MIN", 1000)
     seen = {}
-    solve = X._dc_solve
+    solve = X.dc_solve
 
     def spy(*a, **k):
         seen["args"] = a
         return solve(*a, **k)
 
-    monkeypatch.setattr(X, "_dc_solve", spy)
+    monkeypatch.setattr(X, "dc_solve", spy)
     extract_dc(grid, values, gradients, intervals)
     args = seen["args"]
     assert len(args[1]) >= 1000  # big enough for the split path
@@ -109,7 +109,7 @@ def test_qef_solve_in_ranges_equals_one_pass(monkeypatch):
 
 
 def test_compiled_newton_step_matches_numpy_projection():
-    from csdf.mesh.extract import _project
+    from csdf.mesh.reference import _project
 
     rng = np.random.default_rng(5)
     verts = rng.normal(size=(500, 3))

@@ -13,7 +13,8 @@ import csdf
 from csdf.backends.interval_eval import evaluate_intervals
 from csdf.mesh import kernels as K
 from csdf.mesh.api import _JITTER
-from csdf.mesh.extract import Grid, extract
+from csdf.mesh.grid import Grid
+from csdf.mesh.reference import extract
 from csdf.mesh.stream import extract_mc
 
 pytest.importorskip("numba")

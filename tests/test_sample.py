@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 import csdf
-from csdf.pointio import read_point_properties, read_points, write_points
+from csdf.io import read_point_properties, read_points, write_points
 from csdf.sample import sample_surface, sample_volume
 
 

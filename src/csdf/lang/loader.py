@@ -28,7 +28,8 @@ from ..errors import CsdfError, ModelError
 from ..expr import Expr
 from ..shapes.base import REGISTRY, Shape
 
-__all__ = ["load", "loads", "MAX_FILE_BYTES", "MAX_DEPTH", "MAX_CALLS", "MAX_INSTRUCTIONS"]
+__all__ = ["load", "loads", "parser", "MAX_FILE_BYTES", "MAX_DEPTH", "MAX_CALLS",
+           "MAX_INSTRUCTIONS"]
 
 MAX_FILE_BYTES = 1_000_000
 MAX_DEPTH = 200  # nesting of expressions
@@ -40,7 +41,11 @@ _GRAMMAR = (Path(__file__).parent / "grammar.lark").read_text()
 
 
 @lru_cache(maxsize=1)
-def _parser() -> Lark:
+def parser() -> Lark:
+    """The LALR parser of the language's grammar (``grammar.lark``), built once; its
+    trees carry source positions (``meta.start_pos``, ``meta.end_pos``: character
+    offsets), which :func:`csdf.zoo.load` uses to set parameter defaults in a
+    model's text."""
     return Lark(_GRAMMAR, parser="lalr", propagate_positions=True, maybe_placeholders=True)
 
 
@@ -438,7 +443,7 @@ def loads(text: str, file: str = "<string>") -> Shape:
         raise ModelError(f"model is {size} bytes; the limit is {MAX_FILE_BYTES}", file=file)
     loader = _Loader(text, file)
     try:
-        tree = _parser().parse(text)
+        tree = parser().parse(text)
     except UnexpectedInput as exc:
         raise _syntax_error(exc, loader) from None
     except RecursionError:  # pragma: no cover - the LALR parser is not recursive

@@ -10,7 +10,8 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..field import Field, as_field, auto_bounds, check_bounds
-from .extract import Grid, extract
+from .grid import Grid
+from .reference import extract
 
 __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_VOXELS"]
 

@@ -1,7 +1,7 @@
 """Compiled (Numba) cores of manifold dual contouring (``method='dc'`` with the fast backend).
 
-The same computation as :func:`csdf.mesh.extract._dual_contour` (tested equal to it), on
-the arrays that :func:`csdf.mesh.extract.extract` builds, without its ``(pairs, ...)``
+The same computation as :func:`csdf.mesh.reference._dual_contour` (tested equal to it), on
+the arrays that :func:`csdf.mesh.reference.extract` builds, without its ``(pairs, ...)``
 temporaries, ``ufunc.at``, batched SVD or sorted searches:
 
 * :func:`dc_vertices_range`: one vertex per surface component of each active voxel (ids in
@@ -397,7 +397,7 @@ def edge_flags(e_corner, e_axis, dims, on_box):
 def newton_step(verts, f, g, h):
     """In place, one step ``v -= f grad f / |grad f|^2`` towards the zero set, limited to
     half a voxel; a non-finite component of the step counts as 0 (the arithmetic and
-    its order are those of :func:`csdf.mesh.extract._project`). ``verts, g (V, 3)``,
+    its order are those of :func:`csdf.mesh.reference._project`). ``verts, g (V, 3)``,
     ``f (V,)``."""
     for r in range(verts.shape[0]):
         g0, g1, g2 = g[r, 0], g[r, 1], g[r, 2]

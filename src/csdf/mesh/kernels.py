@@ -14,7 +14,7 @@ chunk plus the outputs:
   the same vertex (watertight);
 * :func:`root_points`, :func:`root_update`, :func:`clip_to_box`: the bracketed
   Illinois / bisection root search on each new edge (the same iteration as
-  :func:`csdf.mesh.extract._refine_roots`), driven from Python because the field is
+  :func:`csdf.mesh.reference._refine_roots`), driven from Python because the field is
   evaluated by the program's own backend.
 
 * :func:`fresh_array`: the big outputs on memory maps of their own.
@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..backends.reuse import map_array, private_map
+from ..memory import map_array, private_map
 
 __all__ = [
     "all_points", "brick_points", "brick_points_into", "close_on_box", "mc_chunk", "new_hash",
@@ -391,7 +391,7 @@ def all_points(idx, e_corner, e_axis, t, origin, h, out) -> None:
 @njit(cache=True, nogil=True)
 def clip_to_box(p: np.ndarray, f: np.ndarray, lo: np.ndarray, hi: np.ndarray, h: float) -> None:
     """In place ``f = max(f, 2 box(p) + h)``: the field closed on the grid box, which
-    agrees with :func:`close_on_box` at the samples (see ``extract._clip_box``)."""
+    agrees with :func:`close_on_box` at the samples (see ``reference._clip_box``)."""
     for r in range(p.shape[0]):
         m = -np.inf
         for d in range(3):
@@ -430,7 +430,7 @@ def root_update(idx, ft, t, a, b, fa, fb, side, tol, it) -> np.ndarray:
     field ``ft`` at their current points; returns the edges still pending.
 
     Regula falsi with the Illinois modification and a bisection step every third
-    iteration, always bracketed in ``[a, b]`` (the iteration of ``extract._refine_roots``).
+    iteration, always bracketed in ``[a, b]`` (the iteration of ``reference._refine_roots``).
     """
     keep = np.empty(idx.shape[0], dtype=idx.dtype)
     n = 0

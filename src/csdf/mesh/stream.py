@@ -1,7 +1,7 @@
 """Streaming sparse marching cubes: the fast path of :func:`csdf.mesh` (``method='mc'``;
 ``method='dc'``: :func:`extract_dc`, the same stream feeding compiled dual contouring).
 
-Same grid, octree and results as :func:`csdf.mesh.extract.extract` (watertight,
+Same grid, octree and results as :func:`csdf.mesh.reference.extract` (watertight,
 2-manifold, consistently wound, vertices on the zero set to ``1e-6`` voxel), but the
 bookkeeping is compiled (:mod:`.kernels`) and runs chunk by chunk over the octree's
 bricks (sorted by x, y, z): evaluate the chunk's samples, run marching cubes on it (new
@@ -31,10 +31,11 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
-from ..backends.lowering import N_THREADS, executor
+from ..parallel import N_THREADS, executor
+from . import dual
 from . import kernels as K
 from .cases import COMPONENT_TABLE, EDGE_AXIS, EDGE_ORIGIN, TRI_TABLE
-from .extract import BRICK, Grid, _octree
+from .grid import BRICK, Grid, octree
 
 __all__ = ["extract_mc", "extract_dc", "CHUNK_SAMPLES"]
 
@@ -129,7 +130,6 @@ def extract_dc(
         from outside.
     """
     from . import dc_kernels as D
-    from .extract import _dc_finish, _dc_solve, _edge_normals
 
     bricks = _sorted_bricks(grid, intervals, progress)
     if len(bricks) == 0:
@@ -166,7 +166,7 @@ def extract_dc(
     block = max(1, chunk_samples)
     for s in range(0, n_e, block):
         sl = slice(s, s + block)
-        normals[sl] = _edge_normals(grid, roots[sl], uaxis[sl], gradients, on_box[sl])
+        normals[sl] = dual.edge_normals(grid, roots[sl], uaxis[sl], gradients, on_box[sl])
 
     def gradients_values(p):
         if values_and_gradients is not None:
@@ -174,17 +174,17 @@ def extract_dc(
         return values(p), gradients(p)
 
     n_vox, n_pairs = st.pop("n_vox"), st.pop("n_pairs")
-    verts, quads, found = _dc_solve(grid, st.pop("vox")[:n_vox], st.pop("vcase")[:n_vox],
-                                    st.pop("pairs")[:n_pairs], roots, normals, uaxis,
-                                    threads=N_THREADS if serial is not None else 1)
+    verts, quads, found = dual.dc_solve(grid, st.pop("vox")[:n_vox], st.pop("vcase")[:n_vox],
+                                        st.pop("pairs")[:n_pairs], roots, normals, uaxis,
+                                        threads=N_THREADS if serial is not None else 1)
     del normals, roots, on_box  # (the working arrays go before the faces are made)
-    return _dc_finish(grid, verts, quads, found, st["f0"][:n_e], values, gradients_values)
+    return dual.dc_finish(grid, verts, quads, found, st["f0"][:n_e], values, gradients_values)
 
 
 def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:
     """The octree's bricks ``(K, 3)``, sorted by x, y, z (a deterministic, local sweep)."""
-    bricks = _octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
-                     else None)
+    bricks = octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
+                    else None)
     return bricks[np.lexsort((bricks[:, 2], bricks[:, 1], bricks[:, 0]))]
 
 

@@ -170,10 +170,10 @@ def _with_defaults(name: str, values: dict[str, float]) -> Shape:
     expression form of a default are handled; the edited text then goes through the
     ordinary loader, which checks it like any model.
     """
-    from ..lang.loader import _parser, loads
+    from ..lang.loader import loads, parser
 
     text = source(name)
-    tree = _parser().parse(text)
+    tree = parser().parse(text)
     spans: list[tuple[int, int, str]] = []
     for st in tree.children:
         if getattr(st, "data", None) != "param_stmt":

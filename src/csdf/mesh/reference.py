@@ -1,19 +1,17 @@
-"""Sparse surface extraction on a voxel grid: octree pruning by interval arithmetic,
-then marching cubes or manifold dual contouring on the active voxels only.
+"""The NumPy reference mesher: sparse surface extraction on a voxel grid, octree pruning
+by interval arithmetic, then marching cubes or manifold dual contouring on the active
+voxels only, in NumPy array code.
 
-This is the NumPy implementation, used without Numba. With the fast backend, both
-methods run compiled and streamed (:mod:`csdf.mesh.stream`, :mod:`csdf.mesh.kernels`,
-:mod:`csdf.mesh.dc_kernels`: same octree, case table, root search and vertex placement,
-tested equal to this).
+It is the oracle the compiled streaming mesher (:mod:`csdf.mesh.stream`,
+:mod:`csdf.mesh.kernels`, :mod:`csdf.mesh.dc_kernels`) is tested equal to (same octree,
+case table, root search and vertex placement), and the mesher :func:`csdf.mesh` uses
+when the field has no compiled evaluator (Numba missing, or another backend chosen).
 
-Grid: ``dims = (nx, ny, nz)`` voxels of edge ``h`` from ``origin``; sample ``(i, j, k)``
-is the point ``origin + h * (i, j, k)``. The mesher works in three stages:
+The grid and the octree are in :mod:`.grid`; the dual-contouring steps shared with the
+streaming mesher in :mod:`.dual`. The mesher works in three stages:
 
-1. **Octree.** Cubic cells of ``BRICK * 2^L`` voxels are tested with interval arithmetic
-   over their boxes; a cell whose interval excludes 0 holds no surface and is dropped
-   (intervals are conservative, so this is safe for fields that are not distances:
-   twist, bend, non-uniform scale). Survivors split until they are bricks of
-   ``BRICK^3`` voxels.
+1. **Octree** (:func:`.grid.octree`): bricks of ``BRICK^3`` voxels that may hold
+   surface.
 2. **Samples.** The field is evaluated at each surviving brick's ``(BRICK+1)^3``
    samples. Samples on the outer faces of the grid count as outside, so the surface is
    always closed (the shape is clipped to the grid box).
@@ -29,53 +27,14 @@ is the point ``origin + h * (i, j, k)``. The mesher works in three stages:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
 from .cases import COMPONENT_TABLE, CORNERS, EDGE_AXIS, EDGE_ORIGIN, MAX_COMPONENTS, TRI_TABLE
+from .dual import PROJECT_STEPS, TIE, dc_finish, dc_solve, edge_normals
+from .grid import BRICK, Grid, octree
 
-__all__ = ["Grid", "extract", "BRICK"]
-
-BRICK = 8
-
-
-@dataclass(frozen=True)
-class Grid:
-    """A voxel grid: ``dims`` voxels of edge ``h`` starting at ``origin`` (model units)."""
-
-    origin: np.ndarray  # (3,)
-    h: float
-    dims: tuple[int, int, int]
-
-    def points(self, ijk: np.ndarray) -> np.ndarray:
-        """Sample coordinates ``(M, 3)`` of integer sample indices ``ijk (M, 3)``."""
-        return self.origin + ijk * self.h
-
-
-def _octree(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:
-    """Lower corners ``(K, 3)`` (sample indices) of the bricks that may hold surface."""
-    dims = np.array(grid.dims)
-    size = BRICK
-    while size < dims.max():
-        size *= 2
-    cells = np.zeros((1, 3), dtype=np.int64)
-    while True:
-        lo_idx = cells
-        hi_idx = np.minimum(cells + size, dims)
-        lo, hi = intervals(grid.points(lo_idx), grid.points(hi_idx))
-        touches = np.any(lo_idx == 0, axis=1) | np.any(hi_idx >= dims, axis=1)
-        keep = (lo <= 0) & ((hi >= 0) | touches)
-        keep &= np.all(lo_idx < dims, axis=1)
-        cells = cells[keep]
-        if progress:
-            progress(size, len(cells))
-        if size == BRICK or len(cells) == 0:
-            return cells
-        size //= 2
-        offs = CORNERS * size
-        cells = (cells[:, None, :] + offs[None, :, :]).reshape(-1, 3)
-        cells = cells[np.all(cells < dims, axis=1)]
+__all__ = ["extract"]
 
 
 def _sample_bricks(grid: Grid, bricks: np.ndarray, values: Callable) -> np.ndarray:
@@ -168,8 +127,8 @@ def extract(
         from outside.
     """
     dims = np.array(grid.dims, dtype=np.int64)
-    bricks = _octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
-                     else None)
+    bricks = octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
+                    else None)
     if len(bricks) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     vals = _sample_bricks(grid, bricks, values)
@@ -235,11 +194,7 @@ def _clip_box(values: Callable, grid: Grid, on_box: np.ndarray) -> Callable:
     return clipped
 
 
-_PROJECT_STEPS = 3
-_SPLIT_MIN = 65536  # active voxels worth solving on several threads
-
-
-def _project(verts: np.ndarray, fg: Callable, h: float, steps: int = _PROJECT_STEPS
+def _project(verts: np.ndarray, fg: Callable, h: float, steps: int = PROJECT_STEPS
              ) -> np.ndarray:
     """Newton steps ``v -= f grad f / |grad f|^2`` towards the zero set, each limited to
     half a voxel; vertices already on it (sharp edges and corners) stay put."""
@@ -254,40 +209,12 @@ def _project(verts: np.ndarray, fg: Callable, h: float, steps: int = _PROJECT_ST
     return verts
 
 
-def _edge_normals(grid: Grid, roots: np.ndarray, uaxis: np.ndarray, gradients: Callable,
-                  on_box: np.ndarray) -> np.ndarray:
-    """Unit normals ``(E, 3)`` at the edge roots ``(E, 3)`` (edge axes ``uaxis (E,)``)."""
-    # normals from both sides of the surface along each edge: exactly on a kink (a box
-    # face, f = 0 where max/min tie) a gradient is a one-sided choice and can vanish
-    step = np.eye(3)[uaxis] * (1e-4 * grid.h)
-    normals = gradients(np.concatenate([roots - step, roots + step]))
-    normals = normals[: len(roots)] + normals[len(roots):]
-    nlen = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(nlen > 0, normals / np.maximum(nlen, 1e-300), 0.0)
-    # box-clipped edges: their normal is the box face normal (the box closes the surface)
-    if on_box.any():
-        lo_b = grid.origin
-        hi_b = grid.origin + grid.h * np.array(grid.dims)
-        rp = roots[on_box]
-        d = np.stack([lo_b - rp, rp - hi_b], axis=1).reshape(len(rp), 6)
-        face = np.argmax(d, axis=1)
-        nb = np.zeros((len(rp), 3))
-        nb[np.arange(len(rp)), face % 3] = np.where(face < 3, -1.0, 1.0)
-        normals[on_box] = np.where((np.max(d, axis=1) > -grid.h)[:, None], nb, normals[on_box])
-    return normals
-
-
-# a quad's diagonals tie (flat faces: both midpoints on the surface up to rounding) when
-# their |f| differ by less than this many voxels: take 0-2, whatever the rounding
-_TIE = 1e-9
-
-
 def _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, uaxis, ukeys, dims, gradients,
                   on_box, values, compiled=False):
     def gradients_values(p):
         return values(p), gradients(p)
 
-    normals = _edge_normals(grid, roots, uaxis, gradients, on_box)
+    normals = edge_normals(grid, roots, uaxis, gradients, on_box)
     if compiled:
         return _dual_contour_compiled(grid, vox, vcase, inv, roots, normals, f0, uaxis,
                                       values, gradients_values)
@@ -365,7 +292,7 @@ def _dual_contour(grid, vox, vcase, av, ae, inv, roots, f0, uaxis, ukeys, dims, 
     m02 = 0.5 * (verts[quads[:, 0]] + verts[quads[:, 2]])
     m13 = 0.5 * (verts[quads[:, 1]] + verts[quads[:, 3]])
     fm = np.abs(values(np.concatenate([m02, m13])))
-    use02 = fm[: len(quads)] <= fm[len(quads):] + _TIE * grid.h
+    use02 = fm[: len(quads)] <= fm[len(quads):] + TIE * grid.h
     t1 = np.where(use02[:, None], quads[:, [0, 1, 2]], quads[:, [0, 1, 3]])
     t2 = np.where(use02[:, None], quads[:, [0, 2, 3]], quads[:, [1, 2, 3]])
     faces = np.concatenate([t1, t2])
@@ -376,69 +303,8 @@ def _dual_contour_compiled(grid, vox, vcase, inv, roots, normals, f0, uaxis, val
                            gradients_values):
     """:func:`_dual_contour` after the normals, with its per-cell work compiled
     (:mod:`.dc_kernels`): the same vertices, quads and triangles."""
-    verts, quads, found = _dc_solve(grid, vox, vcase, inv, roots, normals, uaxis)
-    return _dc_finish(grid, verts, quads, found, f0, values, gradients_values)
-
-
-def _dc_solve(grid: Grid, vox: np.ndarray, vcase: np.ndarray, inv: np.ndarray,
-              roots: np.ndarray, normals: np.ndarray, uaxis: np.ndarray,
-              threads: int = 1) -> tuple:
-    """Compiled QEF vertices ``(V, 3)`` and edge quads ``(E, 4)`` with their found-corner
-    masks ``(E,)`` (:func:`.dc_kernels.dc_vertices_range`; arguments as there). With
-    ``threads > 1`` (and at least ``_SPLIT_MIN`` voxels) the voxels are split into that
-    many ranges solved side by side (the same results)."""
-    from . import dc_kernels as D
-
-    args = (np.asarray(vox, dtype=np.int64), np.asarray(vcase, dtype=np.int64),
-            np.asarray(inv, dtype=np.int64), roots, normals,
-            np.asarray(uaxis, dtype=np.int64), COMPONENT_TABLE.astype(np.int64),
-            EDGE_ORIGIN.astype(np.int64), np.asarray(grid.origin, dtype=np.float64),
-            float(grid.h))
-    rank, n_comp, n_pairs = D.dc_case_tables(args[6], MAX_COMPONENTS)
-    case = args[1]
-    vstart = np.concatenate([[0], np.cumsum(n_comp[case])])  # first vertex of each voxel
-    pstart = np.concatenate([[0], np.cumsum(n_pairs[case])])  # first pair of each voxel
-    verts = np.empty((int(vstart[-1]), 3))
-    quads = np.full((len(roots), 4), -1, dtype=np.int64)
-    if threads <= 1 or len(vox) < _SPLIT_MIN:
-        threads = 1
-    cuts = np.linspace(0, len(vox), threads + 1).astype(np.int64)
-    ranges = [(int(a0), int(a1), int(pstart[a0]), int(vstart[a0]), *args, rank, n_comp,
-               verts, quads) for a0, a1 in zip(cuts[:-1], cuts[1:])]
-    if threads == 1:
-        D.dc_vertices_range(*ranges[0])
-    else:
-        from ..backends.lowering import executor
-
-        pool = executor("csdf-dc", threads)
-        for job in [pool.submit(D.dc_vertices_range, *r) for r in ranges]:
-            job.result()
-    return verts, quads, D.dc_found(quads)
-
-
-def _dc_finish(grid: Grid, verts: np.ndarray, quads: np.ndarray, found: np.ndarray,
-               f0: np.ndarray, values: Callable, gradients_values: Callable,
-               block: int = 1 << 18) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices ``(V, 3)`` projected to the surface and the split, wound triangles
-    ``(F, 3)`` of the complete quads; the field is evaluated ``block`` points at a time
-    (the result does not depend on it)."""
-    from . import dc_kernels as D
-
-    for s in range(0, len(verts), block):
-        v = verts[s:s + block]
-        for _ in range(_PROJECT_STEPS):  # (_project's steps, compiled)
-            f, g = gradients_values(v)
-            D.newton_step(v, np.asarray(f, dtype=np.float64), np.asarray(g, dtype=np.float64),
-                          float(grid.h))
-    quads = D.dc_quads(quads, found, f0)
-    fm = np.empty(2 * len(quads))
-    n = len(quads)
-    for s in range(0, n, block):
-        q = quads[s:s + block]
-        f = np.asarray(values(D.dc_midpoints(q, verts)), dtype=np.float64)
-        fm[s:s + len(q)] = f[:len(q)]
-        fm[n + s:n + s + len(q)] = f[len(q):]
-    return verts, D.dc_split(quads, fm, _TIE * grid.h)
+    verts, quads, found = dc_solve(grid, vox, vcase, inv, roots, normals, uaxis)
+    return dc_finish(grid, verts, quads, found, f0, values, gradients_values)
 
 
 _LOCAL = {}

@@ -1,0 +1,14 @@
+"""Reading and writing files. Every writer is atomic (:func:`atomic_path`): it writes a
+temporary file in the destination folder and renames it over the target, so a failure
+never leaves a half-written file behind.
+
+Modules: ``atomic`` (the temporary-file-and-rename helper), ``mesh`` (triangle meshes:
+STL, OBJ, PLY, GLB), ``points`` (point clouds as PLY files).
+"""
+
+from .atomic import atomic_path
+from .mesh import MESH_FORMATS, write_mesh
+from .points import read_point_properties, read_points, write_points
+
+__all__ = ["atomic_path", "write_mesh", "MESH_FORMATS", "read_points", "write_points",
+           "read_point_properties"]

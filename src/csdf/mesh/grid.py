@@ -1,0 +1,71 @@
+"""The voxel grid both meshers work on, and the octree that prunes it.
+
+Grid: ``dims = (nx, ny, nz)`` voxels of edge ``h`` from ``origin``; sample ``(i, j, k)``
+is the point ``origin + h * (i, j, k)``.
+
+Octree: cubic cells of ``BRICK * 2^L`` voxels are tested with interval arithmetic over
+their boxes; a cell whose interval excludes 0 holds no surface and is dropped (intervals
+are conservative, so this is safe for fields that are not distances: twist, bend,
+non-uniform scale). Survivors split until they are bricks of ``BRICK^3`` voxels. Cells
+touching the grid box are kept while their interval reaches below 0, since the surface
+is closed on the box.
+
+Used by the NumPy reference mesher (:mod:`.reference`) and the compiled streaming mesher
+(:mod:`.stream`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cases import CORNERS
+
+__all__ = ["Grid", "octree", "BRICK"]
+
+#: edge of an octree leaf (a brick), in voxels
+BRICK = 8
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A voxel grid: ``dims`` voxels of edge ``h`` starting at ``origin`` (model units)."""
+
+    origin: np.ndarray  # (3,)
+    h: float
+    dims: tuple[int, int, int]
+
+    def points(self, ijk: np.ndarray) -> np.ndarray:
+        """Sample coordinates ``(M, 3)`` of integer sample indices ``ijk (M, 3)``."""
+        return self.origin + ijk * self.h
+
+
+def octree(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:
+    """Lower corners ``(K, 3)`` (sample indices) of the bricks that may hold surface.
+
+    ``intervals``: ``(lo (M, 3), hi (M, 3)) -> (flo (M,), fhi (M,))``, conservative
+    bounds of the field over boxes; ``progress``: optional ``callback(size, kept)`` after
+    each level (cell edge in voxels, cells kept)."""
+    dims = np.array(grid.dims)
+    size = BRICK
+    while size < dims.max():
+        size *= 2
+    cells = np.zeros((1, 3), dtype=np.int64)
+    while True:
+        lo_idx = cells
+        hi_idx = np.minimum(cells + size, dims)
+        lo, hi = intervals(grid.points(lo_idx), grid.points(hi_idx))
+        touches = np.any(lo_idx == 0, axis=1) | np.any(hi_idx >= dims, axis=1)
+        keep = (lo <= 0) & ((hi >= 0) | touches)
+        keep &= np.all(lo_idx < dims, axis=1)
+        cells = cells[keep]
+        if progress:
+            progress(size, len(cells))
+        if size == BRICK or len(cells) == 0:
+            return cells
+        size //= 2
+        offs = CORNERS * size
+        cells = (cells[:, None, :] + offs[None, :, :]).reshape(-1, 3)
+        cells = cells[np.all(cells < dims, axis=1)]

@@ -1,4 +1,4 @@
-"""Recycled result memory of the fast backend (``csdf.backends.reuse``): memory is only
+"""Recycled result memory of the fast backend (``csdf.memory``): memory is only
 reused once no array or view of an earlier result uses it, and the pool stays bounded."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import csdf
-from csdf.backends import reuse
+from csdf import memory as reuse
 
 MB = 1 << 20
 

@@ -35,9 +35,20 @@ def test_instructions_are_eight_bytes_and_header_is_documented():
     b = p.to_bytes()
     magic, version, flags, n_p, n_c, n_r, out, n_i, n_calls, lip = struct.unpack_from(
         "<4sHHHHHHIId", b)
-    assert (magic, version, flags, n_p, n_c, n_i, n_calls) == (b"CSDF", 1, 0, 0, 1, 7, 1)
+    # a program with bounds is format version 2: the bounds section follows the calls
+    assert (magic, version, flags, n_p, n_c, n_i, n_calls) == (b"CSDF", 2, 0, 0, 1, 7, 1)
     assert lip == 1.0 and out == 3 + 0 + 1 + 0
-    assert len(b) == 32 + 8 + 7 * 8 + (1 + 6 + 4 + 2 + 4 * 4) + 4
+    assert len(b) == 32 + 8 + 7 * 8 + (1 + 6 + 4 + 2 + 4 * 4) + 2 * 3 * 8 + 4
+    box = np.frombuffer(b[-4 - 48:-4], dtype="<f8").reshape(2, 3)
+    np.testing.assert_array_equal(box, [[-1.0] * 3, [1.0] * 3])
+    np.testing.assert_array_equal(p.bounds, box)
+    # without bounds: version 1, the layout earlier csdf wrote, byte for byte
+    b1 = p.with_bounds(None).to_bytes()
+    magic, version, flags, n_p, n_c, n_r, out, n_i, n_calls, lip = struct.unpack_from(
+        "<4sHHHHHHIId", b1)
+    assert (magic, version, flags, n_p, n_c, n_i, n_calls) == (b"CSDF", 1, 0, 0, 1, 7, 1)
+    assert len(b1) == 32 + 8 + 7 * 8 + (1 + 6 + 4 + 2 + 4 * 4) + 4
+    assert b1[6:-4] == b[6:-4 - 48]
 
 
 def _recrc(b: bytes) -> bytes:

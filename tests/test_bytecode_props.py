@@ -214,7 +214,8 @@ def check_text(text: str, *, origin: str = "") -> Program | None:
 # =============================================================================== layout
 def layout(data: bytes) -> dict:
     """Offsets of every field of a *valid* program (an independent reading of the format:
-    header 32 bytes, params, f64 constants, 8-byte instructions, calls, CRC)."""
+    header 32 bytes, params, f64 constants, 8-byte instructions, calls, in version 2 the
+    bounds (2 x dim f64), CRC)."""
     (magic, version, flags, n_p, n_c, n_r, out, n_i, n_calls, lip) = HEADER.unpack_from(data, 0)
     assert magic == b"CSDF"
     pos = HEADER.size
@@ -235,10 +236,14 @@ def layout(data: bytes) -> dict:
         calls.append({"len": pos, "name": pos + 1, "name_len": n, "out": pos + 1 + n,
                       "n_in": pos + 5 + n, "inputs": pos + 7 + n, "count": n_in})
         pos += 7 + n + 4 * n_in
+    bounds = None
+    if version == 2:
+        bounds = pos
+        pos += 2 * (2 if flags & 4 else 3) * 8
     assert pos == len(data) - 4, "layout does not cover the program"
     return {"n_params": n_p, "n_consts": n_c, "n_regs": n_r, "output": out, "n_instr": n_i,
             "n_calls": n_calls, "params": params, "consts": consts, "code": code,
-            "calls": calls, "n_fixed": 3 + n_p + n_c, "end": pos}
+            "calls": calls, "bounds": bounds, "n_fixed": 3 + n_p + n_c, "end": pos}
 
 
 def put(buf: bytearray, offset: int, fmt: str, value) -> None:

@@ -1,6 +1,8 @@
-"""One conformance suite, run over every backend: values, gradients and parameter
-derivatives agree with the NumPy reference (float64: 1e-9 relative; float32: 1e-5) on
-every primitive and operator of the catalogue and on random expression DAGs."""
+"""One conformance suite, run over every point evaluator of the registry
+(:mod:`csdf.backends.registry`; what is unavailable on this machine is skipped): values,
+gradients and parameter derivatives agree with the NumPy reference (float64: 1e-9
+relative; float32: 1e-5) on every primitive and operator of the catalogue and on random
+expression DAGs. A new evaluator is checked by adding its registry entry."""
 
 from __future__ import annotations
 
@@ -11,12 +13,22 @@ from hypothesis import strategies as st
 
 import csdf
 from catalogue import catalogue, sample_box
-from csdf.backends import BACKENDS
+from csdf.backends import BACKENDS, registry
 from csdf.compiler import compile_expr
 from strategies import expr_dags
 
 CAT = catalogue()
-EVAL_BACKENDS = [b for b in BACKENDS if b != "auto"]
+
+
+def _evaluators(*, dtype: str = "float64", exclude: tuple[str, ...] = ()) -> list:
+    """The registry's point evaluators (by backend name) that state ``dtype``, each
+    skipped where it is unavailable."""
+    return [pytest.param(e.name, id=e.name, marks=pytest.mark.skipif(
+        not e.available(), reason=f"{e.name} needs {e.needs}"))
+        for e in registry.point_evaluators() if dtype in e.dtypes and e.name not in exclude]
+
+
+EVAL_BACKENDS = _evaluators()
 TOL = {np.float64: (1e-9, 1e-9), np.float32: (1e-5, 1e-5)}
 
 
@@ -44,18 +56,22 @@ def _close(got, ref, dtype, what):
 
 def _check(prog, pts, backend, dtype):
     # derivatives at infinite coordinates are undefined (0 * inf): values only there
+    caps = registry.get(backend)  # (what the evaluator computes)
     fin = ~np.isinf(pts).any(axis=1)
     ref = prog.value_grad_param_jacobian(pts, backend="numpy")
-    got = prog.value_grad_param_jacobian(pts, backend=backend)
-    _close(got[0], ref[0], dtype, f"{backend} value")
-    _close(got[1][fin], ref[1][fin], dtype, f"{backend} gradient")
-    _close(got[2][fin], ref[2][fin], dtype, f"{backend} param jacobian")
+    if caps.gradients and caps.param_jacobians:
+        got = prog.value_grad_param_jacobian(pts, backend=backend)
+        _close(got[0], ref[0], dtype, f"{backend} value")
+        _close(got[1][fin], ref[1][fin], dtype, f"{backend} gradient")
+        _close(got[2][fin], ref[2][fin], dtype, f"{backend} param jacobian")
     _close(prog(pts, backend=backend), ref[0], dtype, f"{backend} value-only")
-    v, g = prog.value_and_grad(pts, backend=backend)
-    _close(v, ref[0], dtype, f"{backend} value_and_grad value")
-    _close(g[fin], ref[1][fin], dtype, f"{backend} value_and_grad gradient")
-    _close(prog.param_jacobian(pts, backend=backend)[fin], ref[2][fin], dtype,
-           f"{backend} jacobian")
+    if caps.gradients:
+        v, g = prog.value_and_grad(pts, backend=backend)
+        _close(v, ref[0], dtype, f"{backend} value_and_grad value")
+        _close(g[fin], ref[1][fin], dtype, f"{backend} value_and_grad gradient")
+    if caps.param_jacobians:
+        _close(prog.param_jacobian(pts, backend=backend)[fin], ref[2][fin], dtype,
+               f"{backend} jacobian")
 
 
 @pytest.mark.parametrize("backend", EVAL_BACKENDS)
@@ -69,7 +85,7 @@ FLOAT32_SHAPES = ["sphere", "box", "capped_cone", "pyramid", "polygon", "union_s
                   "intersection_exponential", "twist", "repeat_polar", "rotate_param"]
 
 
-@pytest.mark.parametrize("backend", EVAL_BACKENDS)
+@pytest.mark.parametrize("backend", _evaluators(dtype="float32"))
 @pytest.mark.parametrize("name", FLOAT32_SHAPES)
 def test_catalogue_float32(backend, name):
     shape = CAT[name]()
@@ -112,7 +128,7 @@ def _random_case_settings(n):
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
-@pytest.mark.parametrize("backend", [b for b in EVAL_BACKENDS if b != "numpy"])
+@pytest.mark.parametrize("backend", _evaluators(exclude=("numpy",)))
 def test_random_expression_dags(backend):
     n = 12 if backend == "fast" else 60  # each new structure compiles a fast kernel
 
@@ -142,6 +158,31 @@ def test_random_expression_dags(backend):
             np.testing.assert_allclose(g[ok], r[ok], rtol=1e-9, atol=1e-9, err_msg=what)
 
     check()
+
+
+def test_registry_states_every_evaluator():
+    """BACKENDS and select are built on the registry; each entry's module has the
+    interface of its kind and the capabilities it states."""
+    assert BACKENDS == ("auto", "numpy", "interp", "fast")
+    assert [e.name for e in registry.point_evaluators()] == list(BACKENDS[1:])
+    names = [e.name for e in registry.EVALUATORS]
+    assert len(set(names)) == len(names) and {"interval", "glsl"} <= set(names)
+    for e in registry.EVALUATORS:
+        impl = e.load()
+        assert e.description and set(e.dtypes) <= {"float32", "float64"}
+        assert isinstance(e.available(), bool)
+        if e.kind == "points":
+            assert isinstance(impl, registry.PointEvaluator) and e.values
+        elif e.kind == "intervals":
+            assert isinstance(impl, registry.IntervalEvaluator) and e.intervals
+        else:
+            assert e.kind == "source" and callable(impl.to_glsl)
+    assert registry.get("numpy").available()
+    from csdf.backends import select
+
+    for e in registry.point_evaluators():
+        if e.available():
+            assert select(e.name, 10) is e.load()
 
 
 def test_auto_backend_choice():

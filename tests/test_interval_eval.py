@@ -7,7 +7,8 @@
    a box reported empty gives NaN at every sampled point.
 2. Per-op ranges checked by hand.
 3. Exact SDFs: boxes away from the surface get the right sign.
-4. :func:`simplify` gives a valid, shorter program that is bit-identical in its box.
+4. :func:`csdf.compiler.simplify.simplify` gives a valid, shorter program that is
+   bit-identical in its box.
 5. Errors, and the CSG example over 100k boxes (time printed, not asserted).
 
 ``CSDF_FUZZ_EXAMPLES=<n>`` raises every hypothesis test to at least ``n`` examples.
@@ -25,9 +26,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import csdf
-from csdf.backends.interval_eval import evaluate_intervals, simplify
+from csdf.backends.interval_eval import evaluate_intervals
 from csdf.compiler import compile_expr
 from csdf.compiler.binary import validate
+from csdf.compiler.simplify import simplify
 from csdf.expr import X, Y, const, make, param
 
 try:  # tests/ as a package or as a plain directory on sys.path

@@ -30,8 +30,7 @@ from .shapes import REGISTRY, Shape
 from .shapes import __all__ as _shape_names
 from .slicing import save_slice
 from .slicing import slice as slice  # noqa: A004 - public name csdf.slice (not in __all__)
-
-__version__ = "0.1.0"
+from .version import __version__
 
 
 def compile(shape: Shape) -> Program:  # noqa: A001 - public API name

@@ -7,8 +7,14 @@ points with every intermediate value in a CPU register. Derivatives are sparse f
 mode: each value carries only the tangent components that are not structurally zero
 (a value that depends on x alone has no d/dy code), so the generated code stays small.
 
-Safety: the source is built only from the validated program: op names from the fixed
-table in :mod:`csdf.ops`, integer indices, and identifiers made here. Constants,
+Every op's code comes from its specification in :mod:`csdf.ops`: the derivative factors
+are rendered from the spec's formulas (:meth:`csdf.opformula.Formula.render`) and
+combined by :func:`csdf.ops.chain_tangent`, and ``min``/``max`` compare by
+:func:`csdf.ops.tie_comparison`; only the value expressions and the scalar helpers of
+:mod:`csdf.backends.scalar_ops` are written here.
+
+Safety: the source is built only from the validated program: op names and formulas
+from the fixed table in :mod:`csdf.ops`, integer indices, and identifiers made here. Constants,
 parameter values and the parameter-only prefix are passed in an array ``u`` (so
 programs that differ only in constants share a kernel); no user text ever reaches it.
 """
@@ -18,17 +24,33 @@ from __future__ import annotations
 import hashlib
 import re
 
-from ..ops import OPS_BY_CODE
+from ..opformula import Formula, Target
+from ..ops import OPS, OPS_BY_CODE, chain_tangent, tie_comparison
+from .lowering import UNIFORM_BASE
 
 __all__ = ["generate", "structure_key", "CODEGEN_VERSION"]
 
-CODEGEN_VERSION = 6
+CODEGEN_VERSION = 7
 BLOCK = 256
 SEGMENT = 2000  # statements per generated function
 
 # extra uniform constants appended after the program's uniform rows
 _K_ZERO, _K_ONE, _K_TWO, _K_HALF, _K_NAN = range(5)
 N_EXTRA = 5
+# the literals a formula of csdf.ops may use, as those uniform constants
+_LITERALS = {0.0: f"k{_K_ZERO}", 1.0: f"k{_K_ONE}", 2.0: f"k{_K_TWO}", 0.5: f"k{_K_HALF}"}
+_CALLS = {
+    "sin": "np.sin({0})", "cos": "np.cos({0})", "sqrt": "np.sqrt({0})",
+    "floor": "np.floor({0})", "sign": f"sign_({{0}}, k{_K_ONE}, k{_K_ZERO})",
+    "pos_div": f"safe_div_({{0}}, {{1}}, k{_K_ZERO})",
+}
+
+
+def _literal(x: float) -> str:
+    try:
+        return _LITERALS[x]
+    except KeyError:
+        raise ValueError(f"codegen has no uniform constant for the literal {x!r}") from None
 
 _VALUE = {
     "add": "{a} + {b}",
@@ -56,7 +78,8 @@ _VALUE = {
 def structure_key(low, mode: str) -> str:
     """Hash of everything the generated source depends on."""
     h = hashlib.blake2b(digest_size=16)
-    h.update(f"v{CODEGEN_VERSION}|{mode}|{low.n_params}|{low.n_uniform_rows}|{low.out_row}|".encode())
+    h.update(f"v{CODEGEN_VERSION}|{mode}|{low.n_params}|{low.n_consts}|{low.n_uniform_rows}|"
+             f"{low.out_row}|".encode())  # (n_consts: which rows are constants, for ties)
     h.update(low.code[:, :4].tobytes())
     h.update(bytes(sorted(low.prefix_param_deps_key())))
     return h.hexdigest()
@@ -84,14 +107,14 @@ class _Gen:
                 t[r] = "1"
             self.tan[r] = t
         for i in range(U):
-            self.val[3 + i] = f"u{i}"
-            self.tan[3 + i] = [None] * self.T
+            self.val[UNIFORM_BASE + i] = f"u{i}"
+            self.tan[UNIFORM_BASE + i] = [None] * self.T
         if self.wrt:
             for i in range(P):
-                self.tan[3 + i][self.off + i] = "1"
+                self.tan[low.layout.param(i)][self.off + i] = "1"
             for row, deps in low.prefix_param_deps().items():
                 for p in deps:
-                    self.tan[row][self.off + p] = f"du{row - 3}_{p}"
+                    self.tan[row][self.off + p] = f"du{row - UNIFORM_BASE}_{p}"
         self.n_tmp = 0
 
     def tmp(self) -> str:
@@ -121,17 +144,22 @@ class _Gen:
     def _v(self, t: str) -> str:
         return self.K[_K_ONE] if t == "1" else t
 
+    # the tangent algebra of csdf.ops.chain_tangent, on names
+    def neg(self, t):
+        return self.emit(f"-{self._v(t)}")
+
+    def sub(self, u, v):
+        return self.add(u, v, neg_v=True)
+
     def instr(self, op: str, d: int, a: int, b: int | None):
         va = self.val[a]
         vb = self.val[b] if b is not None else None
         K = self.K
         c = None
         if op == "min" or op == "max":
-            # ties follow b when a is a constant (see numpy_backend)
-            P, C = self.low.n_params, self.low.n_consts
-            strict = bool(self.T) and 3 + P <= a < 3 + P + C
-            cmp = ("<" if strict else "<=") if op == "min" else (">" if strict else ">=")
-            c = self.emit(f"{va} {cmp} {vb}")
+            if self.T:  # which operand's tangent: the tie rule of csdf.ops
+                cmp = tie_comparison(op, self.low.is_const_row(a))
+                c = self.emit(f"{va} {cmp} {vb}")
             v = self.emit(f"{op}_({va}, {vb})")
         elif op == "step":
             v = self.emit(f"step_({va}, {K[_K_ONE]}, {K[_K_ZERO]})")
@@ -145,19 +173,13 @@ class _Gen:
             self.tan[d] = self.tangent(op, va, vb, v, self.tan[a], tb, c)
 
     def tangent(self, op, a, b, v, ta, tb, c):
+        """Tangent names of ``v = op(a, b)`` by the op's rule in :mod:`csdf.ops`."""
         K = self.K
         T = self.T
-        if op in ("floor", "step", "sign"):
+        rule = OPS[op].derivative
+        if rule.kind == "zero":
             return [None] * T
-        if op == "add":
-            return [self.add(x, y) for x, y in zip(ta, tb)]
-        if op == "sub":
-            return [self.add(x, y, neg_v=True) for x, y in zip(ta, tb)]
-        if op == "neg":
-            return [None if x is None else self.emit(f"-{self._v(x)}") for x in ta]
-        if op == "mul":
-            return [self.add(self.scale(b, x), self.scale(a, y)) for x, y in zip(ta, tb)]
-        if op in ("min", "max"):
+        if rule.kind == "select":
             out = []
             for x, y in zip(ta, tb):
                 if x is None and y is None:
@@ -167,41 +189,20 @@ class _Gen:
                     ys = K[_K_ZERO] if y is None else self._v(y)
                     out.append(self.emit(f"sel_({c}, {xs}, {ys})"))
             return out
-        if op == "div":
-            if all(y is None for y in tb):
-                f = self.emit(f"{K[_K_ONE]} / {b}")
-                return [self.scale(f, x) for x in ta]
-            f = self.emit(f"{K[_K_ONE]} / {b}")
-            out = []
-            for x, y in zip(ta, tb):
-                num = self.add(x, self.scale(v, y), neg_v=True)
-                out.append(self.scale(f, num))
-            return out
-        if op == "atan2":
-            r2 = self.emit(f"{a} * {a} + {b} * {b}")
-            fy = self.emit(f"safe_div_({b}, {r2}, {K[_K_ZERO]})")
-            fx = self.emit(f"safe_div_(-{a}, {r2}, {K[_K_ZERO]})")
-            return [self.add(self.scale(fy, x), self.scale(fx, y)) for x, y in zip(ta, tb)]
-        if op == "mod":
-            q = self.emit(f"np.floor({a} / {b})")
-            return [self.add(x, self.scale(q, y), neg_v=True) for x, y in zip(ta, tb)]
-        if all(x is None for x in ta):
-            return [None] * T
-        factor = {
-            "square": f"{K[_K_TWO]} * {a}",
-            "sqrt": f"safe_div_({K[_K_HALF]}, {v}, {K[_K_ZERO]})",
-            "abs": f"sign_({a}, {K[_K_ONE]}, {K[_K_ZERO]})",
-            "sin": f"np.cos({a})",
-            "cos": f"-np.sin({a})",
-            "tan": f"{K[_K_ONE]} + {v} * {v}",
-            "asin": f"{K[_K_ONE]} / np.sqrt({K[_K_ONE]} - {a} * {a})",
-            "acos": f"-{K[_K_ONE]} / np.sqrt({K[_K_ONE]} - {a} * {a})",
-            "atan": f"{K[_K_ONE]} / ({K[_K_ONE]} + {a} * {a})",
-            "exp": f"{v}",
-            "log": f"{K[_K_ONE]} / {a}",
-        }[op]
-        f = self.emit(factor)
-        return [self.scale(f, x) for x in ta]
+        names = {"a": a, "b": b, "v": v}
+        target = Target(name=names.__getitem__, literal=_literal, calls=_CALLS)
+        cache: dict[Formula, str] = {}
+
+        def coef(f: Formula) -> str:
+            """The formula's value, emitted once per instruction (``let`` names first)."""
+            if f not in cache:
+                for name, g in rule.let:
+                    if name not in names:
+                        names[name] = self.emit(g.render(target))
+                cache[f] = names[f.text] if f.is_name else self.emit(f.render(target))
+            return cache[f]
+
+        return [chain_tangent(rule, x, y, coef, self) for x, y in zip(ta, tb)]
 
     def source(self) -> str:
         low = self.low
@@ -224,7 +225,8 @@ class _Gen:
         loads += [(f"k{i}", f"u[{U + i}]") for i in range(N_EXTRA)]
         if self.wrt:
             for row, deps in self.low.prefix_param_deps().items():
-                loads += [(f"du{row - 3}_{p}", f"du[{row - 3}, {p}]") for p in deps]
+                i = row - UNIFORM_BASE
+                loads += [(f"du{i}_{p}", f"du[{i}, {p}]") for p in deps]
         return [f"{ind}{n} = {src}" for n, src in loads if names is None or n in names]
 
     def _stores(self, outs: list[str], ind: str) -> list[str]:

@@ -11,7 +11,7 @@ Before a cached source file is imported it is compared byte for byte with the so
 generated now; a file that differs is rewritten, so nothing but csdf's own generated
 code is ever loaded.
 
-Large results are written to recycled memory (:mod:`csdf.backends.reuse`), which spares
+Large results are written to recycled memory (:mod:`csdf.memory`), which spares
 a loop of evaluations the page faults of fresh memory.
 """
 
@@ -27,9 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..memory import result_array
+from ..parallel import run_parallel
 from .codegen import BLOCK, generate, structure_key
-from .lowering import lowered, numba_available, run_parallel
-from .reuse import result_array
+from .lowering import lowered, numba_available
 
 __all__ = ["evaluate", "serial_values", "available", "is_ready", "cache_dir", "kernel_mode"]
 
@@ -130,7 +131,7 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
     dtype = pts.dtype
     n = pts.shape[0]
     kernel, u, du, spatial, wrt = _prepare(prog, pvals, mode, dtype)
-    out = result_array((n,), dtype)  # (recycled memory for large results, see reuse.py)
+    out = result_array((n,), dtype)  # (recycled memory for large results: csdf.memory)
     grad = result_array((n if spatial else 0, 3), dtype)
     jac = result_array((n if wrt else 0, len(prog.params)), dtype)
     run_parallel(lambda r: kernel(pts, u, du, out, grad, jac, r[0], r[1]), n, BLOCK)

@@ -1,16 +1,21 @@
 """GLSL export: a compiled program as a GLSL function, and a paste-ready Shadertoy shader.
 
-:func:`to_glsl` turns a :class:`csdf.Program` (or a :class:`csdf.Shape`, compiled first)
-into a self-contained snippet for GLSL ES 3.00 (WebGL2) and desktop GLSL 3.30 or later:
+:func:`to_glsl` turns a :class:`csdf.Program` (or anything with a ``compile()`` method
+that returns one, such as a :class:`csdf.Shape`) into a self-contained snippet for
+GLSL ES 3.00 (WebGL2) and desktop GLSL 3.30 or later:
 
 * one ``uniform float u_<name>;`` per parameter (in :attr:`Program.params` order, with
   its default and range in a comment), so changing a parameter never recompiles;
 * ``float sdf(vec3 p)``: the tape as straight-line code, one ``float`` temporary per
   instruction (``t<k>`` for instruction ``k``);
 * ``vec4 sdf_grad(vec3 p)`` (unless ``gradient=False``): ``vec4(value, dvalue/dp)`` by
-  forward-mode differentiation with the CPU evaluators' conventions at kinks
-  (``min``/``max`` follow the first operand on ties, ``abs`` has derivative ``sign(a)``,
-  ``floor``/``step``/``sign`` 0, ``sqrt`` at 0 gets 0, ``atan2`` at the origin 0).
+  forward-mode differentiation, generated from the op specification (:mod:`csdf.ops`)
+  that the CPU evaluators follow: the derivative factors are rendered from its
+  formulas, and ``min``/``max`` pick an operand's gradient by its tie rule (ties follow
+  the first operand unless that is a constant, then the second: ``min(2, x)`` at
+  ``x = 2`` has gradient ``(1, 0, 0)`` here as on the CPU); ``abs`` has derivative
+  ``sign(a)``, ``floor``/``step``/``sign`` 0, ``sqrt`` at 0 gets 0, ``atan2`` at the
+  origin 0.
 
 The snippet has no ``#version`` line and no precision statement: the host shader gives
 them (``#version 300 es`` + ``precision highp float;`` for WebGL2, or ``#version 330``).
@@ -31,9 +36,10 @@ float32 (``highp``): constants are rounded to float32 and written with the short
 decimal that reads back as the same float32; infinite or NaN constants are written as
 ``uintBitsToFloat(...)``.
 
-Safety: the text is built only from the program's validated numbers, op names from the
-fixed table in :mod:`csdf.ops`, parameter names (identifiers by construction, checked
-again here) and the function name, which must be a plain GLSL identifier.
+Safety: the text is built only from the program's validated numbers, op names and
+derivative formulas from the fixed table in :mod:`csdf.ops`, parameter names
+(identifiers by construction, checked again here) and the function name, which must be a
+plain GLSL identifier.
 """
 
 from __future__ import annotations
@@ -43,9 +49,10 @@ import re
 
 import numpy as np
 
-from ..compiler.program import Program, as_program
 from ..errors import CsdfError
-from ..ops import OPS_BY_CODE
+from ..opformula import Formula, Target
+from ..ops import OPS, OPS_BY_CODE, chain_tangent, tie_comparison
+from ..version import __version__
 
 __all__ = ["to_glsl", "shadertoy", "glsl_params", "glsl_float", "uniform_name"]
 
@@ -114,22 +121,41 @@ _BINARY = {
     "atan2": "atan({a}, {b})",
     "mod": "mod({a}, {b})",
 }
-# derivative factor f(a, v) of unary ops: d(op(a)) = f * da
-_FACTOR = {
-    "abs": "sign({a})",
-    "sqrt": "({v} > 0.0 ? 0.5 / {v} : 0.0)",
-    "square": "2.0 * {a}",
-    "sin": "cos({a})",
-    "cos": "-sin({a})",
-    "tan": "(1.0 + {v} * {v})",
-    "asin": "(1.0 / sqrt(1.0 - {a} * {a}))",
-    "acos": "(-1.0 / sqrt(1.0 - {a} * {a}))",
-    "atan": "(1.0 / (1.0 + {a} * {a}))",
-    "exp": "{v}",
-    "log": "(1.0 / {a})",
+# the functions of csdf.opformula (derivative factors) in GLSL
+_CALLS = {
+    "sin": "sin({0})", "cos": "cos({0})", "sqrt": "sqrt({0})", "floor": "floor({0})",
+    "sign": "sign({0})", "pos_div": "({1} > 0.0 ? {0} / {1} : 0.0)",
 }
 _ZERO_VEC = "vec3(0.0)"
 _ATOM = re.compile(r"g[0-9]+|vec3\([0-9., ]*\)")
+
+
+def _vec_atom(t: str) -> str:
+    """A gradient expression as an operand (parenthesised unless an atom)."""
+    return t if _ATOM.fullmatch(t) else f"({t})"
+
+
+class _Vec3Algebra:
+    """Tangent algebra of :func:`csdf.ops.chain_tangent` on ``vec3`` expressions."""
+
+    @staticmethod
+    def scale(f: str, t: str) -> str:
+        return f"{f} * {_vec_atom(t)}"
+
+    @staticmethod
+    def add(u: str, v: str) -> str:
+        return f"{u} + {v}"
+
+    @staticmethod
+    def sub(u: str, v: str) -> str:
+        return f"{u} - {v}"
+
+    @staticmethod
+    def neg(t: str) -> str:
+        return f"-{_vec_atom(t)}"
+
+
+_VEC3 = _Vec3Algebra()
 _AXES = ("vec3(1.0, 0.0, 0.0)", "vec3(0.0, 1.0, 0.0)", "vec3(0.0, 0.0, 1.0)")
 
 
@@ -171,9 +197,23 @@ def uniform_name(param_name: str, index: int) -> str:
     return f"u{index}_{re.sub('_+', '_', param_name).strip('_')}".rstrip("_")
 
 
-def _program(shape_or_program) -> Program:
-    """The program of a Shape (compiled, cached) or the Program itself."""
-    return as_program(shape_or_program, "GLSL export")[0]
+def _is_program(obj) -> bool:
+    """Duck-typed :class:`csdf.Program` (the backends do not import the compiler)."""
+    return all(hasattr(obj, a) for a in ("code", "consts", "params", "output", "layout"))
+
+
+def _program(shape_or_program):
+    """The program of a Shape (anything whose ``compile()`` returns a Program; compiled,
+    cached) or the Program itself."""
+    if _is_program(shape_or_program):
+        return shape_or_program
+    compile_ = getattr(shape_or_program, "compile", None)
+    if callable(compile_) and not isinstance(shape_or_program, type):
+        prog = compile_()
+        if _is_program(prog):
+            return prog
+    raise CsdfError(
+        f"GLSL export expects a Shape or Program, got {type(shape_or_program).__name__}")
 
 
 def _check_name(name: str) -> None:
@@ -228,17 +268,17 @@ def glsl_params(shape_or_program) -> list[dict]:
 class _Emitter:
     """Straight-line GLSL for one program: operand atoms per slot, then statements."""
 
-    def __init__(self, prog: Program):
+    def __init__(self, prog):
         self.prog = prog
-        P = len(prog.params)
-        n_fixed = prog.n_fixed
-        self.n_fixed = n_fixed
+        self.layout = lay = prog.layout
+        self.n_fixed = lay.n_fixed
+        self.n_lets = 0
         z = "p.z" if prog.dim == 3 else "0.0"
         atoms: dict[int, str] = {0: "p.x", 1: "p.y", 2: z}
         for i, prm in enumerate(prog.params):
-            atoms[3 + i] = uniform_name(prm.name, i)
+            atoms[lay.param(i)] = uniform_name(prm.name, i)
         for i, c in enumerate(prog.consts.tolist()):
-            atoms[3 + P + i] = glsl_float(c)
+            atoms[lay.const(i)] = glsl_float(c)
         self.fixed = atoms
         self.fixed_tans: dict[int, str | None] = {
             0: _AXES[0], 1: _AXES[1], 2: _AXES[2] if prog.dim == 3 else None,
@@ -300,7 +340,7 @@ class _Emitter:
                 expr = _UNARY[name].format(a=va)
             v = f"t{k}"
             lines.append(f"float {v} = {expr};")
-            g = self._tangent(name, k, va, vb, v, ta, tb, lines)
+            g = self._tangent(name, va, vb, v, ta, tb, self.layout.is_const(a), lines)
             if g is not None and not _ATOM.fullmatch(g):
                 lines.append(f"vec3 g{k} = {g};")
                 g = f"g{k}"
@@ -311,61 +351,38 @@ class _Emitter:
         lines.append(f"return vec4({out_v}, {out_g or _ZERO_VEC});")
         return lines
 
-    @staticmethod
     def _tangent(
-        op: str, k: int, a: str, b: str, v: str, ta: str | None, tb: str | None,
-        lines: list[str],
+        self, op: str, a: str, b: str, v: str, ta: str | None, tb: str | None,
+        a_const: bool, lines: list[str],
     ) -> str | None:
-        """The gradient expression of instruction ``k`` (None when structurally zero)."""
-        if op in ("floor", "step", "sign"):
+        """The gradient expression of ``v = op(a, b)`` by the op's rule in
+        :mod:`csdf.ops` (None when structurally zero); ``a_const``: operand ``a`` is a
+        constant slot (the tie rule). ``let`` values become ``float s<n>`` lines."""
+        rule = OPS[op].derivative
+        if rule.kind == "zero" or (ta is None and tb is None):
             return None
-        if op in ("add", "sub"):
-            if ta is None and tb is None:
-                return None
-            if tb is None:
-                return ta
-            if ta is None:
-                return tb if op == "add" else f"-{tb}"
-            return f"{ta} {'+' if op == 'add' else '-'} {tb}"
-        if op == "mul":
-            terms = [f"{b} * {ta}"] if ta is not None else []
-            terms += [f"{a} * {tb}"] if tb is not None else []
-            return " + ".join(terms) or None
-        if op == "div":
-            if ta is None and tb is None:
-                return None
-            if tb is None:
-                return f"{ta} / {b}"
-            num = f"{ta} - {v} * {tb}" if ta is not None else f"-({v} * {tb})"
-            return f"({num}) / {b}"
-        if op in ("min", "max"):
-            if ta is None and tb is None:
-                return None
-            cmp = "<=" if op == "min" else ">="
+        if rule.kind == "select":
+            cmp = tie_comparison(op, a_const)
             return f"{a} {cmp} {b} ? {ta or _ZERO_VEC} : {tb or _ZERO_VEC}"
-        if op == "atan2":  # v = atan2(y=a, x=b): dv = (b*da - a*db) / (a^2 + b^2)
-            if ta is None and tb is None:
-                return None
-            lines.append(f"float s{k} = {a} * {a} + {b} * {b};")
-            terms = [f"{b} * {ta}"] if ta is not None else []
-            terms += [f"{a} * {tb}"] if tb is not None else []
-            num = " - ".join(terms) if ta is not None else f"-({terms[0]})"
-            return f"s{k} > 0.0 ? ({num}) / s{k} : {_ZERO_VEC}"
-        if op == "mod":  # a - b*floor(a/b)
-            if tb is None:
-                return ta
-            q = f"floor({a} / {b}) * {tb}"
-            return f"{ta} - {q}" if ta is not None else f"-({q})"
-        if ta is None:
-            return None
-        if op == "neg":
-            return f"-{ta}"
-        return f"{_FACTOR[op].format(a=a, v=v)} * {ta}"
+        names = {"a": a, "b": b, "v": v}
+        target = Target(name=names.__getitem__, literal=glsl_float, calls=_CALLS,
+                        atom_args=frozenset({"pos_div"}))
+        cache: dict[Formula, str] = {}
+
+        def coef(f: Formula) -> str:
+            if f not in cache:
+                for name, g in rule.let:
+                    if name not in names:
+                        names[name] = f"s{self.n_lets}"
+                        self.n_lets += 1
+                        lines.append(f"float {names[name]} = {g.render(target)};")
+                cache[f] = f.render(target, atom=True)
+            return cache[f]
+
+        return chain_tangent(rule, ta, tb, coef, _VEC3)
 
 
-def _header(prog: Program, what: str) -> list[str]:
-    from .. import __version__
-
+def _header(prog, what: str) -> list[str]:
     lip = prog.lipschitz
     return [
         f"// {what} generated by csdf {__version__} from a compiled program: "
@@ -473,7 +490,7 @@ void mainImage(out vec4 fragColor, in vec2 fragCoord) {{
 def _view(shape_or_program) -> tuple[np.ndarray, float]:
     """Centre and radius to frame: the Shape's bounds, else the origin and 1.5."""
     bounds = getattr(shape_or_program, "bounds", None)
-    if isinstance(shape_or_program, Program) or bounds is None:
+    if _is_program(shape_or_program) or bounds is None:
         return np.zeros(3), _DEFAULT_RADIUS
     b = np.asarray(bounds, dtype=np.float64)
     if b.shape[0] != 2 or not np.all(np.isfinite(b)):

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lowering import lowered, numba_available, run_parallel
+from ..parallel import run_parallel
+from .lowering import lowered, numba_available
 
 __all__ = ["evaluate", "available", "warm"]
 

@@ -1,4 +1,4 @@
-"""Numba kernels of the fast backend: a block interpreter over the lowered tape.
+"""Numba kernels of the ``'interp'`` backend: a block interpreter over the lowered tape.
 
 Each kernel call evaluates points ``[start, stop)``. It keeps a per-call register file
 ``R`` of ``(n_rows, B)`` values (``B`` points per block) and, for derivatives, ``D`` of
@@ -6,13 +6,19 @@ Each kernel call evaluates points ``[start, stop)``. It keeps a per-call registe
 LLVM vectorises; the opcode dispatch is paid once per block, not per point. Nothing of
 size N is allocated: memory is the inputs, the outputs and a few kilobytes per thread.
 
-Row layout (made by :mod:`csdf.backends.fast`): rows 0-2 hold x, y, z of the block;
-rows ``3 .. 3+U`` hold uniform values (parameters, constants and the results of the
-parameter-only prefix, computed once per call); the rest are registers.
+Row layout (made by :mod:`csdf.backends.lowering`): rows 0-2 hold x, y, z of the block;
+rows ``UNIFORM_BASE .. UNIFORM_BASE+U`` hold uniform values (parameters, constants and
+the results of the parameter-only prefix, computed once per call); the rest are
+registers.
 
-Semantics match the NumPy reference op for op (NaN propagation of ``min``/``max``,
-``step(0) = 1``, ``mod`` as ``a - b*floor(a/b)``, derivative conventions), so values
-agree to rounding (the compiler may contract multiply-adds).
+Semantics are those of the op specification (:mod:`csdf.ops`): NaN propagation of
+``min``/``max``, ``step(0) = 1``, ``mod`` as ``a - b*floor(a/b)``, and the derivative
+rules. These kernels are compiled once for every program, so the rules are written out
+here by hand, in the factored order of each :class:`csdf.ops.Derivative`; the tie rule
+arrives as the flag :data:`~csdf.backends.lowering.FLAG_TIE_STRICT` (set by the lowering
+from :func:`csdf.ops.tie_strict`). ``tests/test_ops.py`` checks every op, kinks and ties
+included, against the specification, so values agree to rounding (the compiler may
+contract multiply-adds).
 """
 
 from __future__ import annotations
@@ -20,7 +26,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-# opcodes (csdf.ops); numba folds these module constants into the kernels
+from .lowering import FLAG_A_ZERO, FLAG_B_ZERO, FLAG_OUT_ZERO, FLAG_TIE_STRICT, UNIFORM_BASE
+
+# opcodes (csdf.ops, checked by tests/test_ops.py); numba folds these module constants
+# (and the imported ones) into the kernels
 NEG, ABS, SQRT, SQUARE, SIN, COS, TAN, ASIN, ACOS, ATAN, EXP, LOG, FLOOR, STEP, SIGN = range(1, 16)
 ADD, SUB, MUL, DIV, MIN, MAX, ATAN2, MOD = range(32, 40)
 
@@ -136,7 +145,7 @@ def value_kernel(code, uvals, pts, out, start, stop, B, n_rows, out_row):
     R = np.zeros((n_rows, B), dtype=pts.dtype)
     for i in range(uvals.shape[0]):
         for j in range(B):
-            R[3 + i, j] = uvals[i]
+            R[UNIFORM_BASE + i, j] = uvals[i]
     K = code.shape[0]
     for s in range(start, stop, B):
         m = min(B, stop - s)
@@ -160,18 +169,20 @@ def _nan_rows(R, out, s, m):
 @njit(**_OPTS)
 def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
     """Tangents ``D[d]`` (T, B) of ``V[0] = op(R[ia], R[ib])`` from ``D[ia]``, ``D[ib]``;
-    ``flags`` bit 0: ``b`` has zero tangent, bit 1: ``a`` has zero tangent. ``d`` may
-    equal ``ia`` or ``ib``; bit 2 (4): the result's tangent is structurally zero."""
-    if flags & 4:
+    ``flags``: ``FLAG_B_ZERO``/``FLAG_A_ZERO``: ``b``'s/``a``'s tangent is zero,
+    ``FLAG_OUT_ZERO``: the result's tangent is structurally zero, ``FLAG_TIE_STRICT``:
+    ``min``/``max`` take ``a``'s tangent only where ``a`` wins strictly. ``d`` may
+    equal ``ia`` or ``ib``."""
+    if flags & FLAG_OUT_ZERO:
         for t in range(T):
             for j in range(B):
                 D[d, t, j] = 0.0
     elif op == ADD:
-        if flags & 1:
+        if flags & FLAG_B_ZERO:
             for t in range(T):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j]
-        elif flags & 2:
+        elif flags & FLAG_A_ZERO:
             for t in range(T):
                 for j in range(B):
                     D[d, t, j] = D[ib, t, j]
@@ -180,11 +191,11 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] + D[ib, t, j]
     elif op == SUB:
-        if flags & 1:
+        if flags & FLAG_B_ZERO:
             for t in range(T):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j]
-        elif flags & 2:
+        elif flags & FLAG_A_ZERO:
             for t in range(T):
                 for j in range(B):
                     D[d, t, j] = -D[ib, t, j]
@@ -193,11 +204,11 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] - D[ib, t, j]
     elif op == MUL:
-        if flags & 1:
+        if flags & FLAG_B_ZERO:
             for t in range(T):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] * R[ib, j]
-        elif flags & 2:
+        elif flags & FLAG_A_ZERO:
             for t in range(T):
                 for j in range(B):
                     D[d, t, j] = R[ia, j] * D[ib, t, j]
@@ -213,7 +224,7 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
         for j in range(B):
             a = R[ia, j]
             b = R[ib, j]
-            if flags & 8:  # a is a constant: ties follow b
+            if flags & FLAG_TIE_STRICT:  # (csdf.ops.tie_strict)
                 pick_a = a < b if op == MIN else a > b
             else:
                 pick_a = a <= b if op == MIN else a >= b
@@ -240,7 +251,7 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
             for j in range(B):
                 D[d, t, j] = -D[ia, t, j]
     elif op == DIV:
-        if flags & 1:
+        if flags & FLAG_B_ZERO:
             for j in range(B):
                 f = 1.0 / R[ib, j]
                 for t in range(T):
@@ -256,10 +267,20 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
             for j in range(B):
                 D[d, t, j] = 0.0
     elif op == MOD:
-        for j in range(B):
-            q = np.floor(R[ia, j] / R[ib, j])
+        if flags & FLAG_B_ZERO:
             for t in range(T):
-                D[d, t, j] = D[ia, t, j] - q * D[ib, t, j]
+                for j in range(B):
+                    D[d, t, j] = D[ia, t, j]
+        elif flags & FLAG_A_ZERO:
+            for j in range(B):
+                q = np.floor(R[ia, j] / R[ib, j])
+                for t in range(T):
+                    D[d, t, j] = -(q * D[ib, t, j])
+        else:
+            for j in range(B):
+                q = np.floor(R[ia, j] / R[ib, j])
+                for t in range(T):
+                    D[d, t, j] = D[ia, t, j] - q * D[ib, t, j]
     elif op == ATAN2:
         for j in range(B):
             y = R[ia, j]
@@ -267,8 +288,15 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
             r2 = x * x + y * y
             fy = x / r2 if r2 > 0 else 0.0
             fx = -y / r2 if r2 > 0 else 0.0
-            for t in range(T):
-                D[d, t, j] = fy * D[ia, t, j] + fx * D[ib, t, j]
+            if flags & FLAG_B_ZERO:
+                for t in range(T):
+                    D[d, t, j] = fy * D[ia, t, j]
+            elif flags & FLAG_A_ZERO:
+                for t in range(T):
+                    D[d, t, j] = fx * D[ib, t, j]
+            else:
+                for t in range(T):
+                    D[d, t, j] = fy * D[ia, t, j] + fx * D[ib, t, j]
     else:
         for j in range(B):
             a = R[ia, j]
@@ -314,10 +342,10 @@ def tangent_kernel(code, uvals, utans, pts, out, grad, jac, start, stop, B, n_ro
                 D[i, i, j] = 1.0
     for i in range(uvals.shape[0]):
         for j in range(B):
-            R[3 + i, j] = uvals[i]
+            R[UNIFORM_BASE + i, j] = uvals[i]
         for t in range(T):
             for j in range(B):
-                D[3 + i, t, j] = utans[i, t]
+                D[UNIFORM_BASE + i, t, j] = utans[i, t]
     K = code.shape[0]
     off = 3 if spatial else 0
     for s in range(start, stop, B):

@@ -1,4 +1,4 @@
-"""Preparing a program for the Numba backends, and running them on all cores.
+"""Preparing a program for the Numba backends (``'interp'`` and ``'fast'``).
 
 Per program (cached on the Program) the tape is *lowered*:
 
@@ -8,30 +8,32 @@ Per program (cached on the Program) the tape is *lowered*:
 * every uniform value (parameter, constant, prefix result) gets its own row, and the
   rest of the tape is renamed to read them, so a block never reloads them;
 * each instruction is flagged when an operand's tangent is structurally zero, so the
-  derivative kernels skip that half of a product or sum.
+  derivative kernels skip that half of a product or sum, and with the tie rule of
+  ``min``/``max`` (:func:`csdf.ops.tie_strict`).
 
-Threads: the points are split into one contiguous range per core and each range runs
-in a ``nogil`` kernel on a worker thread.
+Rows: ``0 .. 2`` x, y, z; from :data:`UNIFORM_BASE` the parameters then the constants
+(at their slot numbers, :class:`csdf.layout.SlotLayout`), then the prefix results; then
+the registers. The points are split over the cores by :func:`csdf.parallel.run_parallel`.
 """
 
 from __future__ import annotations
 
-import os
-import threading
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
-from ..ops import OPS_BY_CODE
+from ..layout import N_COORDS
+from ..ops import OPS_BY_CODE, tie_strict
 from .numpy_backend import uniform_prefix
 
-__all__ = ["Lowered", "lowered", "run_parallel", "executor", "N_THREADS", "numba_available"]
+__all__ = ["Lowered", "lowered", "numba_available", "UNIFORM_BASE", "FLAG_B_ZERO",
+           "FLAG_A_ZERO", "FLAG_OUT_ZERO", "FLAG_TIE_STRICT"]
 
-N_THREADS = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                else (os.cpu_count() or 1))
-_MIN_PER_THREAD = 8192
-_pools: dict[tuple[str, int], ThreadPoolExecutor] = {}
-_pool_lock = threading.Lock()
+#: first row of the uniform values (the rows before it hold x, y, z)
+UNIFORM_BASE = N_COORDS
+# flag bits of a lowered instruction (column 4), see Lowered.flagged_code
+FLAG_B_ZERO = 1
+FLAG_A_ZERO = 2
+FLAG_OUT_ZERO = 4
+FLAG_TIE_STRICT = 8
 
 
 def numba_available() -> bool:
@@ -43,39 +45,16 @@ def numba_available() -> bool:
     return True
 
 
-def executor(name: str = "csdf", workers: int = N_THREADS) -> ThreadPoolExecutor:
-    """A process-wide pool of ``workers`` threads named ``name`` (made on first use)."""
-    with _pool_lock:
-        pool = _pools.get((name, workers))
-        if pool is None:
-            pool = _pools[(name, workers)] = ThreadPoolExecutor(
-                max_workers=workers, thread_name_prefix=name)
-        return pool
-
-
-def run_parallel(job, n: int, align: int) -> None:
-    """Call ``job((start, stop))`` on one contiguous range per core (``align``-sized)."""
-    if n == 0:
-        return
-    nt = max(1, min(N_THREADS, n // _MIN_PER_THREAD))
-    step = -(-n // nt)
-    step = -(-step // align) * align
-    ranges = [(s, min(n, s + step)) for s in range(0, n, step)]
-    if len(ranges) == 1:
-        job(ranges[0])
-    else:
-        list(executor().map(job, ranges))
-
-
 class Lowered:
     """A program prepared for the kernels (see the module docstring)."""
 
     def __init__(self, prog):
-        n_fixed = prog.n_fixed
-        P = len(prog.params)
+        lay = prog.layout
+        n_fixed = lay.n_fixed
+        P = lay.n_params
         code = prog.code.tolist()
         # 1. the uniform prefix
-        uniform_slots = set(range(3, n_fixed))
+        uniform_slots = set(range(lay.param_base, n_fixed))
         n_prefix = 0
         for op, dst, a, b in code:
             arity = OPS_BY_CODE[op].arity
@@ -86,16 +65,16 @@ class Lowered:
                 break
         self.n_prefix = n_prefix
         # 2. rows: x y z | params consts | prefix results | registers
-        loc = {0: 0, 1: 1, 2: 2}
-        for s in range(3, n_fixed):
-            loc[s] = s  # same index: rows 3.. hold params then constants
+        loc = {i: i for i in range(N_COORDS)}
+        for s in range(lay.param_base, n_fixed):
+            loc[s] = s  # same index: rows UNIFORM_BASE.. hold params then constants
         row = n_fixed
         self.prefix_rows: list[tuple[int, int]] = []  # (instruction index, row)
         for k in range(n_prefix):
             loc[code[k][1]] = row
             self.prefix_rows.append((k, row))
             row += 1
-        n_uniform_rows = row - 3
+        n_uniform_rows = row - UNIFORM_BASE
         reg_base = row
         lowered = []
         for op, dst, a, b in code[n_prefix:]:
@@ -110,10 +89,11 @@ class Lowered:
         self.n_uniform_rows = n_uniform_rows
         self.out_row = loc[prog.output]
         self.n_params = P
-        self.n_consts = len(prog.consts)
+        self.n_consts = lay.n_consts
+        self.layout = lay
         self.prog = prog
         # parameters each prefix result depends on (structurally)
-        deps: dict[int, set[int]] = {3 + i: {i} for i in range(P)}
+        deps: dict[int, set[int]] = {lay.param(i): {i} for i in range(P)}
         self._prefix_deps: dict[int, list[int]] = {}
         for k, row in self.prefix_rows:
             op, _dst, a, b = code[k]
@@ -153,25 +133,33 @@ class Lowered:
         with np.errstate(over="ignore"):  # values beyond float32 range become inf
             return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
 
+    def is_const_row(self, row: int) -> bool:
+        """True when ``row`` holds a constant of the program (rows of parameters and
+        constants have their slot numbers)."""
+        return self.layout.is_const(row)
+
     def flagged_code(self, zero_uniform: np.ndarray) -> np.ndarray:
-        """Instructions with flag bits: 1 = ``b``'s tangent is structurally zero, 2 = ``a``'s,
-        4 = the result's (as the reference treats it: no tangent, not ``0 * factor``),
-        8 = ``a`` is a constant (``min``/``max`` ties then follow ``b``)."""
+        """Instructions with flag bits: :data:`FLAG_B_ZERO` = ``b``'s tangent is
+        structurally zero, :data:`FLAG_A_ZERO` = ``a``'s, :data:`FLAG_OUT_ZERO` = the
+        result's (as the reference treats it: no tangent, not ``0 * factor``; always for
+        ops whose derivative rule is ``'zero'``), :data:`FLAG_TIE_STRICT` = a ``min``/``max``
+        takes ``a``'s derivative only where ``a`` wins strictly (:func:`csdf.ops.tie_strict`
+        of ``a`` being a constant)."""
         code = self.code.copy()
         if len(code) == 0:
             return code
         zero = np.zeros(self.n_rows, dtype=bool)
-        zero[3:3 + self.n_uniform_rows] = zero_uniform
+        zero[UNIFORM_BASE:UNIFORM_BASE + self.n_uniform_rows] = zero_uniform
         for k in range(len(code)):
             op, d, a, b, _ = code[k]
             info = OPS_BY_CODE[int(op)]
             binary = info.arity == 2
             za = bool(zero[a])
             zb = bool(zero[b]) if binary else True
-            zd = (za and zb) or info.name in ("floor", "step", "sign")
-            a_const = 3 + self.n_params <= a < 3 + self.n_params + self.n_consts
-            code[k, 4] = ((1 if (binary and zb) else 0) | (2 if za else 0) | (4 if zd else 0)
-                          | (8 if a_const else 0))
+            zd = (za and zb) or info.derivative.kind == "zero"
+            code[k, 4] = ((FLAG_B_ZERO if (binary and zb) else 0) | (FLAG_A_ZERO if za else 0)
+                          | (FLAG_OUT_ZERO if zd else 0)
+                          | (FLAG_TIE_STRICT if tie_strict(self.is_const_row(int(a))) else 0))
             zero[d] = zd
         return code
 

@@ -7,21 +7,25 @@ every op computed by NumPy in the points' dtype. Tangents are carried per slot a
 where the T seeds are x, y, z (gradient), the parameters (Jacobian), or both.
 
 Where a value is NaN (a NaN coordinate or parameter, or a NaN made inside the tape)
-its derivatives are NaN too. Derivative conventions at non-differentiable
-points: ``min``/``max`` follow the first operand on ties (the second when only the first
-is a constant), ``abs``/``sign``/``step``/``floor`` have derivative ``sign(a)``
-/ 0 / 0 / 0, ``sqrt`` at 0 has derivative 0, ``atan2`` at the origin 0.
+its derivatives are NaN too. Every op's value, derivative rule, tie rule (``min``/``max``)
+and kink conventions are those of its specification in :mod:`csdf.ops`, evaluated here
+with NumPy (:func:`csdf.ops.chain_tangent`, :func:`csdf.ops.tie_mask`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..ops import OPS_BY_CODE, numpy_impl
+from ..ops import OPS, OPS_BY_CODE, chain_tangent, numpy_impl, tie_mask
 
-__all__ = ["evaluate", "uniform_prefix", "CHUNK"]
+__all__ = ["evaluate", "available", "uniform_prefix", "CHUNK"]
 
 CHUNK = 1 << 16
+
+
+def available() -> bool:
+    """Always True: the reference needs only NumPy."""
+    return True
 
 
 def _sc(c, d):
@@ -59,66 +63,34 @@ def _select(mask, da, db, n: int, t: int, dtype):
     return np.where(mask[:, None], za, zb)
 
 
+class _Arrays:
+    """Tangent algebra on NumPy tangents (``None`` | ``(T,)`` | ``(chunk, T)``)."""
+
+    scale = staticmethod(_sc)
+    add = staticmethod(_add)
+    sub = staticmethod(_sub)
+
+    @staticmethod
+    def neg(t):
+        return -t
+
+
+_ARRAYS = _Arrays()
+
+
 def _tangent(op: str, a, b, out, da, db, n: int, t: int, dtype, a_const: bool = False):
-    """Tangent of ``out = op(a, b)`` given tangents ``da``, ``db``; ``a_const``: operand
-    ``a`` is a constant (for the tie rule of ``min``/``max``)."""
-    one = dtype.type(1)
-    if op == "add":
-        return _add(da, db)
-    if op == "sub":
-        return _sub(da, db)
-    if op == "neg":
-        return None if da is None else -da
-    if op == "mul":
-        return _add(_sc(b, da), _sc(a, db))
-    if op == "div":
-        return _sc(one / b, _sub(da, _sc(out, db)))
-    if op == "square":
-        return _sc(2 * a, da)
-    if op in ("min", "max"):
-        # ties follow a, unless a is a constant: then b, whose one-sided derivative is
-        # the informative one (a box's face normal exactly on the surface)
-        strict = a_const
-        if op == "min":
-            mask = a < b if strict else a <= b
-        else:
-            mask = a > b if strict else a >= b
-        return _select(mask, da, db, n, t, dtype)
-    if op in ("floor", "step", "sign"):
+    """Tangent of ``out = op(a, b)`` given tangents ``da``, ``db``, by the op's rule in
+    :mod:`csdf.ops`; ``a_const``: operand ``a`` is a constant slot (the tie rule of
+    ``min``/``max``)."""
+    rule = OPS[op].derivative
+    if rule.kind == "select":
+        return _select(tie_mask(op, a, b, a_const), da, db, n, t, dtype)
+    if rule.kind == "zero" or (da is None and db is None):
         return None
-    if da is None and op != "atan2" and op != "mod":
-        return None
-    if op == "abs":
-        return _sc(np.sign(a), da)
-    if op == "sqrt":
-        with np.errstate(divide="ignore", invalid="ignore"):
-            f = np.where(out > 0, 0.5 / out, 0).astype(dtype, copy=False)
-        return _sc(f, da)
-    if op == "sin":
-        return _sc(np.cos(a), da)
-    if op == "cos":
-        return _sc(-np.sin(a), da)
-    if op == "tan":
-        return _sc(one + out * out, da)
-    if op == "asin":
-        return _sc(one / np.sqrt(one - a * a), da)
-    if op == "acos":
-        return _sc(-one / np.sqrt(one - a * a), da)
-    if op == "atan":
-        return _sc(one / (one + a * a), da)
-    if op == "exp":
-        return _sc(out, da)
-    if op == "log":
-        return _sc(one / a, da)
-    if op == "atan2":  # out = atan2(a=y, b=x)
-        r2 = a * a + b * b
-        with np.errstate(divide="ignore", invalid="ignore"):
-            fy = np.where(r2 > 0, b / r2, 0).astype(dtype, copy=False)
-            fx = np.where(r2 > 0, -a / r2, 0).astype(dtype, copy=False)
-        return _add(_sc(fy, da), _sc(fx, db))
-    if op == "mod":  # a - b*floor(a/b)
-        return _sub(da, _sc(np.floor(a / b), db))
-    raise AssertionError(op)  # pragma: no cover
+    env = {"a": a, "b": b, "v": out}
+    for name, f in rule.let:
+        env[name] = f.numpy(env, dtype)
+    return chain_tangent(rule, da, db, lambda f: f.numpy(env, dtype), _ARRAYS)
 
 
 def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
@@ -157,8 +129,9 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
     code = [(OPS_BY_CODE[op].name, OPS_BY_CODE[op].arity, dst, a, b)
             for op, dst, a, b in prog.code.tolist()]
     fns = {name: numpy_impl(name) for name, *_ in code}
-    n_slots = prog.n_slots
-    c_lo, c_hi = 3 + P, 3 + P + len(prog.consts)  # constant slots
+    lay = prog.layout
+    n_slots = lay.n_slots
+    c_lo, c_hi = lay.const_base, lay.reg_base  # constant slots (the tie rule of min/max)
     if chunk is None:
         chunk = CHUNK if T == 0 else max(1024, (1 << 20) // max(T, 1) // 4)
     elif chunk < 1:
@@ -173,7 +146,7 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
         if wrt_params:
             off = 3 if spatial else 0
             for i in range(P):
-                seeds[3 + i] = eye[off + i]
+                seeds[lay.param(i)] = eye[off + i]
 
     for start in range(0, n, chunk):
         stop = min(n, start + chunk)
@@ -183,10 +156,9 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
         vals[1] = pts[start:stop, 1]
         vals[2] = pts[start:stop, 2] if d == 3 else np.zeros(m, dtype)
         for i in range(P):
-            vals[3 + i] = pv[i]
-        base = 3 + P
+            vals[lay.param(i)] = pv[i]
         for i, c in enumerate(consts):
-            vals[base + i] = c
+            vals[lay.const(i)] = c
         tans = list(seeds) if T else None
         with np.errstate(all="ignore"):
             for name, arity, dst, a, b in code:
@@ -231,15 +203,16 @@ def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int):
         ``(values, dparams)``: lists indexed by instruction; ``dparams[k]`` is ``(P,)``.
     """
     P = len(prog.params)
+    lay = prog.layout
     dtype = np.dtype(np.float64)
-    vals: list = [None] * prog.n_slots
-    tans: list = [None] * prog.n_slots
+    vals: list = [None] * lay.n_slots
+    tans: list = [None] * lay.n_slots
     eye = np.eye(P, dtype=dtype)
     for i in range(P):
-        vals[3 + i] = np.float64(pvals[i])
-        tans[3 + i] = eye[i]
+        vals[lay.param(i)] = np.float64(pvals[i])
+        tans[lay.param(i)] = eye[i]
     for i, c in enumerate(prog.consts):
-        vals[3 + P + i] = np.float64(c)
+        vals[lay.const(i)] = np.float64(c)
     out_v, out_d = [], []
     with np.errstate(all="ignore"):
         for op, dst, a, b in prog.code[:n_prefix].tolist():
@@ -247,7 +220,7 @@ def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int):
             va, vb = vals[a], (vals[b] if info.arity == 2 else None)
             v = numpy_impl(info.name)(va, vb) if info.arity == 2 else numpy_impl(info.name)(va)
             t = _tangent(info.name, va, vb, v, tans[a], tans[b] if info.arity == 2 else None,
-                         1, P, dtype, 3 + P <= a < 3 + P + len(prog.consts))
+                         1, P, dtype, lay.is_const(a))
             vals[dst], tans[dst] = v, t
             out_v.append(float(v))
             out_d.append(np.zeros(P) if t is None else np.asarray(t, dtype=np.float64))

@@ -1,4 +1,4 @@
-"""Binary bytecode: encoding, decoding and validation (format v1, ``docs/bytecode.md``).
+"""Binary bytecode: encoding, decoding and validation (format v2, ``docs/bytecode.md``).
 
 Layout (little-endian)::
 
@@ -8,11 +8,20 @@ Layout (little-endian)::
     consts   n_consts x f64
     code     n_instr x 8 bytes: u8 opcode, u8 reserved (0), u16 dst, u16 a, u16 b
     calls    n_calls x (u8 name length, name, u32 out instruction, u16 n_in, n_in x u32)
+    bounds   version 2 only: dim x f64 lo, then dim x f64 hi
     crc32    u32 of everything before it
 
-:func:`decode` checks every field and raises :class:`~csdf.BytecodeError` naming the
-byte offset; a program it returns is safe to evaluate (every operand refers to a slot
-written before it is read).
+Version 2 added the bounds section. A program with bounds is written as version 2; one
+without (``bounds is None``) as version 1, byte for byte what earlier csdf wrote, so
+each program has one encoding. Both versions are read (version 1 gives
+``bounds=None``).
+
+:func:`decode_fields` checks every field and raises :class:`~csdf.BytecodeError` naming
+the byte offset; :func:`validate` checks a program built from them (every operand refers
+to a slot written before it is read), so a program :meth:`csdf.Program.from_bytes`
+returns is safe to evaluate. The codecs read a program through its attributes and
+return :class:`~csdf.Program` keyword arguments, so that they need not import the
+program module (which calls them).
 """
 
 from __future__ import annotations
@@ -21,33 +30,43 @@ import math
 import re
 import struct
 import zlib
+from typing import Any
 
 import numpy as np
 
 from ..errors import BytecodeError
 from ..expr import RESERVED_PARAM_NAMES, Param
+from ..layout import MAX_SLOTS
 from ..ops import OPS_BY_CODE
-from .program import INSTR_REF, Call, Program
+from .calls import INSTR_REF, Call
 
-__all__ = ["encode", "decode", "validate", "VERSION", "MAGIC"]
+__all__ = ["encode", "decode_fields", "validate", "VERSION", "VERSIONS", "MAGIC",
+           "MAX_SLOTS"]
 
 MAGIC = b"CSDF"
-VERSION = 1
+#: the newest format version (written for programs with bounds)
+VERSION = 2
+#: the versions :func:`decode` reads
+VERSIONS = (1, 2)
+#: the version that has the bounds section
+_BOUNDS_VERSION = 2
 HEADER = struct.Struct("<4sHHHHHHIId")
 INSTR = struct.Struct("<BBHHH")
 EXACTNESS_CODES = {"exact": 0, "bound": 1, "neither": 2}
 EXACTNESS_NAMES = {v: k for k, v in EXACTNESS_CODES.items()}
 FLAG_DIM2 = 4
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-MAX_SLOTS = 65535
+#: inputs a call record can list (its count is a u16)
+MAX_CALL_INPUTS = 0xFFFF
 
 
-def encode(prog: Program) -> bytes:
-    """Serialise a program (see the module docstring for the layout)."""
+def encode(prog: Any) -> bytes:
+    """Serialise a :class:`csdf.Program` (see the module docstring for the layout)."""
     flags = EXACTNESS_CODES[prog.exactness] | (FLAG_DIM2 if prog.dim == 2 else 0)
+    version = 1 if prog.bounds is None else _BOUNDS_VERSION
     out = bytearray(
         HEADER.pack(
-            MAGIC, VERSION, flags, len(prog.params), len(prog.consts), prog.n_regs,
+            MAGIC, version, flags, len(prog.params), len(prog.consts), prog.n_regs,
             prog.output, len(prog.code), len(prog.calls), prog.lipschitz,
         )
     )
@@ -61,6 +80,8 @@ def encode(prog: Program) -> bytes:
         name = c.name.encode()
         out += struct.pack("<B", len(name)) + name + struct.pack("<IH", c.out, len(c.inputs))
         out += struct.pack(f"<{len(c.inputs)}I", *c.inputs)
+    if prog.bounds is not None:
+        out += prog.bounds.astype("<f8").tobytes()  # row-major: lo, then hi
     out += struct.pack("<I", zlib.crc32(out) & 0xFFFFFFFF)
     return bytes(out)
 
@@ -97,8 +118,12 @@ class _Reader:
         return s
 
 
-def decode(data: bytes) -> Program:
-    """Parse and validate bytecode; raise :class:`BytecodeError` on any flaw."""
+def decode_fields(data: bytes) -> dict[str, Any]:
+    """Parse bytecode into :class:`csdf.Program` keyword arguments.
+
+    Raises :class:`BytecodeError` on any flaw of the bytes; pass the program built from
+    the result to :func:`validate` for the checks of its contents.
+    """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise BytecodeError(f"bytecode must be bytes, got {type(data).__name__}")
     data = bytes(data)
@@ -114,8 +139,9 @@ def decode(data: bytes) -> Program:
     r = _Reader(data[:-4])
     (_, version, flags, n_params, n_consts, n_regs, output, n_instr, n_calls,
      lipschitz) = HEADER.unpack(r.take(HEADER.size, "header"))
-    if version != VERSION:
-        raise BytecodeError(f"byte 4: unsupported version {version} (this csdf reads {VERSION})")
+    if version not in VERSIONS:
+        known = " and ".join(str(v) for v in VERSIONS)
+        raise BytecodeError(f"byte 4: unsupported version {version} (this csdf reads {known})")
     if flags & ~(3 | FLAG_DIM2) or (flags & 3) == 3:
         raise BytecodeError(f"byte 6: invalid flags 0x{flags:04x}")
     params = []
@@ -140,19 +166,23 @@ def decode(data: bytes) -> Program:
         out, n_in = r.unpack("<IH", f"call {i} header")
         inputs = r.unpack(f"<{n_in}I", f"call {i} inputs")
         calls.append(Call(name, out, tuple(inputs)))
+    dim = 2 if flags & FLAG_DIM2 else 3
+    bounds = None
+    if version == _BOUNDS_VERSION:
+        raw_box = r.take(16 * dim, "bounds")
+        bounds = np.frombuffer(raw_box, dtype="<f8").astype(np.float64).reshape(2, dim)
     if r.pos != len(r.data):
         raise BytecodeError(f"byte {r.pos}: {len(r.data) - r.pos} unexpected trailing bytes")
-    prog = Program(
+    return dict(
         params=tuple(params), consts=consts, code=code, output=output, n_regs=n_regs,
-        dim=2 if flags & FLAG_DIM2 else 3, exactness=EXACTNESS_NAMES[flags & 3],
-        lipschitz=lipschitz, calls=tuple(calls),
+        dim=dim, exactness=EXACTNESS_NAMES[flags & 3],
+        lipschitz=lipschitz, calls=tuple(calls), bounds=bounds,
     )
-    validate(prog)
-    return prog
 
 
-def validate(prog: Program) -> None:
-    """Check a program's internal consistency; raise :class:`BytecodeError` if broken."""
+def validate(prog: Any) -> None:
+    """Check a :class:`csdf.Program`'s internal consistency; raise
+    :class:`BytecodeError` if broken."""
     seen = set()
     for p in prog.params:
         if not _IDENT.fullmatch(p.name) or p.name in RESERVED_PARAM_NAMES:
@@ -174,6 +204,11 @@ def validate(prog: Program) -> None:
         raise BytecodeError(f"{n_slots} slots exceed the limit of {MAX_SLOTS}")
     if math.isnan(prog.lipschitz) or prog.lipschitz < 0:
         raise BytecodeError(f"lipschitz bound {prog.lipschitz} is not a non-negative number")
+    if prog.bounds is not None and np.shape(prog.bounds) != (2, prog.dim):
+        raise BytecodeError(
+            f"bounds have shape {np.shape(prog.bounds)}; a {prog.dim}D program needs "
+            f"(2, {prog.dim})"
+        )
     written = set()
     for k, (op, dst, a, b) in enumerate(prog.code.tolist()):
         info = OPS_BY_CODE.get(op)
@@ -205,8 +240,10 @@ def validate(prog: Program) -> None:
     for i, c in enumerate(prog.calls):
         if not _IDENT.fullmatch(c.name) or len(c.name.encode()) > 255:
             raise BytecodeError(f"call {i}: bad name {c.name[:40]!r}")
-        if len(c.inputs) > 65535:
-            raise BytecodeError(f"call {i}: {len(c.inputs)} inputs; at most 65535")
+        if len(c.inputs) > MAX_CALL_INPUTS:
+            raise BytecodeError(
+                f"call {i}: {len(c.inputs)} inputs; at most {MAX_CALL_INPUTS}"
+            )
         if not 0 <= c.out < n_instr:
             raise BytecodeError(f"call {i}: output instruction {c.out} out of range")
         for s in c.inputs:

@@ -8,19 +8,19 @@ are given at evaluation time, so changing them never recompiles.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..errors import CsdfError, ParamError
+from ..errors import BytecodeError, CsdfError, ParamError
 from ..expr import Param
 from ..layout import SlotLayout
 from ..ops import CATEGORIES, OPS_BY_CODE
+from .binary import decode_fields, encode, validate
+from .calls import INSTR_REF, Call
+from .text import assemble_fields, disassemble
 
-__all__ = ["Program", "Call", "as_program"]
-
-INSTR_REF = 0x80000000
+__all__ = ["Program", "Call", "as_program", "INSTR_REF"]
 
 
 def as_program(shape, what: str):
@@ -43,22 +43,6 @@ def as_program(shape, what: str):
     raise CsdfError(f"{what} expects a Shape or Program, got {type(shape).__name__}")
 
 
-@dataclass(frozen=True)
-class Call:
-    """A primitive invocation inside a program (for primitive-level counts).
-
-    Attributes:
-        name: primitive name (``'sphere'``, ...).
-        out: index of the instruction that produces the primitive's distance.
-        inputs: where its inputs come from: a fixed slot index, or
-            ``0x80000000 | i`` for the result of instruction ``i``.
-    """
-
-    name: str
-    out: int
-    inputs: tuple[int, ...]
-
-
 class Program:
     """A compiled signed distance function: a linear register tape.
 
@@ -76,6 +60,13 @@ class Program:
         dim: 3, or 2 for planar shapes.
         exactness: ``'exact' | 'bound' | 'neither'``; lipschitz: gradient-norm bound.
         calls: primitive invocations (:class:`Call`).
+        bounds: ``(2, dim)`` float64 ``[lo, hi]`` box (model units) containing the zero
+            set, read-only, or None when unbounded or unknown (a shape's
+            :attr:`~csdf.Shape.bounds`, kept in the bytecode since format version 2).
+
+    With its metadata (exactness, Lipschitz bound, bounds) a program alone is enough
+    for every consumer; :meth:`to_bytes` and :meth:`disassemble` keep all of it, and two
+    programs are equal when their bytecode is.
     """
 
     def __init__(
@@ -90,6 +81,7 @@ class Program:
         exactness: str = "neither",
         lipschitz: float = math.inf,
         calls: tuple[Call, ...] = (),
+        bounds: np.ndarray | None = None,
     ):
         self.params = tuple(params)
         self.consts = np.asarray(consts, dtype=np.float64)
@@ -100,6 +92,17 @@ class Program:
         self.exactness = exactness
         self.lipschitz = float(lipschitz)
         self.calls = tuple(calls)
+        if bounds is None:
+            self.bounds: np.ndarray | None = None
+        else:
+            box = np.array(bounds, dtype=np.float64)
+            if box.shape != (2, self.dim):
+                raise ValueError(
+                    f"bounds must have shape (2, {self.dim}) for a {self.dim}D program; "
+                    f"got {box.shape}"
+                )
+            box.setflags(write=False)
+            self.bounds = box
         self._param_index = {p.name: i for i, p in enumerate(self.params)}
         self.consts.setflags(write=False)
         self.code.setflags(write=False)
@@ -139,6 +142,16 @@ class Program:
 
     def __hash__(self) -> int:
         return hash(self.to_bytes())
+
+    def with_bounds(self, bounds: np.ndarray | None) -> Program:
+        """The same program with other bounds: a ``(2, dim)`` ``[lo, hi]`` box of the
+        zero set in model units, or None (e.g. to give a program read from a version-1
+        file, which has none, its box)."""
+        return Program(
+            params=self.params, consts=self.consts, code=self.code, output=self.output,
+            n_regs=self.n_regs, dim=self.dim, exactness=self.exactness,
+            lipschitz=self.lipschitz, calls=self.calls, bounds=bounds,
+        )
 
     # ------------------------------------------------------------------ parameters
     def param_values(self, params: dict | None = None, **kw: Any) -> np.ndarray:
@@ -287,29 +300,32 @@ class Program:
     # ------------------------------------------------------------------ serialisation
     def to_bytes(self) -> bytes:
         """The binary bytecode (versioned, fixed-width instructions; docs/bytecode.md)."""
-        from .binary import encode
-
         return encode(self)
 
     @classmethod
     def from_bytes(cls, data: bytes) -> Program:
-        """Decode and validate bytecode. Raises :class:`csdf.BytecodeError` on any flaw."""
-        from .binary import decode
-
-        return decode(data)
+        """Decode and validate bytecode (format version 1 or 2; a version-1 program has
+        no bounds). Raises :class:`csdf.BytecodeError` on any flaw; a program it returns
+        is safe to evaluate."""
+        prog = cls(**decode_fields(data))
+        validate(prog)
+        return prog
 
     def disassemble(self) -> str:
         """A readable text listing that :meth:`from_text` loads back to the same program."""
-        from .text import disassemble
-
         return disassemble(self)
 
     @classmethod
     def from_text(cls, text: str) -> Program:
-        """Assemble a listing made by :meth:`disassemble` (raises BytecodeError)."""
-        from .text import assemble
-
-        return assemble(text)
+        """Assemble a listing made by :meth:`disassemble`; runs the same validation as
+        :meth:`from_bytes` (raises BytecodeError naming the line)."""
+        fields = assemble_fields(text)
+        try:
+            prog = cls(**fields)
+        except (ValueError, OverflowError) as exc:
+            raise BytecodeError(f"invalid program: {exc}") from None
+        validate(prog)
+        return prog
 
     @property
     def nbytes(self) -> int:
@@ -320,18 +336,19 @@ class Program:
         """Size of the call-level form, in bytes: the same layout as :meth:`to_bytes`, but
         each primitive is one 8-byte ``call`` instruction (its body is the library's, not
         the model's) and the call table is not needed; constants used only inside
-        primitive bodies are dropped. This is what the paper's "about 100 bytes" counts.
+        primitive bodies are dropped; the bounds section is not counted either. This
+        is what the paper's "about 100 bytes" counts.
         """
         inside = self._primitive_bodies()
         n_instr = len(self.code) - len(inside) + len(self.calls)
         used: set[int] = set()
-        base = 3 + len(self.params)
+        layout = self.layout
         for k, (op, _dst, a, b) in enumerate(self.code.tolist()):
             if k in inside:
                 continue
             used.update(s for s in ((a, b) if OPS_BY_CODE[op].arity == 2 else (a,)))
         for c in self.calls:
             used.update(s for s in c.inputs if not s & INSTR_REF)
-        n_consts = sum(1 for s in used if base <= s < self.n_fixed)
+        n_consts = sum(1 for s in used if layout.is_const(s))
         params = sum(1 + len(p.name.encode()) + 24 for p in self.params)
         return 32 + params + 8 * n_consts + 8 * n_instr + 4

@@ -7,16 +7,17 @@ Steps:
 2. order the op nodes children-first, with every *uniform* node (one that depends
    only on parameters and constants) before every *varying* one, so evaluators can
    compute the uniform prefix once per call;
-3. lay out the slot file: ``x y z | params (sorted by name) | constants (first-use
-   order) | registers``;
-4. allocate registers by linear scan: a register is freed after its value's last use
-   and reused lowest-first, so the register count is the peak number of live values;
-5. record the primitive calls (for the paper's primitive-level Table-1 counts).
+3. lay out the slot file (:class:`csdf.layout.SlotLayout`): ``x y z | params (sorted
+   by name) | constants (first-use order) | registers``;
+4. allocate registers by linear scan (:func:`csdf.compiler.regalloc.linear_scan`): a
+   register is freed after its value's last use and reused lowest-first, so the
+   register count is the peak number of live values;
+5. record the primitive calls (for the paper's primitive-level Table-1 counts) and the
+   shape's metadata: exactness, Lipschitz bound and bounding box.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 import struct
 
@@ -24,21 +25,28 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..expr import Expr, expr_params, walk
+from ..layout import MAX_SLOTS, SlotLayout
 from ..ops import OPS
-from .program import Call, Program
+from .calls import INSTR_REF, Call
+from .program import Program
+from .regalloc import linear_scan
 
 __all__ = ["compile_shape", "compile_expr", "MAX_SLOTS"]
 
-MAX_SLOTS = 65535
-INSTR_REF = 0x80000000
-
 
 def compile_shape(shape) -> Program:
-    """Compile a :class:`csdf.Shape` (see :func:`compile_expr`)."""
+    """Compile a :class:`csdf.Shape` (see :func:`compile_expr`).
+
+    The program carries the shape's exactness, Lipschitz bound and bounds
+    (``shape.bounds``, the box of its zero set, or None). ``shape`` is anything with
+    ``build()``, ``dim``, ``exactness``, ``lipschitz`` and ``bounds`` (the compiler does
+    not import the shapes layer).
+    """
     root, ctx = shape.build()
     calls = [(name, out, inputs) for name, out, inputs in ctx.calls.values()]
     return compile_expr(
-        root, dim=shape.dim, exactness=shape.exactness, lipschitz=shape.lipschitz, calls=calls
+        root, dim=shape.dim, exactness=shape.exactness, lipschitz=shape.lipschitz,
+        calls=calls, bounds=shape.bounds,
     )
 
 
@@ -49,6 +57,7 @@ def compile_expr(
     exactness: str = "neither",
     lipschitz: float = math.inf,
     calls: list[tuple[str, Expr, tuple[Expr, ...]]] | None = None,
+    bounds: np.ndarray | None = None,
 ) -> Program:
     """Compile an expression over x, y, z into a :class:`Program`.
 
@@ -57,9 +66,11 @@ def compile_expr(
         dim: 3, or 2 when it uses only x and y.
         exactness, lipschitz: metadata stored with the program.
         calls: primitive invocations ``(name, output node, input nodes)``.
+        bounds: ``(2, dim)`` ``[lo, hi]`` box of the zero set (model units), or None
+            when unbounded or unknown; stored with the program.
 
     Raises:
-        CsdfError: the program would need more than 65535 slots.
+        CsdfError: the program would need more than :data:`csdf.layout.MAX_SLOTS` slots.
     """
     params = expr_params(root)
     order = list(walk(root))
@@ -74,76 +85,56 @@ def compile_expr(
     ops = [n for n in order if n.op in OPS]
     sched = [n for n in ops if uniform[id(n)]] + [n for n in ops if not uniform[id(n)]]
 
-    n_p = len(params)
-    slot: dict[int, int] = {}
-    fixed_xyz = {"x": 0, "y": 1, "z": 2}
-    pslot = {p.name: 3 + i for i, p in enumerate(params)}
+    param_index = {p.name: i for i, p in enumerate(params)}
     consts: list[float] = []
     const_index: dict[bytes, int] = {}
 
-    def leaf_slot(n: Expr) -> int | None:
-        if n.op in fixed_xyz:
-            return fixed_xyz[n.op]
-        if n.op == "param":
-            return pslot[n.value.name]  # type: ignore[union-attr]
+    def note_const(n: Expr) -> None:
         if n.op == "const":
             bits = struct.pack("<d", n.value)
-            j = const_index.get(bits)
-            if j is None:
-                j = const_index[bits] = len(consts)
+            if bits not in const_index:
+                const_index[bits] = len(consts)
                 consts.append(float(n.value))  # type: ignore[arg-type]
-            return -1 - j  # placeholder: final slot known once all constants are seen
-        return None
 
     # constants in first-use order: instructions, then output, then call inputs
     for n in sched:
         for a in n.args:
-            leaf_slot(a)
-    leaf_slot(root)
+            note_const(a)
+    note_const(root)
     for _, _out, inputs in calls or ():
         for e in inputs:
-            leaf_slot(e)
-    n_fixed = 3 + n_p + len(consts)
-
-    def fixed(n: Expr) -> int | None:
-        s = leaf_slot(n)
-        if s is None:
-            return None
-        return s if s >= 0 else 3 + n_p + (-1 - s)
+            note_const(e)
 
     # linear-scan register allocation
     index = {id(n): i for i, n in enumerate(sched)}
-    last_use: dict[int, int] = {}
-    for i, n in enumerate(sched):
-        for a in n.args:
-            last_use[id(a)] = i
-    last_use[id(root)] = len(sched)
-    free: list[int] = []
-    n_regs = 0
+    reads = [[index[id(a)] for a in n.args if a.op in OPS] for n in sched]
+    regs, n_regs = linear_scan(reads, [index[id(root)]] if id(root) in index else ())
+    layout = SlotLayout(len(params), len(consts), n_regs)
+    if layout.n_slots > MAX_SLOTS:
+        raise CsdfError(
+            f"the program needs {layout.n_slots} slots; at most {MAX_SLOTS} are supported"
+        )
+
+    def fixed(n: Expr) -> int | None:
+        """The fixed slot of a leaf (None for an op node)."""
+        if n.op in ("x", "y", "z"):
+            return "xyz".index(n.op)
+        if n.op == "param":
+            return layout.param(param_index[n.value.name])  # type: ignore[union-attr]
+        if n.op == "const":
+            return layout.const(const_index[struct.pack("<d", n.value)])
+        return None
+
+    def slot(n: Expr) -> int:
+        f = fixed(n)
+        return f if f is not None else layout.reg(regs[index[id(n)]])
+
     code = np.zeros((len(sched), 4), dtype=np.int64)
     for i, n in enumerate(sched):
-        operands = []
-        for a in n.args:
-            f = fixed(a)
-            operands.append(f if f is not None else slot[id(a)])
-        for a in {id(a): a for a in n.args}.values():
-            if a.op in OPS and last_use[id(a)] == i:
-                heapq.heappush(free, slot[id(a)] - n_fixed)
-        if free:
-            r = heapq.heappop(free)
-        else:
-            r = n_regs
-            n_regs += 1
-        slot[id(n)] = n_fixed + r
         info = OPS[n.op]
-        code[i] = (info.code, n_fixed + r, operands[0], operands[1] if info.arity == 2 else 0)
-    if n_fixed + n_regs > MAX_SLOTS:
-        raise CsdfError(
-            f"the program needs {n_fixed + n_regs} slots; at most {MAX_SLOTS} are supported"
-        )
-    out_slot = fixed(root)
-    if out_slot is None:
-        out_slot = slot[id(root)]
+        operands = [slot(a) for a in n.args]
+        code[i] = (info.code, layout.reg(regs[i]), operands[0],
+                   operands[1] if info.arity == 2 else 0)
 
     def source(e: Expr) -> int | None:
         f = fixed(e)
@@ -164,10 +155,11 @@ def compile_expr(
         params=tuple(params),
         consts=np.array(consts, dtype=np.float64),
         code=code,
-        output=out_slot,
+        output=slot(root),
         n_regs=n_regs,
         dim=dim,
         exactness=exactness,
         lipschitz=lipschitz,
         calls=tuple(call_list),
+        bounds=bounds,
     )

@@ -1,14 +1,15 @@
 """Text form of a program: a readable listing that assembles back to the same program.
 
-Example (a sphere of parameter radius ``r``)::
+Example (a sphere of parameter radius ``r`` in ``[0.5, 2]``)::
 
     csdf-program 1
     dim 3
     exactness exact
     lipschitz 1.0
-    param r 1.0 -inf inf
-    r0 = square x
-    r1 = square y
+    bounds -2.0 -2.0 -2.0 2.0 2.0 2.0
+    param r 1.0 0.5 2.0
+    r0 = square y
+    r1 = square x
     r0 = add r0 r1
     r1 = square z
     r0 = add r0 r1
@@ -17,11 +18,13 @@ Example (a sphere of parameter radius ``r``)::
     output r0
     call sphere @6 x y z $r
 
-Operands: ``x y z``, ``$name`` (parameter), ``c<k>`` (constant ``k``, declared by a
-``const c<k> <value>`` line), ``r<k>`` (register). In ``call`` lines ``@i`` is the
-result of instruction ``i``. Floats are written with ``repr`` so they round-trip exactly
-(a NaN constant as ``nan:0x<16 hex digits>``, its bit pattern).
-Comments start with ``;``.
+Header lines: ``dim``, ``exactness``, ``lipschitz`` and, for a program with bounds,
+``bounds`` (the box of the zero set: ``dim`` numbers lo, then ``dim`` numbers hi; a
+listing without it, as older csdf wrote them, gives ``bounds=None``). Operands: ``x y
+z``, ``$name`` (parameter), ``c<k>`` (constant ``k``, declared by a ``const c<k>
+<value>`` line), ``r<k>`` (register). In ``call`` lines ``@i`` is the result of
+instruction ``i``. Floats are written with ``repr`` so they round-trip exactly (a NaN
+as ``nan:0x<16 hex digits>``, its bit pattern). Comments start with ``;``.
 """
 
 from __future__ import annotations
@@ -29,48 +32,56 @@ from __future__ import annotations
 import math
 import re
 import struct
+from typing import Any
 
 import numpy as np
 
 from ..errors import BytecodeError
 from ..expr import Param
+from ..layout import MAX_SLOTS, N_COORDS, SlotLayout
 from ..ops import OPS, OPS_BY_CODE
-from .binary import validate
-from .program import INSTR_REF, Call, Program
+from .calls import INSTR_REF, Call
 
-__all__ = ["disassemble", "assemble"]
+__all__ = ["disassemble", "assemble_fields"]
 
 _MAX_LINES = 1_000_000
 
 
-def _slot_name(prog: Program, s: int) -> str:
-    if s < 3:
+def _slot_name(layout: SlotLayout, prog: Any, s: int) -> str:
+    if s < N_COORDS:
         return "xyz"[s]
-    if s < 3 + len(prog.params):
-        return "$" + prog.params[s - 3].name
-    if s < prog.n_fixed:
-        return f"c{s - 3 - len(prog.params)}"
-    return f"r{s - prog.n_fixed}"
+    if layout.is_param(s):
+        return "$" + prog.params[s - layout.param_base].name
+    if layout.is_const(s):
+        return f"c{s - layout.const_base}"
+    return f"r{s - layout.reg_base}"
 
 
-def disassemble(prog: Program) -> str:
+def disassemble(prog: Any) -> str:
+    """The listing of a :class:`csdf.Program` (see the module docs)."""
     lines = [
         "csdf-program 1",
         f"dim {prog.dim}",
         f"exactness {prog.exactness}",
         f"lipschitz {prog.lipschitz!r}",
     ]
+    if prog.bounds is not None:
+        lines.append("bounds " + " ".join(_fmt(v) for v in prog.bounds.reshape(-1).tolist()))
+    layout = prog.layout
     for p in prog.params:
         lines.append(f"param {p.name} {p.default!r} {p.lo!r} {p.hi!r}")
     for i, c in enumerate(prog.consts.tolist()):
         lines.append(f"const c{i} {_fmt(c)}")
     for op, dst, a, b in prog.code.tolist():
         info = OPS_BY_CODE[op]
-        args = [_slot_name(prog, a)] + ([_slot_name(prog, b)] if info.arity == 2 else [])
-        lines.append(f"{_slot_name(prog, dst)} = {info.name} {' '.join(args)}")
-    lines.append(f"output {_slot_name(prog, prog.output)}")
+        args = [_slot_name(layout, prog, a)]
+        if info.arity == 2:
+            args.append(_slot_name(layout, prog, b))
+        lines.append(f"{_slot_name(layout, prog, dst)} = {info.name} {' '.join(args)}")
+    lines.append(f"output {_slot_name(layout, prog, prog.output)}")
     for c in prog.calls:
-        ins = [f"@{s & ~INSTR_REF}" if s & INSTR_REF else _slot_name(prog, s) for s in c.inputs]
+        ins = [f"@{s & ~INSTR_REF}" if s & INSTR_REF else _slot_name(layout, prog, s)
+               for s in c.inputs]
         lines.append(f"call {c.name} @{c.out} {' '.join(ins)}".rstrip())
     return "\n".join(lines) + "\n"
 
@@ -94,14 +105,17 @@ def _float(tok: str, ln: int) -> float:
     return float(tok)
 
 
-def assemble(text: str) -> Program:
-    """Parse a listing (see module docs); raise :class:`BytecodeError` with the line."""
+def assemble_fields(text: str) -> dict[str, Any]:
+    """Parse a listing (see module docs) into :class:`csdf.Program` keyword arguments;
+    raise :class:`BytecodeError` with the line. :meth:`csdf.Program.from_text` builds
+    the program and validates it like a decoded one."""
     if not isinstance(text, str):
         raise BytecodeError(f"a program listing must be text, got {type(text).__name__}")
     raw_lines = text.splitlines()
     if len(raw_lines) > _MAX_LINES:
         raise BytecodeError(f"listing has {len(raw_lines)} lines; at most {_MAX_LINES}")
     header = {"dim": 3, "exactness": "neither", "lipschitz": math.inf}
+    bounds_row: tuple[int, list[float]] | None = None
     params: list[Param] = []
     consts: list[float] = []
     code: list[tuple[int, int, int, int]] = []
@@ -126,6 +140,8 @@ def assemble(text: str) -> Program:
             header["exactness"] = toks[1]
         elif kw == "lipschitz" and len(toks) == 2:
             header["lipschitz"] = _float(toks[1], ln)
+        elif kw == "bounds":
+            bounds_row = (ln, [_float(t, ln) for t in toks[1:]])
         elif kw == "param" and len(toks) == 5:
             params.append(Param(toks[1], *(_float(t, ln) for t in toks[2:])))
         elif kw == "const" and len(toks) == 3:
@@ -147,8 +163,9 @@ def assemble(text: str) -> Program:
             raise BytecodeError(f"line {ln}: cannot read {line[:60]!r}")
     if not seen_magic:
         raise BytecodeError("line 1: empty listing (expected 'csdf-program 1')")
-    pindex = {p.name: 3 + i for i, p in enumerate(params)}
-    n_fixed = 3 + len(params) + len(consts)
+    layout = SlotLayout(len(params), len(consts))
+    pindex = {p.name: layout.param(i) for i, p in enumerate(params)}
+    n_fixed = layout.n_fixed
 
     def slot(tok: str, ln: int) -> int:
         if tok in ("x", "y", "z"):
@@ -157,7 +174,7 @@ def assemble(text: str) -> Program:
             return pindex[tok[1:]]
         m = re.fullmatch(r"c(\d{1,6})", tok)
         if m and int(m.group(1)) < len(consts):
-            return 3 + len(params) + int(m.group(1))
+            return layout.const(int(m.group(1)))
         m = re.fullmatch(r"r(\d{1,5})", tok)
         if m:
             return n_fixed + int(m.group(1))
@@ -183,16 +200,25 @@ def assemble(text: str) -> Program:
         for t in toks[2:]:
             ins.append(INSTR_REF | int(t[1:]) if re.fullmatch(r"@\d{1,9}", t) else slot(t, ln))
         calls.append(Call(name, int(toks[1][1:]), tuple(ins)))
-    if n_fixed + n_regs > 65535:
-        raise BytecodeError("too many slots (limit 65535)")
+    if n_fixed + n_regs > MAX_SLOTS:
+        raise BytecodeError(f"too many slots (limit {MAX_SLOTS})")
+    bounds = None
+    if bounds_row is not None:
+        ln, vals = bounds_row
+        dim = int(header["dim"])
+        if len(vals) != 2 * dim:
+            raise BytecodeError(
+                f"line {ln}: bounds of a {dim}D program are {2 * dim} numbers "
+                f"({dim} lo, then {dim} hi); got {len(vals)}"
+            )
+        bounds = np.array(vals, dtype=np.float64).reshape(2, dim)
     try:
-        prog = Program(
-            params=tuple(params), consts=np.array(consts, dtype=np.float64),
-            code=np.array(code, dtype=np.int64).reshape(-1, 4), output=output, n_regs=n_regs,
-            dim=int(header["dim"]), exactness=str(header["exactness"]),
-            lipschitz=float(header["lipschitz"]), calls=tuple(calls),
-        )
+        code_arr = np.array(code, dtype=np.int64).reshape(-1, 4)
     except (ValueError, OverflowError) as exc:
         raise BytecodeError(f"invalid program: {exc}") from None
-    validate(prog)
-    return prog
+    return dict(
+        params=tuple(params), consts=np.array(consts, dtype=np.float64), code=code_arr,
+        output=output, n_regs=n_regs, dim=int(header["dim"]),
+        exactness=str(header["exactness"]), lipschitz=float(header["lipschitz"]),
+        calls=tuple(calls), bounds=bounds,
+    )

@@ -1,11 +1,11 @@
-"""Recycled memory for the fast backend's large results.
+"""Recycled memory for large results (the fast evaluator's outputs), and private memory
+maps (the mesher's chunk buffers).
 
-Writing a fresh 80 MB result (``10^7`` float64 distances) first costs a page fault per
-page: on the benchmark VM ~2 us per 4 KB page, so ~40 ms, about twice the evaluation
-itself, or up to ~130 ms when NumPy's huge-page advice makes the OS compact memory first
-(``benchmarks/RESULTS.md``). Code that evaluates in a loop (fitting, rendering, meshing,
-benchmarks) drops each result before asking for the next, so the same memory can serve
-again with its pages already in place.
+Writing a fresh large result first costs a page fault per page, which can take longer
+than the evaluation that fills it (more when NumPy's huge-page advice makes the OS
+compact memory first; figures in ``benchmarks/MEMORY_NOTES.md``). Code that evaluates
+in a loop (fitting, rendering, meshing, benchmarks) drops each result before asking for
+the next, so the same memory can serve again with its pages already in place.
 
 :func:`result_array` hands out arrays over private anonymous memory maps kept in a
 small pool. A map is reused only when no array or view of an earlier result still uses

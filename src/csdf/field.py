@@ -165,7 +165,11 @@ def _own_bounds(prog: Program, shape: Any = None) -> np.ndarray | None:
     if b is None:
         return None
     b = np.asarray(b, dtype=np.float64)
-    return b if np.all(np.isfinite(b)) else None
+    # a box is kept as the shape computed it: it may be infinite (unbounded shapes),
+    # NaN, or empty (lo > hi: an intersection of disjoint shapes); none of these is one
+    if b.ndim != 2 or b.shape[0] != 2 or not np.all(np.isfinite(b)) or np.any(b[1] < b[0]):
+        return None
+    return b
 
 
 def field_bounds(prog: Program, params: Mapping[str, float] | None = None, bounds: Any = None,

@@ -22,20 +22,22 @@ import hashlib
 import math
 import re
 import struct
+import threading
 import weakref
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ParamError
+from .errors import CsdfError, ParamError
 from .ops import OPS, numpy_impl
 
 __all__ = [
     "Expr", "Param", "param", "const", "as_expr", "make", "X", "Y", "Z", "Number",
     "sqrt", "square", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "exp", "log",
     "floor", "step", "sign", "minimum", "maximum", "mod", "clamp", "mix", "select_ge",
-    "walk", "expr_params", "is_const", "const_value",
+    "walk", "expr_params", "is_const", "const_value", "to_float", "describe_number",
+    "NodeBudget", "node_budget",
 ]
 
 Number = int | float
@@ -166,6 +168,77 @@ class Expr:
 _INTERN: weakref.WeakValueDictionary[tuple, Expr] = weakref.WeakValueDictionary()
 
 
+class NodeBudget:
+    """A limit on the number of expression nodes created in one thread while it is
+    active (see :func:`node_budget`).
+
+    Only nodes that did not exist yet count (interning finds the others), so the count
+    is the growth of the DAG: what building costs in time and memory.
+
+    Attributes:
+        limit: the most nodes that may be created.
+        count: nodes created so far.
+        what: how the error names the thing being built (``'the model'``).
+    """
+
+    __slots__ = ("limit", "count", "what")
+
+    def __init__(self, limit: int, what: str = "the model"):
+        self.limit = int(limit)
+        self.count = 0
+        self.what = what
+
+    def charge(self) -> None:
+        """Count one new node.
+
+        Raises:
+            CsdfError: more than :attr:`limit` nodes were created.
+        """
+        self.count += 1
+        if self.count > self.limit:
+            raise CsdfError(
+                f"{self.what} expands to more than {self.limit} expression nodes; "
+                "a shape reused at many different placements (for example nested "
+                "unions of translated copies, each level doubling) multiplies its "
+                "size; use repeat/repeat_polar/mirror or fewer levels"
+            )
+
+
+class _Active(threading.local):
+    budget: NodeBudget | None = None
+
+
+_ACTIVE = _Active()
+
+
+class node_budget:  # noqa: N801 (used as a context manager, like a function)
+    """Context manager: count the expression nodes created in this thread against
+    ``limit`` (an error is raised when it is exceeded). When a budget is already active
+    in this thread, the outer one keeps counting and ``limit`` is ignored.
+
+    Example::
+
+        with node_budget(1_000_000):
+            e = shape.sdf(p)
+    """
+
+    def __init__(self, limit: int, what: str = "the model"):
+        self._new = NodeBudget(limit, what)
+        self._owner = False
+
+    def __enter__(self) -> NodeBudget:
+        if _ACTIVE.budget is not None:
+            return _ACTIVE.budget
+        _ACTIVE.budget = self._new
+        self._owner = True
+        return self._new
+
+    def __exit__(self, *exc: object) -> None:
+        if self._owner:
+            _ACTIVE.budget = None
+            self._owner = False
+
+
 def _float_bits(v: float) -> bytes:
     return struct.pack("<d", v)
 
@@ -194,6 +267,9 @@ def _intern(op: str, args: tuple[Expr, ...], value: object = None) -> Expr:
     node = _INTERN.get(ident)
     if node is not None:
         return node
+    budget = _ACTIVE.budget
+    if budget is not None:
+        budget.charge()
     node = object.__new__(Expr)
     node.op = op
     node.args = args
@@ -214,9 +290,53 @@ Z = _leaf("z")
 _KEEP = (X, Y, Z)
 
 
+def describe_number(v: object) -> str:
+    """Short text of a number for error messages (a huge integer as ``10**400``)."""
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        i = int(v)
+        if abs(i) >= 10**20:
+            digits = len(str(abs(i))) if abs(i).bit_length() < 10_000 else None
+            if digits is None:
+                return f"{'-' if i < 0 else ''}2**{abs(i).bit_length() - 1} or more"
+            if abs(i) == 10 ** (digits - 1):
+                return f"{'-' if i < 0 else ''}10**{digits - 1}"
+            return f"{'-' if i < 0 else ''}an integer of {digits} digits"
+        return str(i)
+    try:
+        return f"{float(v):g}"  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return type(v).__name__
+
+
+def to_float(v: object, what: str, error: type[CsdfError] = CsdfError) -> float:
+    """``float(v)`` for a real number (Python or NumPy, not bool), raising ``error``
+    naming ``what`` and the value when it is not a number or too large for float64
+    (``10**400``). NaN and infinities pass: callers decide about them."""
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        if not (isinstance(v, np.ndarray) and v.shape == () and v.dtype.kind in "iuf"):
+            raise error(f"{what} must be a number, got {type(v).__name__}")
+    try:
+        return float(v)  # type: ignore[arg-type]
+    except OverflowError:
+        raise error(
+            f"{what} is {describe_number(v)}, too large for a float64 number "
+            "(at most about 1.8e308)"
+        ) from None
+
+
 def const(v: Number) -> Expr:
-    """A constant node (float64)."""
-    return _intern("const", (), float(v))
+    """A constant node (float64).
+
+    Raises:
+        CsdfError: ``v`` is an integer too large for float64.
+    """
+    try:
+        f = float(v)
+    except OverflowError:
+        raise CsdfError(
+            f"the constant {describe_number(v)} is too large for a float64 number"
+        ) from None
+    return _intern("const", (), f)
 
 
 def param(name: str, default: Number, lo: Number | None = None, hi: Number | None = None) -> Expr:
@@ -254,7 +374,7 @@ def param(name: str, default: Number, lo: Number | None = None, hi: Number | Non
 def _number(v: object, what: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise ParamError(f"{what} must be a number, got {type(v).__name__}")
-    return float(v)
+    return to_float(v, what, ParamError)
 
 
 def _finite(v: object, what: str) -> float:
@@ -271,9 +391,9 @@ def as_expr(v: Expr | Number) -> Expr:
     if isinstance(v, bool):
         raise TypeError("a boolean is not a number here")
     if isinstance(v, (int, float, np.integer, np.floating)):
-        return const(float(v))
+        return const(to_float(v, "a number in an expression"))
     if isinstance(v, np.ndarray) and v.shape == ():
-        return const(float(v))
+        return const(to_float(v, "a number in an expression"))
     raise TypeError(f"expected a number or expression, got {type(v).__name__}")
 
 

@@ -15,10 +15,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["SlotLayout", "MAX_SLOTS", "N_COORDS"]
+__all__ = ["SlotLayout", "MAX_SLOTS", "MAX_PARAMS", "N_COORDS"]
 
 #: slots a program may use (slot numbers are 16-bit in the bytecode)
 MAX_SLOTS = 65535
+#: The most parameters a program may have. Bounding the count (rather than the
+#: Jacobian's working size at evaluation time) keeps every consumer safe at once:
+#: forward-mode differentiation carries one tangent of ``3 + P`` numbers per point and
+#: live register and seeds the parameters with a ``(3 + P) x (3 + P)`` identity, so its
+#: memory grows as ``P**2`` even for a single point (30,000 parameters would need
+#: 7.2 GB); at 1024 that is 8 MB for the seeds and 8 MB per live register for a chunk of
+#: 1024 points, and fitting and the editor stay interactive. Real models have tens of
+#: parameters; one that needs more can make values that never vary constants.
+MAX_PARAMS = 1024
 #: the coordinate slots x, y, z come first
 N_COORDS = 3
 

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import BytecodeError
 from ..expr import RESERVED_PARAM_NAMES, Param
-from ..layout import MAX_SLOTS
+from ..layout import MAX_PARAMS, MAX_SLOTS
 from ..ops import OPS_BY_CODE
 from .calls import INSTR_REF, Call
 
@@ -183,6 +183,9 @@ def decode_fields(data: bytes) -> dict[str, Any]:
 def validate(prog: Any) -> None:
     """Check a :class:`csdf.Program`'s internal consistency; raise
     :class:`BytecodeError` if broken."""
+    if len(prog.params) > MAX_PARAMS:
+        raise BytecodeError(f"the program has {len(prog.params)} parameters, more than "
+                            f"{MAX_PARAMS}")
     seen = set()
     for p in prog.params:
         if not _IDENT.fullmatch(p.name) or p.name in RESERVED_PARAM_NAMES:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import BytecodeError, CsdfError, ParamError
-from ..expr import Param
+from ..expr import Param, describe_number
 from ..layout import SlotLayout
 from ..ops import CATEGORIES, OPS_BY_CODE
 from .binary import decode_fields, encode, validate
@@ -158,8 +158,8 @@ class Program:
         """Parameter vector ``(P,)`` float64 from defaults overridden by ``params``/``kw``.
 
         Raises:
-            ParamError: an unknown name (the message lists the known ones) or a value
-                that is not a real number.
+            ParamError: an unknown name (the message lists the known ones), a value
+                that is not a real number, or one too large for float64 (``10**400``).
         """
         vals = np.array([p.default for p in self.params], dtype=np.float64)
         given = dict(params or {})
@@ -177,7 +177,17 @@ class Program:
                     raise ParamError(
                         f"parameter {name!r} must be a real number, got {type(v).__name__}"
                     )
-            vals[i] = float(v)
+            try:
+                vals[i] = float(v)
+            except OverflowError:
+                raise ParamError(
+                    f"parameter {name!r} = {describe_number(v)} is too large for a float64 "
+                    "number (at most about 1.8e308)"
+                ) from None
+            except (TypeError, ValueError):
+                raise ParamError(
+                    f"parameter {name!r} must be a real number, got {type(v).__name__}"
+                ) from None
         return vals
 
     # ------------------------------------------------------------------ evaluation

@@ -25,13 +25,14 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..expr import Expr, expr_params, walk
-from ..layout import MAX_SLOTS, SlotLayout
+from ..layout import MAX_PARAMS, MAX_SLOTS, SlotLayout
 from ..ops import OPS
 from .calls import INSTR_REF, Call
 from .program import Program
 from .regalloc import linear_scan
 
-__all__ = ["compile_shape", "compile_expr", "MAX_SLOTS"]
+__all__ = ["compile_shape", "compile_expr", "MAX_SLOTS", "MAX_PARAMS"]
+
 
 
 def compile_shape(shape) -> Program:
@@ -70,9 +71,16 @@ def compile_expr(
             when unbounded or unknown; stored with the program.
 
     Raises:
-        CsdfError: the program would need more than :data:`csdf.layout.MAX_SLOTS` slots.
+        CsdfError: the program would need more than :data:`csdf.layout.MAX_SLOTS` slots,
+            or it has more than :data:`MAX_PARAMS` parameters.
     """
     params = expr_params(root)
+    if len(params) > MAX_PARAMS:
+        raise CsdfError(
+            f"the model has {len(params)} parameters, more than {MAX_PARAMS} parameters "
+            "are not supported (the parameter Jacobian grows as their square); make the "
+            "values that need not vary constants"
+        )
     order = list(walk(root))
     uniform: dict[int, bool] = {}
     for n in order:

@@ -16,6 +16,18 @@ Exactness contract (hg_sdf's): every shape carries
 
 Parameters in arguments: bounding boxes and Lipschitz bounds hold for every value
 of a parameter in ``[lo, hi]`` when both are finite, otherwise at its default.
+
+Sizes (radii, half-sizes, heights, thicknesses) are checked by :func:`size_arg`: a
+negative size is a :class:`~csdf.errors.ShapeError`; for a parameter expression, when
+its value at the parameters' defaults is negative. A zero size
+is allowed where the formula stays finite: the shape is then degenerate (a point, a
+segment, a flat sheet) and its field is still the distance to that set; where a size
+divides (ellipsoid radii, pyramid base, round_cone height) it must be > 0.
+
+Size limits while building (so that a small model text cannot take minutes and
+gigabytes): :data:`MAX_EXPANSION` evaluations of shape nodes once the shape DAG is
+unfolded (checked before anything is built), and :data:`MAX_EXPR_NODES` expression
+nodes created while building (counted as they are made).
 """
 
 from __future__ import annotations
@@ -27,15 +39,35 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ShapeError
-from ..expr import Expr, Param, X, Y, Z, as_expr, expr_params
+from ..errors import CsdfError, ShapeError
+from ..expr import Expr, Param, X, Y, Z, as_expr, describe_number, expr_params, node_budget
 from ..interval import expr_range
+from ..ops import numpy_impl
 from ..vec import Vec
 
 __all__ = [
     "Shape", "BuildContext", "REGISTRY", "ApiEntry", "register", "scalar_arg", "vector_arg",
-    "int_arg", "derive_exactness", "Bounds", "EXACTNESS",
+    "int_arg", "size_arg", "size_vector", "check_size", "derive_exactness", "Bounds",
+    "EXACTNESS", "MAX_EXPR_NODES", "MAX_EXPANSION",
 ]
+
+#: The most expression nodes that building one shape may create (shared
+#: subexpressions count once; nodes that already exist count not at all). It matches
+#: the language's 10^6-instruction limit: every instruction is one node. Counted while
+#: building (:meth:`Shape.build`), so an oversized model stops at this size instead of
+#: being built whole and then measured.
+MAX_EXPR_NODES = 1_000_000
+
+#: The most shape-node evaluations a shape may need once its DAG is unfolded: a shape
+#: used in two places is evaluated twice when the two places give it different
+#: coordinates, so ``k`` nested levels of ``a | a.translate(v)`` need ``2**k``. Checked
+#: in time linear in the number of distinct shape nodes before anything is built, so an
+#: exponential model fails at once and in a few MB. Each evaluation makes at least one
+#: expression node, usually several, so this is a looser limit than
+#: :data:`MAX_EXPR_NODES` for every model with no exponential reuse. (The count
+#: assumes every use of a shape has its own coordinates; a shape used twice at the same
+#: coordinates within one operator is counted once.)
+MAX_EXPANSION = 200_000
 
 EXACTNESS = ("exact", "bound", "neither")
 Bounds = "np.ndarray | None"  # (2, dim) array [lo, hi] or None when unbounded/unknown
@@ -122,10 +154,45 @@ class Shape:
         return out
 
     def build(self) -> tuple[Expr, BuildContext]:
-        """Build the expression at (x, y, z) (or (x, y)); returns it and the context."""
+        """Build the expression at (x, y, z) (or (x, y)); returns it and the context.
+
+        Raises:
+            CsdfError: the shape needs more than :data:`MAX_EXPANSION` shape
+                evaluations or creates more than :data:`MAX_EXPR_NODES` expression
+                nodes ("the model expands to more than N expression nodes").
+        """
+        n = self.expansion()
+        if n > MAX_EXPANSION:
+            raise CsdfError(
+                f"the model expands to more than {MAX_EXPANSION} shape evaluations once "
+                f"its reused shapes are unfolded ({describe_number(n)}; each makes "
+                f"expression nodes, at most {MAX_EXPR_NODES} are allowed): a shape reused "
+                "at many different placements (for example nested unions of translated "
+                "copies, each level doubling) multiplies its size; use "
+                "repeat/repeat_polar/mirror or fewer levels"
+            )
         ctx = BuildContext()
         p = Vec((X, Y, Z)[: self.dim])
-        return self.sdf(p, ctx), ctx
+        with node_budget(MAX_EXPR_NODES, "the model"):
+            return self.sdf(p, ctx), ctx
+
+    def expansion(self) -> int:
+        """Number of shape-node evaluations building this shape needs at most: the size
+        of the shape DAG unfolded into a tree, with a child given twice to one node
+        counted once (see :data:`MAX_EXPANSION`). Linear time in the distinct nodes."""
+        total: dict[int, int] = {}
+        stack: list[tuple[Shape, bool]] = [(self, False)]
+        while stack:
+            node, done = stack.pop()
+            if id(node) in total:
+                continue
+            kids = {id(c): c for c in node.children if isinstance(c, Shape)}
+            if done:
+                total[id(node)] = 1 + sum(total[k] for k in kids)
+                continue
+            stack.append((node, True))
+            stack.extend((c, False) for k, c in kids.items() if k not in total)
+        return total[id(self)]
 
     @property
     def expr(self) -> Expr:
@@ -214,9 +281,82 @@ def scalar_arg(v: Any, what: str) -> Expr:
         return v
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise ShapeError(f"{what} must be a number or a parameter, got {type(v).__name__}")
-    if not math.isfinite(float(v)):
-        raise ShapeError(f"{what} must be finite, got {v}")
-    return as_expr(float(v))
+    f = _float(v, what)
+    if not math.isfinite(f):
+        raise ShapeError(f"{what} must be finite, got {describe_number(v)}")
+    return as_expr(f)
+
+
+def _float(v: Any, what: str) -> float:
+    try:
+        return float(v)
+    except OverflowError:
+        raise ShapeError(
+            f"{what} is {describe_number(v)}, too large for a float64 number"
+        ) from None
+
+
+def _at_defaults(e: Expr) -> float:
+    """Value of a parameter-only expression with every parameter at its default."""
+    from ..expr import walk
+
+    vals: dict[int, float] = {}
+    with np.errstate(all="ignore"):
+        for n in walk(e):
+            if n.op == "const":
+                vals[id(n)] = float(n.value)  # type: ignore[arg-type]
+            elif n.op == "param":
+                vals[id(n)] = float(n.value.default)  # type: ignore[union-attr]
+            else:
+                args = [np.float64(vals[id(a)]) for a in n.args]
+                vals[id(n)] = float(numpy_impl(n.op)(*args))
+    return vals[id(e)]
+
+
+def size_arg(v: Any, what: str, *, positive: bool = False) -> Expr:
+    """Coerce a size (radius, full or half size, height, thickness) like
+    :func:`scalar_arg`, refusing negative values (``positive``: also zero).
+
+    A constant is checked at once. A parameter expression is checked at the
+    parameters' defaults (a default lies in its declared range, so a range that is
+    wholly negative is refused too). A range that reaches below zero while the default
+    is fine is accepted: interval arithmetic over several parameters overestimates
+    (``(root - hub) * 0.3`` in the zoo gear), so it cannot prove the size negative.
+
+    Raises:
+        ShapeError: naming ``what`` and the offending value or range.
+    """
+    return check_size(scalar_arg(v, what), what, positive=positive)
+
+
+def size_vector(
+    v: Any, n: int, what: str, *, broadcast: bool = False, positive: bool = False
+) -> tuple[Expr, ...]:
+    """Coerce an ``n``-vector of sizes like :func:`vector_arg`, checking each component
+    as :func:`size_arg` does (named ``what[i]``, or ``what`` for a broadcast scalar)."""
+    comps = vector_arg(v, n, what, broadcast=broadcast)
+    if broadcast and not isinstance(v, (tuple, list, np.ndarray)):
+        check_size(comps[0], what, positive=positive)
+        return comps
+    return tuple(check_size(c, f"{what}[{i}]", positive=positive) for i, c in enumerate(comps))
+
+
+def check_size(e: Expr, what: str, *, positive: bool = False) -> Expr:
+    """Check a coerced size expression (see :func:`size_arg`); returns it."""
+    need = "> 0" if positive else ">= 0"
+
+    def bad(x: float) -> bool:
+        return x < 0 or (positive and x == 0)
+
+    if e.op == "const":
+        x = float(e.value)  # type: ignore[arg-type]
+        if bad(x):
+            raise ShapeError(f"{what} must be {need}, got {x:g}")
+        return e
+    d = _at_defaults(e)
+    if bad(d):
+        raise ShapeError(f"{what} must be {need}, got {d:g} at the parameters' defaults")
+    return e
 
 
 def _leaves(e: Expr):
@@ -250,11 +390,18 @@ def int_arg(v: Any, what: str, lo: int = 1, hi: int = 10_000) -> int:
         v = float(v.value)  # type: ignore[arg-type]
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise ShapeError(f"{what} must be an integer, got {type(v).__name__}")
-    if float(v) != int(v):
-        raise ShapeError(f"{what} must be an integer, got {v}")
-    if not lo <= int(v) <= hi:
-        raise ShapeError(f"{what} must be in [{lo}, {hi}], got {int(v)}")
-    return int(v)
+    if isinstance(v, (float, np.floating)):
+        f = float(v)
+        if not math.isfinite(f):
+            raise ShapeError(f"{what} must be a finite integer in [{lo}, {hi}], got {f}")
+        if f != math.floor(f):
+            raise ShapeError(f"{what} must be an integer, got {f:g}")
+        i = int(f)
+    else:
+        i = int(v)
+    if not lo <= i <= hi:
+        raise ShapeError(f"{what} must be in [{lo}, {hi}], got {describe_number(i)}")
+    return i
 
 
 def mag(e: Expr) -> float:

@@ -16,7 +16,16 @@ from ..errors import ShapeError
 from ..expr import Expr, cos, maximum, sin
 from ..interval import expr_range
 from ..vec import Vec
-from .base import Shape, box_bounds, mag, radius_of, register, scalar_arg, vector_arg
+from .base import (
+    Shape,
+    box_bounds,
+    mag,
+    radius_of,
+    register,
+    scalar_arg,
+    size_arg,
+    size_vector,
+)
 from .domain import _check, _derived
 
 __all__ = ["twist", "bend", "taper", "elongate", "round_", "shell", "offset"]
@@ -113,10 +122,10 @@ def taper(shape: Shape, rate) -> Shape:
 
 @register("method")
 def elongate(shape: Shape, h) -> Shape:
-    """Stretch the shape by inserting a slab of half-widths ``h`` (scalar or per axis) at
-    the origin: ``f(p - clamp(p, -h, h))``. **Bound** (exact outside)."""
+    """Stretch the shape by inserting a slab of half-widths ``h`` (scalar or per axis,
+    each >= 0) at the origin: ``f(p - clamp(p, -h, h))``. **Bound** (exact outside)."""
     _check(shape, "elongate")
-    hv = vector_arg(h, shape.dim, "elongate: h", broadcast=True)
+    hv = size_vector(h, shape.dim, "elongate: h", broadcast=True)
     H = Vec(hv)
 
     def f(p: Vec, ctx) -> Expr:
@@ -135,10 +144,10 @@ def _grow(b: np.ndarray | None, d: float) -> np.ndarray | None:
 
 @register("method", name="round")
 def round_(shape: Shape, radius) -> Shape:
-    """Round the shape by growing it by ``radius``: ``f - radius``. **Bound** (exact
-    outside when the child is exact)."""
+    """Round the shape by growing it by ``radius`` (>= 0; use :meth:`offset` to shrink):
+    ``f - radius``. **Bound** (exact outside when the child is exact)."""
     _check(shape, "round")
-    r = scalar_arg(radius, "round: radius")
+    r = size_arg(radius, "round: radius")
     return _derived(shape, "round", lambda p, ctx: shape.sdf(p, ctx) - r, args=(radius,),
                     keeps_exact=False, bounds=_grow(shape.bounds, mag(r)))
 
@@ -154,10 +163,10 @@ def offset(shape: Shape, d) -> Shape:
 
 @register("method")
 def shell(shape: Shape, thickness) -> Shape:
-    """Hollow the shape into a shell of ``thickness`` centred on its surface:
-    ``|f| - thickness/2``. **Bound**."""
+    """Hollow the shape into a shell of ``thickness`` (>= 0; 0 gives the surface itself)
+    centred on its surface: ``|f| - thickness/2``. **Bound**."""
     _check(shape, "shell")
-    t = scalar_arg(thickness, "shell: thickness")
+    t = size_arg(thickness, "shell: thickness")
     return _derived(
         shape, "shell", lambda p, ctx: abs(shape.sdf(p, ctx)) - t * 0.5, args=(thickness,),
         keeps_exact=False, bounds=_grow(shape.bounds, mag(t) / 2),

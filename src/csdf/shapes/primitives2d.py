@@ -2,6 +2,11 @@
 
 A 2D shape evaluated at 3D points ignores z (it is its infinite prism along z, which
 keeps its exactness). :func:`extrude` and :func:`revolve` turn it into a bounded solid.
+
+Sizes must be >= 0 (a negative one is a :class:`~csdf.errors.ShapeError`, as for the
+3D primitives); zero gives a degenerate shape whose field is still the exact distance to
+it (``circle(0)`` is the distance to the origin, ``segment`` with thickness 0 the distance
+to the segment), except the ``ellipse`` radii, which divide and must be > 0.
 """
 
 from __future__ import annotations
@@ -22,6 +27,8 @@ from .base import (
     mag,
     register,
     scalar_arg,
+    size_arg,
+    size_vector,
     vector_arg,
 )
 from .formulas import (
@@ -56,14 +63,14 @@ def _prim2(name, fn, args, prim_args, bounds, exactness="exact") -> Shape:
 @register("primitive2d")
 def circle(radius=0.5) -> Shape:
     """Disk of ``radius``. **Exact.**"""
-    r = scalar_arg(radius, "circle: radius")
+    r = size_arg(radius, "circle: radius")
     return _prim2("circle", lambda p: length(p) - r, (radius,), (r,), _square(mag(r)))
 
 
 @register("primitive2d")
 def rectangle(size=1.0) -> Shape:
     """Axis-aligned rectangle with full side lengths ``size`` (scalar or 2-vector). **Exact.**"""
-    s = vector_arg(size, 2, "rectangle: size", broadcast=True)
+    s = size_vector(size, 2, "rectangle: size", broadcast=True)
     h = Vec(s) * 0.5
     m = [mag(c) / 2 for c in s]
     return _prim2(
@@ -75,8 +82,8 @@ def rectangle(size=1.0) -> Shape:
 @register("primitive2d")
 def rounded_rectangle(size=1.0, radius=0.1) -> Shape:
     """Rectangle of outer full size ``size`` with corners rounded by ``radius``. **Exact.**"""
-    s = vector_arg(size, 2, "rounded_rectangle: size", broadcast=True)
-    r = scalar_arg(radius, "rounded_rectangle: radius")
+    s = size_vector(size, 2, "rounded_rectangle: size", broadcast=True)
+    r = size_arg(radius, "rounded_rectangle: radius")
     h = Vec(s) * 0.5
     m = [mag(c) / 2 for c in s]
     return _prim2(
@@ -90,7 +97,7 @@ def regular_polygon(n=5, radius=0.5) -> Shape:
     """Regular ``n``-gon (``n`` a constant integer >= 3) of circumradius ``radius`` with a
     vertex on +y. **Exact.**"""
     k = int_arg(n, "regular_polygon: n", 3, 1000)
-    r = scalar_arg(radius, "regular_polygon: radius")
+    r = size_arg(radius, "regular_polygon: radius")
     return _prim2(
         "regular_polygon", lambda p: regular_polygon2(p, k, r), (n, radius), (r,),
         _square(mag(r)),
@@ -145,7 +152,7 @@ def triangle(a=(0.0, 0.5), b=(-0.5, -0.5), c=(0.5, -0.5)) -> Shape:
 def equilateral_triangle(radius=0.5) -> Shape:
     """Equilateral triangle of circumradius ``radius``, centroid at the origin, a vertex
     on +y. **Exact.**"""
-    r = scalar_arg(radius, "equilateral_triangle: radius")
+    r = size_arg(radius, "equilateral_triangle: radius")
     return _prim2(
         "equilateral_triangle", lambda p: equilateral_triangle2(p, r), (radius,), (r,),
         _square(mag(r)),
@@ -155,7 +162,7 @@ def equilateral_triangle(radius=0.5) -> Shape:
 @register("primitive2d")
 def hexagon(radius=0.5) -> Shape:
     """Regular hexagon of circumradius ``radius`` with a vertex on +x. **Exact.**"""
-    r = scalar_arg(radius, "hexagon: radius")
+    r = size_arg(radius, "hexagon: radius")
     return _prim2(
         "hexagon", lambda p: hexagon2(p, r * (math.sqrt(3.0) / 2.0)), (radius,), (r,),
         _square(mag(r)),
@@ -165,8 +172,8 @@ def hexagon(radius=0.5) -> Shape:
 @register("primitive2d")
 def ring(radius=0.5, thickness=0.1) -> Shape:
     """Annulus ``| |p| - radius | <= thickness/2``. **Exact.**"""
-    r = scalar_arg(radius, "ring: radius")
-    t = scalar_arg(thickness, "ring: thickness")
+    r = size_arg(radius, "ring: radius")
+    t = size_arg(thickness, "ring: thickness")
     return _prim2(
         "ring", lambda p: abs(length(p) - r) - t * 0.5, (radius, thickness), (r, t),
         _square(mag(r) + mag(t) / 2),
@@ -179,7 +186,7 @@ def segment(a=(-0.5, 0.0), b=(0.5, 0.0), thickness=0.0) -> Shape:
     thickness 0 the unsigned distance to the segment. **Exact.**"""
     av = vector_arg(a, 2, "segment: a")
     bv = vector_arg(b, 2, "segment: b")
-    t = scalar_arg(thickness, "segment: thickness")
+    t = size_arg(thickness, "segment: thickness")
     e = mag(t) / 2
     bb = _poly_bounds([av, bv, av])
     return _prim2(
@@ -192,9 +199,9 @@ def segment(a=(-0.5, 0.0), b=(0.5, 0.0), thickness=0.0) -> Shape:
 def trapezoid(r1=0.5, r2=0.25, height=1.0) -> Shape:
     """Isosceles trapezoid, centred: half-width ``r1`` at ``y=-height/2`` and ``r2`` at
     ``y=+height/2``. **Exact.**"""
-    a = scalar_arg(r1, "trapezoid: r1")
-    b = scalar_arg(r2, "trapezoid: r2")
-    h = scalar_arg(height, "trapezoid: height")
+    a = size_arg(r1, "trapezoid: r1")
+    b = size_arg(r2, "trapezoid: r2")
+    h = size_arg(height, "trapezoid: height")
     w, hh = max(mag(a), mag(b)), mag(h) / 2
     return _prim2(
         "trapezoid", lambda p: trapezoid2(p, a, b, h * 0.5), (r1, r2, height), (a, b, h),
@@ -205,7 +212,7 @@ def trapezoid(r1=0.5, r2=0.25, height=1.0) -> Shape:
 @register("primitive2d")
 def rhombus(size=(1.0, 0.6)) -> Shape:
     """Rhombus with full diagonals ``size = (sx, sy)`` along x and y. **Exact.**"""
-    s = vector_arg(size, 2, "rhombus: size", broadcast=True)
+    s = size_vector(size, 2, "rhombus: size", broadcast=True)
     m = [mag(c) / 2 for c in s]
     return _prim2(
         "rhombus", lambda p: rhombus2(p, s[0] * 0.5, s[1] * 0.5), (size,), s,
@@ -215,8 +222,9 @@ def rhombus(size=(1.0, 0.6)) -> Shape:
 
 @register("primitive2d")
 def ellipse(radii=(0.5, 0.3)) -> Shape:
-    """Ellipse with semi-axes ``radii`` as ``(|p / radii| - 1) * min(radii)``. **Bound.**"""
-    r = vector_arg(radii, 2, "ellipse: radii", broadcast=True)
+    """Ellipse with semi-axes ``radii`` (each > 0) as ``(|p / radii| - 1) * min(radii)``.
+    **Bound.**"""
+    r = size_vector(radii, 2, "ellipse: radii", broadcast=True, positive=True)
     rv = Vec(r)
     m = [mag(c) for c in r]
     return _prim2(
@@ -238,7 +246,7 @@ def extrude(shape, height=1.0) -> Shape:
     """Extrude a 2D shape along z to ``z`` in ``[-height/2, height/2]``.
     **Exact** when the 2D shape is exact; Lipschitz ``max(L2d, 1)``."""
     _require2d(shape, "extrude")
-    h = scalar_arg(height, "extrude: height")
+    h = size_arg(height, "extrude: height")
 
     def f(p: Vec, ctx) -> Expr:
         d = shape.sdf(Vec((p.x, p.y)), ctx)

@@ -3,6 +3,13 @@
 Each docstring states the distance contract: **exact** (Euclidean signed distance),
 **bound** (never overestimates), or **neither**. Every argument may be a number or a
 parameter expression (``csdf.param``).
+
+Sizes (radii, sizes, heights, thicknesses, roundings) must be >= 0: a negative one is a
+:class:`~csdf.errors.ShapeError` (for a parameter, when it is negative at the defaults;
+see :func:`csdf.shapes.base.size_arg`). Zero is allowed and gives a degenerate shape
+whose field is still the exact distance to it (``sphere(0)`` is the distance to a
+point, ``rounded_box(s, 0)`` is ``box(s)``), except where a size divides: the
+``ellipsoid`` radii, the ``pyramid`` base and the ``round_cone`` height must be > 0.
 """
 
 from __future__ import annotations
@@ -16,7 +23,16 @@ from ..errors import ShapeError
 from ..expr import Expr, as_expr, maximum, minimum, select_ge, sign, sqrt
 from ..interval import expr_range
 from ..vec import Vec, dot, length, length2
-from .base import Shape, box_bounds, mag, register, scalar_arg, vector_arg
+from .base import (
+    Shape,
+    box_bounds,
+    mag,
+    register,
+    scalar_arg,
+    size_arg,
+    size_vector,
+    vector_arg,
+)
 from .formulas import (
     SQRT3,
     box_distance,
@@ -71,7 +87,7 @@ def _lohi(e: Expr) -> tuple[float, float]:
 @register("primitive3d")
 def sphere(radius=1.0) -> Shape:
     """Sphere of ``radius``. **Exact.**"""
-    r = scalar_arg(radius, "sphere: radius")
+    r = size_arg(radius, "sphere: radius")
     return primitive(
         "sphere", lambda p: length(p) - r, args=(radius,), prim_args=(r,),
         exactness="exact", bounds=_cube(mag(r)),
@@ -81,7 +97,7 @@ def sphere(radius=1.0) -> Shape:
 @register("primitive3d")
 def box(size=1.0) -> Shape:
     """Axis-aligned box with full side lengths ``size`` (scalar or 3-vector). **Exact.**"""
-    s = vector_arg(size, 3, "box: size", broadcast=True)
+    s = size_vector(size, 3, "box: size", broadcast=True)
     h = Vec(s) * 0.5
     m = [mag(c) / 2 for c in s]
     return primitive(
@@ -93,8 +109,8 @@ def box(size=1.0) -> Shape:
 @register("primitive3d")
 def rounded_box(size=1.0, radius=0.1) -> Shape:
     """Box of outer full size ``size`` with edges rounded by ``radius``. **Exact.**"""
-    s = vector_arg(size, 3, "rounded_box: size", broadcast=True)
-    r = scalar_arg(radius, "rounded_box: radius")
+    s = size_vector(size, 3, "rounded_box: size", broadcast=True)
+    r = size_arg(radius, "rounded_box: radius")
     h = Vec(s) * 0.5
     m = [mag(c) / 2 for c in s]
     return primitive(
@@ -107,8 +123,8 @@ def rounded_box(size=1.0, radius=0.1) -> Shape:
 def box_frame(size=1.0, thickness=0.1) -> Shape:
     """The 12 edges of a box of full size ``size`` as square bars of side ``thickness``,
     flush with the faces. **Exact.**"""
-    s = vector_arg(size, 3, "box_frame: size", broadcast=True)
-    t = scalar_arg(thickness, "box_frame: thickness")
+    s = size_vector(size, 3, "box_frame: size", broadcast=True)
+    t = size_arg(thickness, "box_frame: thickness")
     h = Vec(s) * 0.5
     e = t * 0.5
     m = [mag(c) / 2 for c in s]
@@ -139,8 +155,8 @@ def box_frame(size=1.0, thickness=0.1) -> Shape:
 @register("primitive3d")
 def cylinder(radius=0.5, height=1.0) -> Shape:
     """Capped cylinder around the z axis, ``z`` in ``[-height/2, height/2]``. **Exact.**"""
-    r = scalar_arg(radius, "cylinder: radius")
-    h = scalar_arg(height, "cylinder: height")
+    r = size_arg(radius, "cylinder: radius")
+    h = size_arg(height, "cylinder: height")
     R, H = mag(r), mag(h) / 2
 
     def f(p: Vec) -> Expr:
@@ -155,9 +171,9 @@ def cylinder(radius=0.5, height=1.0) -> Shape:
 @register("primitive3d")
 def rounded_cylinder(radius=0.5, height=1.0, rounding=0.1) -> Shape:
     """Cylinder (as :func:`cylinder`) whose two rims are rounded by ``rounding``. **Exact.**"""
-    r = scalar_arg(radius, "rounded_cylinder: radius")
-    h = scalar_arg(height, "rounded_cylinder: height")
-    rr = scalar_arg(rounding, "rounded_cylinder: rounding")
+    r = size_arg(radius, "rounded_cylinder: radius")
+    h = size_arg(height, "rounded_cylinder: height")
+    rr = size_arg(rounding, "rounded_cylinder: rounding")
     R, H = mag(r), mag(h) / 2
 
     def f(p: Vec) -> Expr:
@@ -175,7 +191,7 @@ def capsule(a=(0.0, 0.0, -0.5), b=(0.0, 0.0, 0.5), radius=0.25) -> Shape:
     """Points within ``radius`` of the segment ``a -> b``. **Exact.**"""
     av = vector_arg(a, 3, "capsule: a")
     bv = vector_arg(b, 3, "capsule: b")
-    r = scalar_arg(radius, "capsule: radius")
+    r = size_arg(radius, "capsule: radius")
     R = mag(r)
     ra = [expr_range(c) for c in av]
     rb = [expr_range(c) for c in bv]
@@ -204,27 +220,28 @@ def _frustum(name: str, r1: Expr, r2: Expr, h: Expr, args: tuple) -> Shape:
 @register("primitive3d")
 def cone(radius=0.5, height=1.0) -> Shape:
     """Solid cone: base disk of ``radius`` at ``z=0``, apex at ``(0, 0, height)``. **Exact.**"""
-    r = scalar_arg(radius, "cone: radius")
-    h = scalar_arg(height, "cone: height")
+    r = size_arg(radius, "cone: radius")
+    h = size_arg(height, "cone: height")
     return _frustum("cone", r, as_expr(0.0), h, (radius, height))
 
 
 @register("primitive3d")
 def capped_cone(r1=0.5, r2=0.25, height=1.0) -> Shape:
     """Frustum: radius ``r1`` at ``z=0``, ``r2`` at ``z=height``. **Exact.**"""
-    a = scalar_arg(r1, "capped_cone: r1")
-    b = scalar_arg(r2, "capped_cone: r2")
-    h = scalar_arg(height, "capped_cone: height")
+    a = size_arg(r1, "capped_cone: r1")
+    b = size_arg(r2, "capped_cone: r2")
+    h = size_arg(height, "capped_cone: height")
     return _frustum("capped_cone", a, b, h, (r1, r2, height))
 
 
 @register("primitive3d")
 def round_cone(r1=0.5, r2=0.25, height=1.0) -> Shape:
     """Convex hull of a sphere ``r1`` at the origin and a sphere ``r2`` at
-    ``(0, 0, height)``; requires ``|r1 - r2| < height``. **Exact.**"""
-    a = scalar_arg(r1, "round_cone: r1")
-    b = scalar_arg(r2, "round_cone: r2")
-    h = scalar_arg(height, "round_cone: height")
+    ``(0, 0, height)``; requires ``r1, r2 >= 0`` and ``|r1 - r2| < height`` (so
+    ``height > 0``). **Exact.**"""
+    a = size_arg(r1, "round_cone: r1")
+    b = size_arg(r2, "round_cone: r2")
+    h = size_arg(height, "round_cone: height", positive=True)
     for v in (r1, r2, height):
         if isinstance(v, Expr):
             break
@@ -252,8 +269,8 @@ def round_cone(r1=0.5, r2=0.25, height=1.0) -> Shape:
 def torus(major=0.5, minor=0.15) -> Shape:
     """Torus around the z axis: tube of radius ``minor`` around a circle of radius
     ``major`` in the xy plane. **Exact.**"""
-    R = scalar_arg(major, "torus: major")
-    r = scalar_arg(minor, "torus: minor")
+    R = size_arg(major, "torus: major")
+    r = size_arg(minor, "torus: minor")
     e = mag(R) + mag(r)
     return primitive(
         "torus", lambda p: length(Vec((length(Vec((p.x, p.y))) - R, p.z))) - r,
@@ -266,8 +283,8 @@ def torus(major=0.5, minor=0.15) -> Shape:
 def capped_torus(major=0.5, minor=0.15, angle=math.pi / 2) -> Shape:
     """Arc of a torus (as :func:`torus`) whose centre circle spans azimuths within
     ``angle`` radians of the +y direction, with round end caps. **Exact.**"""
-    R = scalar_arg(major, "capped_torus: major")
-    r = scalar_arg(minor, "capped_torus: minor")
+    R = size_arg(major, "capped_torus: major")
+    r = size_arg(minor, "capped_torus: minor")
     a = scalar_arg(angle, "capped_torus: angle")
     from ..expr import cos, sin
 
@@ -290,9 +307,9 @@ def capped_torus(major=0.5, minor=0.15, angle=math.pi / 2) -> Shape:
 def link(length=1.0, major=0.3, minor=0.1) -> Shape:  # noqa: F811 (shadows vec.length)
     """Chain link in the xy plane: a tube of radius ``minor`` around two half circles of
     radius ``major`` centred at ``(0, +-length/2, 0)`` joined by straight parts. **Exact.**"""
-    le = scalar_arg(length, "link: length")
-    R = scalar_arg(major, "link: major")
-    r = scalar_arg(minor, "link: minor")
+    le = size_arg(length, "link: length")
+    R = size_arg(major, "link: major")
+    r = size_arg(minor, "link: minor")
     ex = mag(R) + mag(r)
     ey = mag(le) / 2 + ex
 
@@ -331,7 +348,7 @@ def plane(normal=(0.0, 0.0, 1.0), offset=0.0) -> Shape:
 @register("primitive3d")
 def slab(thickness=0.1, normal=(0.0, 0.0, 1.0)) -> Shape:
     """Slab ``|dot(p, n)| <= thickness/2`` between two parallel planes. **Exact.**"""
-    t = scalar_arg(thickness, "slab: thickness")
+    t = size_arg(thickness, "slab: thickness")
     n = _unit(vector_arg(normal, 3, "slab: normal"), "slab: normal")
     return primitive(
         "slab", lambda p: abs(dot(p, n)) - t * 0.5, args=(thickness, normal),
@@ -341,9 +358,10 @@ def slab(thickness=0.1, normal=(0.0, 0.0, 1.0)) -> Shape:
 
 @register("primitive3d")
 def ellipsoid(radii=(0.5, 0.3, 0.2)) -> Shape:
-    """Ellipsoid with semi-axes ``radii``, as ``(|p / radii| - 1) * min(radii)``.
-    **Bound** (exact on the surface and along the axes)."""
-    r = vector_arg(radii, 3, "ellipsoid: radii", broadcast=True)
+    """Ellipsoid with semi-axes ``radii`` (each > 0), as
+    ``(|p / radii| - 1) * min(radii)``. **Bound** (exact on the surface and along the
+    axes)."""
+    r = size_vector(radii, 3, "ellipsoid: radii", broadcast=True, positive=True)
     rv = Vec(r)
     m = [mag(c) for c in r]
     return primitive(
@@ -356,7 +374,7 @@ def ellipsoid(radii=(0.5, 0.3, 0.2)) -> Shape:
 def octahedron(size=0.5) -> Shape:
     """Regular octahedron ``|x| + |y| + |z| <= size`` (vertices at distance ``size``),
     as ``(|x| + |y| + |z| - size) / sqrt(3)``. **Bound** (exact near the faces)."""
-    s = scalar_arg(size, "octahedron: size")
+    s = size_arg(size, "octahedron: size")
     return primitive(
         "octahedron", lambda p: (abs(p.x) + abs(p.y) + abs(p.z) - s) * (1.0 / SQRT3),
         args=(size,), prim_args=(s,), exactness="bound", bounds=_cube(mag(s)),
@@ -365,10 +383,10 @@ def octahedron(size=0.5) -> Shape:
 
 @register("primitive3d")
 def pyramid(height=1.0, base=1.0) -> Shape:
-    """Square pyramid: base of side ``base`` centred at ``z=0``, apex at
-    ``(0, 0, height)``. **Exact.**"""
-    h = scalar_arg(height, "pyramid: height")
-    b = scalar_arg(base, "pyramid: base")
+    """Square pyramid: base of side ``base`` (> 0) centred at ``z=0``, apex at
+    ``(0, 0, height)`` (``height >= 0``; 0 gives the flat base square). **Exact.**"""
+    h = size_arg(height, "pyramid: height")
+    b = size_arg(base, "pyramid: base", positive=True)
     B = mag(b) / 2
     hl, hh = _lohi(h)
 
@@ -409,8 +427,8 @@ def _prism(d2: Expr, p: Vec, h: Expr) -> Expr:
 def hex_prism(radius=0.5, height=1.0) -> Shape:
     """Hexagonal prism: regular hexagon of circumradius ``radius`` with a vertex on +x,
     ``z`` in ``[-height/2, height/2]``. **Exact.**"""
-    r = scalar_arg(radius, "hex_prism: radius")
-    h = scalar_arg(height, "hex_prism: height")
+    r = size_arg(radius, "hex_prism: radius")
+    h = size_arg(height, "hex_prism: height")
     R, H = mag(r), mag(h) / 2
     return primitive(
         "hex_prism", lambda p: _prism(hexagon2(p, r * (SQRT3 / 2.0)), p, h),
@@ -423,8 +441,8 @@ def hex_prism(radius=0.5, height=1.0) -> Shape:
 def tri_prism(radius=0.5, height=1.0) -> Shape:
     """Triangular prism: equilateral triangle of circumradius ``radius`` (centroid at the
     origin, a vertex on +y), ``z`` in ``[-height/2, height/2]``. **Exact.**"""
-    r = scalar_arg(radius, "tri_prism: radius")
-    h = scalar_arg(height, "tri_prism: height")
+    r = size_arg(radius, "tri_prism: radius")
+    h = size_arg(height, "tri_prism: height")
     R, H = mag(r), mag(h) / 2
     return primitive(
         "tri_prism", lambda p: _prism(equilateral_triangle2(p, r), p, h),

@@ -2,15 +2,22 @@
 
 Models are ``.csdf`` files, or compiled programs (``.csdfb`` bytecode, ``.csdft`` text
 listings). Every error is printed as one clear message (with file, line and column for
-model errors) and exits with status 2; outputs are written atomically.
+model errors; with the file's name for errors in compiled programs) and exits with
+status 2; outputs are written atomically. SIGINT and SIGTERM stop a command promptly
+(no partial output or temporary file is left) with status 130 and 143.
 """
 
 from __future__ import annotations
 
 import math
+import signal
 import sys
+import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.console import Console
@@ -41,13 +48,24 @@ def _load(path: Path):
         data = path.read_bytes()
     except OSError as exc:
         raise CsdfError(f"cannot read {path}: {exc.strerror}") from None
-    if suffix == ".csdfb":
-        return Program.from_bytes(data)
-    if suffix == ".csdft":
+    try:
+        if suffix == ".csdfb":
+            return Program.from_bytes(data)
+        if suffix == ".csdft":
+            try:
+                text = data.decode("utf-8")
+            except UnicodeDecodeError:
+                raise CsdfError(f"{path} is not UTF-8 text") from None
+            return Program.from_text(text)
+    except CsdfError as exc:
+        if str(exc).startswith(str(path)):
+            raise
+        # the same error class ("byte 826: checksum mismatch"), naming the file
         try:
-            return Program.from_text(data.decode("utf-8"))
-        except UnicodeDecodeError:
-            raise CsdfError(f"{path} is not UTF-8 text") from None
+            named = type(exc)(f"{path}: {exc}")
+        except TypeError:  # (an error class with another constructor)
+            named = CsdfError(f"{path}: {exc}")
+        raise named from None
     raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .csdfb or .csdft")
 
 
@@ -72,12 +90,96 @@ def _params(values: list[str]) -> dict[str, float]:
     return out_
 
 
-def _run(fn) -> None:
+class Stopped(KeyboardInterrupt):
+    """A command stopped by SIGINT or SIGTERM (raised on the main thread by the handlers
+    that :func:`_signals` installs; a ``KeyboardInterrupt``, so that every ``finally``
+    and atomic write cleans up on the way out).
+
+    Attributes:
+        signum: the signal's number.
+    """
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+    @property
+    def status(self) -> int:
+        """The shell's exit status for death by this signal: 128 + its number (130 for
+        SIGINT, 143 for SIGTERM)."""
+        return 128 + self.signum
+
+
+@contextmanager
+def _signals() -> Iterator[None]:
+    """While a command runs, SIGINT and SIGTERM raise :class:`Stopped` on the main
+    thread (even where the process was started with them ignored, as a shell does for
+    background jobs: a long ``csdf mesh`` must stop when asked), so that the work in
+    progress stops at the main thread's next Python instruction (the mesher then drops
+    the work queued on its threads), temporary files are removed, and the exit status
+    says which signal it was. Off the main thread (tests, embedding) nothing is installed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    wanted = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
+
+    def stop(signum: int, _frame: Any) -> None:
+        raise Stopped(signum)
+
+    old = {}
     try:
-        fn()
+        for sig in wanted:
+            old[sig] = signal.signal(sig, stop)
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def _run(fn: Callable[[], None]) -> None:
+    """Run a command: a :class:`csdf.CsdfError` (or a stray ``OSError``) is printed as
+    one message and exits with status 2; SIGINT and SIGTERM stop it cleanly with status
+    130 or 143."""
+    try:
+        with _signals():
+            fn()
     except CsdfError as exc:
         err.print(f"[bold red]error:[/] {exc}", highlight=False, markup=True, soft_wrap=True)
         raise typer.Exit(2) from None
+    except OSError as exc:  # (csdf's own writes and reads say CsdfError; a safety net)
+        where = f"{exc.filename}: " if exc.filename else ""
+        err.print(f"[bold red]error:[/] {where}{exc.strerror or exc}", highlight=False,
+                  markup=True, soft_wrap=True)
+        raise typer.Exit(2) from None
+    except Exception as exc:
+        # a signal raised inside a compiled kernel's call comes out as a SystemError
+        # ("returned a result with an exception set") caused by the Stopped
+        stop = _stopped_by(exc)
+        if stop is None:
+            raise
+        _report_stop(stop)
+    except Stopped as exc:
+        _report_stop(exc)
+
+
+def _stopped_by(exc: BaseException) -> Stopped | None:
+    """The :class:`Stopped` in ``exc``'s chain of causes, or None."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, Stopped):
+            return cur
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return None
+
+
+def _report_stop(stop: Stopped) -> None:
+    """Say which signal stopped the command, and exit with its status (130, 143)."""
+    name = signal.Signals(stop.signum).name
+    err.print(f"[bold red]stopped:[/] {name} received; no partial output file was left",
+              highlight=False, markup=True, soft_wrap=True)
+    raise typer.Exit(stop.status) from None
 
 
 def _version(value: bool) -> None:

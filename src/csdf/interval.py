@@ -467,7 +467,8 @@ def check_boxes(dim: int, lo: Any, hi: Any) -> Pair:
     if bad.any():
         i, j = np.argwhere(bad)[0]
         raise CsdfError(
-            f"box {i}: lo[{j}] = {blo[i, j]!r} > hi[{j}] = {bhi[i, j]!r} (need lo <= hi)"
+            f"box {i}: lo[{j}] = {float(blo[i, j])!r} > hi[{j}] = {float(bhi[i, j])!r} "
+            "(need lo <= hi)"
         )
     if blo.shape[1] == 2:
         z = np.zeros((blo.shape[0], 1))

@@ -20,7 +20,8 @@ def write_mesh(mesh, path: str | os.PathLike) -> Path:
     file extension; atomic.
 
     Raises:
-        CsdfError: unknown extension or unwritable folder.
+        CsdfError: unknown extension, or the file cannot be written (naming the path
+            and the reason).
     """
     target = Path(path)
     fmt = MESH_FORMATS.get(target.suffix.lower())
@@ -29,14 +30,16 @@ def write_mesh(mesh, path: str | os.PathLike) -> Path:
             f"cannot tell the mesh format of {target.name!r}; use one of "
             f"{', '.join(sorted(MESH_FORMATS))}"
         )
+    # the bytes first (the long part for a large mesh), so the temporary file exists
+    # only while they are written
+    if fmt == "glb":
+        data = mesh.export(file_type="glb")
+    elif fmt == "ply":
+        data = mesh.export(file_type="ply", encoding="binary")
+    else:
+        data = mesh.export(file_type=fmt)
+    if isinstance(data, str):
+        data = data.encode()
     with atomic_path(target) as tmp:
-        if fmt == "glb":
-            data = mesh.export(file_type="glb")
-        elif fmt == "ply":
-            data = mesh.export(file_type="ply", encoding="binary")
-        else:
-            data = mesh.export(file_type=fmt)
-        if isinstance(data, str):
-            data = data.encode()
         tmp.write_bytes(data)
     return target

@@ -197,6 +197,10 @@ def _parse_header(data: bytes, where: str):
         elif key == "property":
             if not elements:
                 raise CsdfError(f"{where}: header line {no}: property before any element")
+            pname = words[-1]
+            if len(words) in (3, 5) and pname in (q[0] for q in elements[-1].props):
+                raise CsdfError(f"{where}: header line {no}: element {elements[-1].name!r} "
+                                f"has property {pname!r} twice")
             if len(words) == 3 and words[1] in PLY_TYPES:
                 elements[-1].props.append((words[2], PLY_TYPES[words[1]], None))
             elif len(words) == 5 and words[1] == "list" and words[2] in PLY_TYPES \
@@ -277,23 +281,60 @@ def _read_ascii(data: bytes, offset: int, elements: list[_Element],
     if vertex.count and (skip + vertex.count * max(width, 1)) * 2 - 1 > len(body):
         raise CsdfError(f"{where}: truncated: {vertex.count} vertices declared but the body "
                         f"has only {len(body)} bytes")
-    lines = [ln for ln in body.splitlines() if ln.strip()]
-    if len(lines) < skip + vertex.count:
+    first = data[:offset].count(b"\n") + 1  # the file's line number of the body's first
+    numbered = [(first + i, ln) for i, ln in enumerate(body.splitlines()) if ln.strip()]
+    if len(numbered) < skip + vertex.count:
         raise CsdfError(f"{where}: truncated: expected {skip + vertex.count} data lines "
-                        f"before the end of the vertices, found {len(lines)}")
-    rows = [ln.split() for ln in lines[skip: skip + vertex.count]]
+                        f"before the end of the vertices, found {len(numbered)}")
+    numbered = numbered[skip: skip + vertex.count]
+    rows = [ln.split() for _, ln in numbered]
     for i, r in enumerate(rows):
         if len(r) != width:
-            raise CsdfError(f"{where}: vertex {i} has {len(r)} values, expected {width}")
+            raise CsdfError(f"{where}: line {numbered[i][0]}: vertex {i} has {len(r)} "
+                            f"values, expected {width}")
     try:
         table = np.array(rows, dtype=np.float64).reshape(vertex.count, width)
     except ValueError:
         raise CsdfError(f"{where}: a vertex value is not a number") from None
+    _check_ascii_ranges(table, vertex, [no for no, _ in numbered], rows, where)
     # values are rounded to the declared type (a 'float' written with 9 digits reads back
     # as the same float32)
     with np.errstate(invalid="ignore", over="ignore"):
         return {p[0]: table[:, i].astype(p[1]).astype(np.float64) if p[1][0] == "f"
                 else table[:, i] for i, p in enumerate(vertex.props)}
+
+
+_PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int",
+              "u4": "uint", "f4": "float", "f8": "double"}
+
+
+def _check_ascii_ranges(table: np.ndarray, el: _Element, line_nos: list[int],
+                        rows: list[list[str]], where: str) -> None:
+    """Every ASCII value must fit its declared type: integers whole and in range,
+    ``float`` values finite unless written as inf/nan (no overflow to inf).
+
+    Raises:
+        CsdfError: naming the file, the line, the property, its type and the value.
+    """
+    for j, (name, code, _) in enumerate(el.props):
+        col = table[:, j]
+        if code[0] in "iu":
+            info = np.iinfo(code)
+            with np.errstate(invalid="ignore"):
+                ok = (col >= info.min) & (col <= info.max) & (col == np.floor(col))
+            limits = f"whole numbers in [{info.min}, {info.max}]"
+        elif code == "f4":
+            with np.errstate(over="ignore"):
+                ok = np.isfinite(col.astype(np.float32)) | ~np.isfinite(col)
+            limits = f"magnitudes up to {float(np.finfo(np.float32).max):.7g}"
+        else:
+            continue
+        bad = np.flatnonzero(~ok)
+        if len(bad):
+            i = int(bad[0])
+            raise CsdfError(f"{where}: line {line_nos[i]}: vertex {i}: property {name!r} "
+                            f"({_PLY_NAMES[code]}) is {rows[i][j]}, outside its type "
+                            f"({limits})")
 
 
 def _read_vertex(path: str | os.PathLike):

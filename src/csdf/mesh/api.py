@@ -13,11 +13,14 @@ from ..field import Field, as_field, auto_bounds, check_bounds
 from .grid import Grid
 from .reference import extract
 
-__all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_VOXELS"]
+__all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_MESH_RESOLUTION", "MAX_VOXELS"]
 
 MAX_RESOLUTION = 4096
 _JITTER = np.array([0.3819660112501051, 0.2360679774997897, 0.1458980337503155])  # golden
 MAX_VOXELS = 4096**3
+_PAD = 5  # voxels added to the bounds' count along each axis (2 + jitter each side)
+#: the largest ``resolution`` (voxels along the bounds' longest side) within the limits
+MAX_MESH_RESOLUTION = MAX_RESOLUTION - _PAD
 
 
 def mesh(
@@ -48,7 +51,11 @@ def mesh(
         outwards), vertices on the zero set to ``1e-6`` voxel (``mc``).
 
     Raises:
-        CsdfError: bad arguments, or a grid over the limits (4096 voxels per side).
+        CsdfError: bad arguments: a ``resolution`` outside ``[2, 4091]``; a
+            ``voxel_size`` that is not a positive number, that makes the grid exceed
+            4096 voxels per side, or that is over half the bounds' longest side (the
+            mesh would be empty); bounds of zero size (a point-like shape), or too
+            large or too small to grid in float64.
     """
     import trimesh
 
@@ -63,27 +70,7 @@ def mesh(
         raise CsdfError("mesh needs a 3D shape; extrude or revolve a 2D shape first")
     if bounds is not None:
         fld = Field(fld, bounds=check_bounds(bounds))
-    b = fld.bounds
-    extent = b[1] - b[0]
-    if voxel_size is not None:
-        h = float(voxel_size)
-        if not (h > 0 and math.isfinite(h)):
-            raise CsdfError(f"voxel_size must be a positive number, got {voxel_size}")
-    else:
-        n = 128 if resolution is None else resolution
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
-            raise CsdfError(f"resolution must be an integer >= 2, got {resolution!r}")
-        h = float(extent.max()) / int(n)
-    # shift the grid by irrational fractions of a voxel, so faces at round coordinates
-    # (an axis-aligned box) never lie on sample planes, where the sign test and the
-    # gradient are ambiguous
-    origin = b[0] - h * (2.0 + _JITTER)
-    dims = tuple(int(math.ceil(e / h)) + 5 for e in extent)
-    if max(dims) > MAX_RESOLUTION or math.prod(dims) > MAX_VOXELS:
-        raise CsdfError(
-            f"grid of {dims} voxels is over the limit of {MAX_RESOLUTION} per side; "
-            "use a coarser resolution or voxel_size"
-        )
+    origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
     grid = Grid(origin=origin, h=h, dims=dims)
 
     def values(p):
@@ -142,3 +129,110 @@ class _Progress:
 
     def close(self) -> None:
         self.bar.stop()
+
+
+def _num(x: Any) -> str:
+    """A number for a message: plain and short (``2``, ``0.015625``, ``1e+300``), never
+    a NumPy repr such as ``np.float64(2.0)``."""
+    try:
+        return f"{float(x):.6g}"
+    except (TypeError, ValueError, OverflowError):
+        return repr(x)
+
+
+def _show(x: Any) -> str:
+    """A user's argument for a message: strings and booleans as written, numbers plainly
+    (:func:`_num`), anything else by its type."""
+    if isinstance(x, (str, bool)) or x is None:
+        return repr(x)
+    if isinstance(x, (int, np.integer)):
+        return _show_int(x)
+    if isinstance(x, (float, np.floating)):
+        return _num(x)
+    return f"a {type(x).__name__}"
+
+
+def _limit(x: float, up: bool) -> str:
+    """A limit for a message, rounded to 6 digits away from the forbidden side (so the
+    value shown is itself allowed): up for a minimum, down for a maximum."""
+    shown = float(f"{x:.6g}")
+    if (shown < x) if up else (shown > x):
+        shown = float(f"{x * (1 + 5e-6 if up else 1 - 5e-6):.6g}")
+    return f"{shown:.6g}"
+
+
+def _show_int(n: int) -> str:
+    """An integer for a message, without printing hundreds of digits."""
+    n = int(n)
+    return str(n) if abs(n) < 10**15 else f"an integer of {n.bit_length()} bits"
+
+
+def _grid_layout(bounds: np.ndarray, resolution: Any, voxel_size: Any
+                 ) -> tuple[np.ndarray, float, tuple[int, int, int]]:
+    """``(origin (3,), voxel edge h, dims)`` of the sampling grid over ``bounds``
+    (padded by 2 voxels and shifted by the jitter), with every argument checked.
+
+    Raises:
+        CsdfError: see :func:`mesh`; each message names the argument and its limits.
+    """
+    b = np.asarray(bounds, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = b[1] - b[0]
+    side = float(extent.max())
+    box = f"[{', '.join(_num(v) for v in b[0])}] .. [{', '.join(_num(v) for v in b[1])}]"
+    if not math.isfinite(side):
+        raise CsdfError(f"bounds {box} are too large: their size overflows float64; "
+                        "give bounds whose sides are below 1e308")
+    if not side > 0:
+        raise CsdfError(f"the bounds {box} have zero size (a point-like or empty "
+                        "shape?); nothing to mesh")
+    if voxel_size is not None:
+        bad = isinstance(voxel_size, bool)
+        try:
+            h = float(voxel_size)
+        except (TypeError, ValueError, OverflowError):
+            bad = True
+        if bad or not (h > 0 and math.isfinite(h)):
+            raise CsdfError(f"voxel_size must be a positive number, got {_show(voxel_size)}")
+        h_min = side / MAX_MESH_RESOLUTION
+        if h < h_min:
+            raise CsdfError(
+                f"voxel_size {_num(h)} makes the grid exceed the limit of "
+                f"{MAX_RESOLUTION} voxels per side over bounds whose longest side is "
+                f"{_num(side)}; voxel_size must be at least {_limit(h_min, True)} (or use "
+                f"resolution <= {MAX_MESH_RESOLUTION})")
+        if h > side / 2:
+            raise CsdfError(
+                f"voxel_size {_num(h)} is larger than half the bounds' longest side "
+                f"({_num(side)}): the mesh would be empty; voxel_size must be at most "
+                f"{_limit(side / 2, False)}")
+    else:
+        n = 128 if resolution is None else resolution
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+            raise CsdfError(f"resolution must be an integer in [2, {MAX_MESH_RESOLUTION}] "
+                            f"(voxels along the longest side), got {_show(resolution)}")
+        if not 2 <= n <= MAX_MESH_RESOLUTION:
+            raise CsdfError(f"resolution must be an integer in [2, {MAX_MESH_RESOLUTION}] "
+                            f"(voxels along the longest side; the grid is over the limit "
+                            f"of {MAX_RESOLUTION} per side beyond), got {_show_int(n)}")
+        h = side / int(n)
+    # a voxel must be a step float64 can take at these coordinates
+    scale = float(np.abs(b).max())
+    if h < 16 * float(np.spacing(scale)) or h < 16 * float(np.finfo(np.float64).tiny):
+        raise CsdfError(f"bounds {box} are too small for float64 at their position: a "
+                        f"voxel of {_num(h)} cannot be resolved; give larger bounds")
+    # shift the grid by irrational fractions of a voxel, so faces at round coordinates
+    # (an axis-aligned box) never lie on sample planes, where the sign test and the
+    # gradient are ambiguous
+    origin = b[0] - h * (2.0 + _JITTER)
+    counts = np.ceil(extent / h) + _PAD
+    if not np.all(np.isfinite(origin)) or not np.all(np.isfinite(origin + h * counts)):
+        raise CsdfError(f"bounds {box} are too large: the padded grid overflows float64; "
+                        "give smaller bounds")
+    dims = tuple(int(c) for c in counts)
+    if max(dims) > MAX_RESOLUTION or math.prod(dims) > MAX_VOXELS:
+        raise CsdfError(
+            f"grid of {dims} voxels is over the limit of {MAX_RESOLUTION} per side; "
+            "use a coarser resolution or voxel_size"
+        )
+    return origin, h, dims

@@ -250,27 +250,34 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
         spare_ebuf.append(ebuf)
         return rest
 
-    for k in starts[:LOOKAHEAD]:
-        sample(k)
-    for s in starts:
-        chunk = bricks[s:s + per_chunk]
-        vals = ahead.pop(s).result()
-        sample(s + LOOKAHEAD * per_chunk)
-        table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
-        if spare_vals is not None:
-            spare_vals.append(vals.base)  # (the buffer vals is a view of)
-        del vals
-        if n_verts + n_new > len(verts):  # (searches still running write to verts)
-            stragglers += [r for r in (j.result() for j in searches) if r is not None]
-            searches = []
-            verts = _room(verts, n_verts, n_new)
-        searches.append(pool.submit(search_owning, ebuf, n_new,
-                                    verts[n_verts:n_verts + n_new], n_verts))
-        # (the search owns the old buffers until it is done)
-        ebuf = spare_ebuf.pop() if spare_ebuf else new_ebuf()
-        n_verts += n_new
-        if progress:
-            progress("samples", s + len(chunk), len(bricks))
+    try:
+        for k in starts[:LOOKAHEAD]:
+            sample(k)
+        for s in starts:
+            chunk = bricks[s:s + per_chunk]
+            vals = ahead.pop(s).result()
+            sample(s + LOOKAHEAD * per_chunk)
+            table, n_used, ebuf, n_new = kernel(chunk, vals, table, n_used, n_verts, ebuf)
+            if spare_vals is not None:
+                spare_vals.append(vals.base)  # (the buffer vals is a view of)
+            del vals
+            if n_verts + n_new > len(verts):  # (searches still running write to verts)
+                stragglers += [r for r in (j.result() for j in searches) if r is not None]
+                searches = []
+                verts = _room(verts, n_verts, n_new)
+            searches.append(pool.submit(search_owning, ebuf, n_new,
+                                        verts[n_verts:n_verts + n_new], n_verts))
+            # (the search owns the old buffers until it is done)
+            ebuf = spare_ebuf.pop() if spare_ebuf else new_ebuf()
+            n_verts += n_new
+            if progress:
+                progress("samples", s + len(chunk), len(bricks))
+    except BaseException:
+        # stopped (KeyboardInterrupt, or a signal the caller turned into one) or
+        # failed: drop the jobs not yet started, so the workers stop with this thread
+        for job in (*ahead.values(), *searches):
+            job.cancel()
+        raise
     stragglers += [r for r in (j.result() for j in searches) if r is not None]
     if stragglers:  # the few slow roots (kinks, flat spots) of all chunks together
         rest = _Roots.concat(stragglers)

@@ -11,7 +11,8 @@ Endpoints (all JSON bodies must be ``application/json``; bodies over
     ``{'ok': true, 'glsl', 'params', 'info', 'bounds', 'step'}`` with the GLSL of
     :func:`csdf.backends.glsl.to_glsl` (``sdf`` and ``sdf_grad``), the parameters of
     :func:`~csdf.backends.glsl.glsl_params`, the ``csdf info`` figures, the shape's box
-    and the sphere-tracing step scale; or 422 ``{'ok': false, 'error': {'line',
+    and the sphere-tracing step scale (an unbounded parameter range has ``lo``/``hi``
+    null); or 422 ``{'ok': false, 'error': {'line',
     'column', 'message', 'hint', 'text'}}``.
 ``POST /api/save`` ``{'text', 'filename'?}``
     Atomic write of the text to the opened file. With no file opened, ``filename`` (a
@@ -23,11 +24,18 @@ Endpoints (all JSON bodies must be ``application/json``; bodies over
 ``POST /api/export/shadertoy`` ``{'text', 'params'?}``
     The Shadertoy "Image" shader as text, with the given parameter values as constants.
 
+Errors are JSON ``{'ok': false, 'error': ...}`` with a 4xx status: 400 for a malformed
+request (not JSON, nested deeper than :data:`MAX_JSON_DEPTH`, a lone surrogate in a
+string, numbers out of range), 403 for a refused origin or file, 413 for size, 415 for
+the content type and 422 for a model that does not load, compile or mesh. Only a failing
+disk (reading or writing the opened file) gives a 5xx.
+
 Safety: the server reads and writes only the opened model file (or, without one, a new
 ``.csdf`` file in the start folder), evaluates nothing but the ``.csdf`` language (a
 parser and a fixed set of shape functions; no code execution), rejects requests whose
-``Host`` is not the loopback address (DNS rebinding) or whose ``Origin`` is another site,
-and binds only 127.0.0.1.
+``Host`` is not the loopback address (DNS rebinding) or whose ``Origin`` is not exactly
+the origin the server serves (``http://127.0.0.1:PORT`` or ``http://localhost:PORT``;
+``Origin: null`` is refused), and binds only 127.0.0.1.
 """
 
 from __future__ import annotations
@@ -55,18 +63,21 @@ from ..errors import CsdfError, ModelError
 from ..field import Field, as_field, glsl_float, glsl_params, shadertoy, to_glsl
 
 __all__ = ["create_app", "serve", "free_port", "model_info", "MAX_BODY_BYTES",
-           "MAX_EXPORT_RESOLUTION", "DEFAULT_MODEL"]
+           "MAX_EXPORT_RESOLUTION", "MAX_JSON_DEPTH", "DEFAULT_MODEL"]
 
 #: largest accepted request body (the model text and a few fields), in bytes
 MAX_BODY_BYTES = 256 * 1024
 #: largest mesh export resolution (voxels along the longest side)
 MAX_EXPORT_RESOLUTION = 256
+#: deepest accepted nesting of arrays and objects in a request body
+MAX_JSON_DEPTH = 32
 #: the zoo model the editor opens when no file is given
 DEFAULT_MODEL = "chair"
 
 STATIC_DIR = Path(__file__).with_name("static")
 _LOOPBACK = ["127.0.0.1", "localhost"]
 _FILENAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\- ]{0,120}\.csdf")
+_SURROGATE = re.compile("[\ud800-\udfff]")
 _SECURITY_HEADERS = {
     "Content-Security-Policy": (
         "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
@@ -166,9 +177,53 @@ def _params(value: Any, prog) -> dict[str, float]:
     for k, v in value.items():
         if k not in names:
             raise _ApiError(400, f"unknown parameter {k!r}")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise _ApiError(400, f"parameter {k!r} must be a finite number")
-        out[k] = float(v)
+        bad = _ApiError(400, f"parameter {k!r} must be a finite number")
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise bad
+        try:
+            f = float(v)  # an integer beyond the float range overflows
+        except OverflowError:
+            raise bad from None
+        if not math.isfinite(f):
+            raise bad
+        out[k] = f
+    return out
+
+
+#: what a hostile model may make numeric code raise (beside CsdfError): the model's
+#: fault, answered with 422, not a server error
+_MODEL_FAILURES = (ValueError, ArithmeticError, MemoryError, RecursionError)
+
+
+def _json_safe(v: Any) -> Any:
+    """``v`` with every non-finite float replaced by None (JSON has no infinity: an
+    unbounded parameter range is sent as ``lo``/``hi`` null)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    return v
+
+
+def _describe(exc: BaseException) -> str:
+    """A short message for an unexpected failure on a model (type and first line)."""
+    text = str(exc).splitlines()[0][:200] if str(exc) else ""
+    if isinstance(exc, MemoryError):
+        return "out of memory" + (f" ({text})" if text else "")
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _own_origins(request: Request, hosts: list[str]) -> set[str]:
+    """The exact ``Origin`` values of this server's own page: ``http://HOST:PORT`` for
+    each accepted host name and the port the server listens on (also without ``:80``
+    for port 80). Any other scheme, host or port, and ``null``, is another origin."""
+    server = request.scope.get("server")
+    port = server[1] if server and server[1] is not None else request.url.port or 80
+    out = {f"http://{h}:{port}" for h in hosts}
+    if port == 80:
+        out |= {f"http://{h}" for h in hosts}
     return out
 
 
@@ -245,6 +300,8 @@ class _Editor:
                     tmp.write_text(text, encoding="utf-8")
             except OSError as exc:
                 raise _ApiError(500, f"cannot write {p.name}: {exc.strerror}") from None
+            except CsdfError as exc:  # atomic_path's wrapped OSError
+                raise _ApiError(500, str(exc)) from None
             self.path = p
         return p
 
@@ -270,11 +327,39 @@ async def _json_body(request: Request) -> dict[str, Any]:
         chunks.append(chunk)
     try:
         body = json.loads(b"".join(chunks).decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise _ApiError(400, "the body is not JSON") from None
+    except RecursionError:
+        raise _ApiError(400, f"the JSON is nested too deeply (limit {MAX_JSON_DEPTH} "
+                             "levels)") from None
+    except UnicodeDecodeError:
+        raise _ApiError(400, "the body is not JSON (not UTF-8 text)") from None
+    except ValueError as exc:  # JSONDecodeError, or an integer with too many digits
+        detail = "" if isinstance(exc, json.JSONDecodeError) else f" ({exc})"
+        raise _ApiError(400, f"the body is not JSON{detail}"[:200]) from None
     if not isinstance(body, dict):
         raise _ApiError(400, "the body must be a JSON object")
+    _check_json(body)
     return body
+
+
+def _check_json(body: Any) -> None:
+    """Refuse bodies nested deeper than :data:`MAX_JSON_DEPTH` and strings (values or
+    keys) holding a lone surrogate (``"\\ud800"`` is valid JSON but not Unicode text:
+    it can be neither saved as UTF-8 nor echoed back in an error)."""
+    stack: list[tuple[Any, int]] = [(body, 1)]
+    while stack:
+        v, depth = stack.pop()
+        if isinstance(v, str):
+            m = _SURROGATE.search(v)
+            if m is not None:
+                raise _ApiError(400, f"a string holds a lone surrogate "
+                                     f"({ascii(m.group())[1:-1]} at index {m.start()}): "
+                                     "not valid Unicode text")
+        elif isinstance(v, (dict, list)):
+            if depth > MAX_JSON_DEPTH:
+                raise _ApiError(400, f"the JSON is nested too deeply (limit "
+                                     f"{MAX_JSON_DEPTH} levels)")
+            items = [*v.keys(), *v.values()] if isinstance(v, dict) else v
+            stack.extend((x, depth + 1) for x in items)
 
 
 def _text(body: dict[str, Any]) -> str:
@@ -300,14 +385,15 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
         CsdfError: ``model_path`` is not a ``.csdf`` path or its folder does not exist.
     """
     ed = _Editor(model_path, root)
+    hosts = list(allowed_hosts) if allowed_hosts is not None else list(_LOOPBACK)
+    origin_hosts = [h for h in hosts if "*" not in h]
 
     def guard(handler):
         async def endpoint(request: Request) -> Response:
             origin = request.headers.get("origin")
-            if origin is not None and origin != "null":
-                host = request.headers.get("host", "")
-                if origin.split("://", 1)[-1] != host:
-                    return JSONResponse({"error": "cross-origin request refused"}, 403)
+            if origin is not None and origin not in _own_origins(request, origin_hosts):
+                return JSONResponse({"ok": False, "error": "cross-origin request refused: "
+                                     "only this editor's own page may call its API"}, 403)
             try:
                 return await handler(request)
             except _ApiError as exc:
@@ -330,11 +416,15 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
             fld = _load_text(text, ed.name())
             prog = fld.program
             glsl = to_glsl(prog)
+            info = model_info(fld)
         except CsdfError as exc:
             return 422, {"ok": False, "error": _error_json(exc)}
-        info = model_info(fld)
-        return 200, {"ok": True, "glsl": glsl, "params": glsl_params(prog), "info": info,
-                     "bounds": info["bounds"], "step": _step_scale(prog)}
+        except _MODEL_FAILURES as exc:
+            err = CsdfError(f"the model cannot be previewed: {_describe(exc)}")
+            return 422, {"ok": False, "error": _error_json(err)}
+        return 200, _json_safe({"ok": True, "glsl": glsl, "params": glsl_params(prog),
+                                "info": info, "bounds": info["bounds"],
+                                "step": _step_scale(prog)})
 
     async def compile_(request: Request) -> Response:
         text = _text(await _json_body(request))
@@ -352,11 +442,21 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
 
         try:
             fld = _load_text(text, ed.name())
-            pv = _params(params, fld.program)
-            m = mesh(fld, resolution=resolution, params=pv, progress=False)
         except CsdfError as exc:
             raise _ApiError(422, str(exc)) from None
-        data = m.export(file_type=fmt)
+        except _MODEL_FAILURES as exc:
+            raise _ApiError(422, f"the model cannot be loaded: {_describe(exc)}") from None
+        pv = _params(params, fld.program)
+        try:
+            m = mesh(fld, resolution=resolution, params=pv, progress=False)
+            if len(m.faces) == 0:
+                raise CsdfError(f"the mesh is empty at resolution {resolution}: the shape "
+                                "has no surface there, or only parts thinner than a voxel")
+            data = m.export(file_type=fmt)
+        except CsdfError as exc:
+            raise _ApiError(422, str(exc)) from None
+        except _MODEL_FAILURES as exc:
+            raise _ApiError(422, f"the model cannot be meshed: {_describe(exc)}") from None
         return data.encode() if isinstance(data, str) else data
 
     async def export_mesh(request: Request) -> Response:
@@ -378,11 +478,18 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
     def _shadertoy(text: str, params: Any) -> str:
         try:
             fld = _load_text(text, ed.name())
-            prog = fld.program
-            pv = _params(params, prog)
+        except CsdfError as exc:
+            raise _ApiError(422, str(exc)) from None
+        except _MODEL_FAILURES as exc:
+            raise _ApiError(422, f"the model cannot be loaded: {_describe(exc)}") from None
+        prog = fld.program
+        pv = _params(params, prog)
+        try:
             src = shadertoy(fld.shape)
         except CsdfError as exc:
             raise _ApiError(422, str(exc)) from None
+        except _MODEL_FAILURES as exc:
+            raise _ApiError(422, f"the model cannot be exported: {_describe(exc)}") from None
         for p in glsl_params(prog):
             if p["name"] in pv:
                 src = re.sub(rf"^const float {re.escape(p['uniform'])} = [^;]*;",
@@ -408,7 +515,6 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
         Route("/api/export/shadertoy", guard(export_shadertoy), methods=["POST"]),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),
     ]
-    hosts = list(allowed_hosts) if allowed_hosts is not None else list(_LOOPBACK)
     app = Starlette(routes=routes,
                     middleware=[Middleware(TrustedHostMiddleware, allowed_hosts=hosts)])
     app.state.editor = ed

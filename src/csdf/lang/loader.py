@@ -1,5 +1,11 @@
 """Loading ``.csdf`` model files: parse with Lark, then evaluate the tree safely.
 
+Names are lexically scoped: a name means the nearest binding before it (a ``def``'s
+argument inside its body, then a ``param``/``let``/``def`` above), else the built-in of
+that name, so a model may name things after built-ins (``let slab = ...``) without
+losing the built-in where it is not shadowed; see :meth:`_Loader.lookup`. Keywords are
+reserved by the grammar.
+
 Safety: nothing from a model file is ever passed to Python's ``eval``/``exec``, imported
 or looked up as an attribute. Names resolve only to the model's own ``param``/``let``/
 ``def`` bindings, the registered modelling API (:data:`csdf.shapes.REGISTRY`) and a
@@ -15,6 +21,8 @@ import difflib
 import inspect
 import math
 import os
+import re
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -64,14 +72,44 @@ KEYWORDS = ("param", "let", "def", "export", "in")
 
 @dataclass
 class _Func:
+    """A ``def``: its body sees its arguments and the bindings made before it
+    (``seq``: the number of top-level bindings when it was defined)."""
+
     name: str
     args: list[str]
     body: Tree
     line: int
+    seq: int = 0
+
+
+@dataclass
+class _Global:
+    """A top-level binding: its definition order, value and line."""
+
+    seq: int
+    value: Any
+    line: int
+
+
+class _Builtin:
+    """Marker: a name resolved to the built-in of that name."""
+
+
+class _Unknown:
+    """Marker: a name bound to nothing."""
+
+
+_BUILTIN = _Builtin()
+_UNKNOWN = _Unknown()
 
 
 def _is_num(v: Any) -> bool:
     return isinstance(v, (int, float, Expr)) and not isinstance(v, bool)
+
+
+def _is_vec(v: Any) -> bool:
+    """A tuple of numbers (arithmetic applies element-wise to these, not to nested ones)."""
+    return isinstance(v, tuple) and all(_is_num(x) for x in v)
 
 
 def _kind(v: Any) -> str:
@@ -95,7 +133,10 @@ class _Loader:
         self.text = text
         self.file = file
         self.lines = text.splitlines()
-        self.scope: dict[str, Any] = {}
+        self.globals: dict[str, _Global] = {}  # top-level bindings, in order
+        self.locals: dict[str, Any] = {}  # the arguments of the def being evaluated
+        self.limit = sys.maxsize  # globals with seq < limit are "before" this point
+        self.func_line = 0  # the line of the def being evaluated (0 at top level)
         self.params: dict[str, Expr] = {}
         self.calls = 0
         self.call_stack: list[str] = []
@@ -116,7 +157,30 @@ class _Loader:
                           source_line=src, width=width or 1)
 
     def known_names(self) -> list[str]:
-        return sorted(set(self.scope) | set(REGISTRY) | set(MATH) | set(CONSTANTS))
+        return sorted(set(self.locals) | set(self.globals) | set(REGISTRY) | set(MATH)
+                      | set(CONSTANTS))
+
+    # ------------------------------------------------------------------ names
+    def lookup(self, name: str) -> tuple[Any, int]:
+        """What ``name`` means here, and the line that bound it (0 for a built-in).
+
+        Lexical scope, nearest first: the arguments of the ``def`` being evaluated; the
+        top-level bindings made before this point (before the ``def`` statement, inside
+        a function body); the built-in of that name (:data:`_BUILTIN`); and, inside a
+        function body only, a top-level binding made after the ``def`` (so functions can
+        be written in any order; a built-in of the same name takes precedence there).
+        :data:`_UNKNOWN` when none applies.
+        """
+        if name in self.locals:
+            return self.locals[name], self.func_line
+        g = self.globals.get(name)
+        if g is not None and g.seq < self.limit:
+            return g.value, g.line
+        if name in REGISTRY or name in MATH or name in CONSTANTS:
+            return _BUILTIN, 0
+        if g is not None:
+            return g.value, g.line
+        return _UNKNOWN, 0
 
     def suggest(self, name: str, pool: list[str]) -> str:
         close = difflib.get_close_matches(name, pool, n=3, cutoff=0.6)
@@ -135,13 +199,14 @@ class _Loader:
         return self.export
 
     def _bind(self, name_tok: Token, value: Any, what: str) -> None:
+        """Bind a top-level name (once). A name may equal a built-in's: it shadows the
+        built-in from here on (``what``: the kind of binding, for messages)."""
         name = str(name_tok)
-        if name in self.scope:
+        if name in self.globals:
+            prev = self.globals[name].line
             raise self.error(f"{name!r} is already defined", name_tok,
-                             hint="each name can be defined once")
-        if name in REGISTRY or name in MATH or name in CONSTANTS:
-            raise self.error(f"{name!r} is a built-in name; pick another {what} name", name_tok)
-        self.scope[name] = value
+                             hint=f"each name can be defined once (it was on line {prev})")
+        self.globals[name] = _Global(len(self.globals), value, name_tok.line or 0)
 
     def st_param_stmt(self, st: Tree) -> None:
         name, default, lo, hi = st.children
@@ -175,7 +240,8 @@ class _Loader:
         args = [str(a) for a in rest[:-1] if a is not None]
         if len(set(args)) != len(args):
             raise self.error(f"function {str(name)!r} repeats an argument name", name)
-        self._bind(name, _Func(str(name), args, body, name.line or 0), "function")
+        f = _Func(str(name), args, body, name.line or 0, seq=len(self.globals))
+        self._bind(name, f, "function")
 
     def st_export_stmt(self, st: Tree) -> None:
         if self.export is not None:
@@ -213,17 +279,17 @@ class _Loader:
     def ex_name(self, node: Tree, depth: int) -> Any:
         tok = node.children[0]
         name = str(tok)
-        if name in self.scope:
-            v = self.scope[name]
-            if isinstance(v, _Func):
-                raise self.error(f"{name!r} is a function; call it: {name}(...)", tok)
-            return v
-        if name in CONSTANTS:
-            return CONSTANTS[name]
-        if name in REGISTRY or name in MATH:
+        v, _ = self.lookup(name)
+        if v is _BUILTIN:
+            if name in CONSTANTS:
+                return CONSTANTS[name]
             raise self.error(f"{name!r} is a function; call it: {name}(...)", tok)
-        raise self.error(f"unknown name {name!r}", tok,
-                         hint=self.suggest(name, self.known_names()))
+        if v is _UNKNOWN:
+            raise self.error(f"unknown name {name!r}", tok,
+                             hint=self.suggest(name, self.known_names()))
+        if isinstance(v, _Func):
+            raise self.error(f"{name!r} is a function; call it: {name}(...)", tok)
+        return v
 
     def ex_tuple(self, node: Tree, depth: int) -> tuple:
         items = [self.eval(c, depth) for c in node.children if c is not None]
@@ -245,14 +311,14 @@ class _Loader:
                              hint="use | for union, & for intersection, - for difference")
         if _is_num(a) and _is_num(b):
             return E.make(op, a, b)
-        if isinstance(a, tuple) and isinstance(b, tuple) and op in ("add", "sub"):
+        if _is_vec(a) and _is_vec(b) and op in ("add", "sub"):
             if len(a) != len(b):
                 raise self.error(f"vectors of sizes {len(a)} and {len(b)} cannot be added",
                                  node)
             return tuple(E.make(op, x, y) for x, y in zip(a, b))
-        if op in ("mul", "div") and isinstance(a, tuple) and _is_num(b):
+        if op in ("mul", "div") and _is_vec(a) and _is_num(b):
             return tuple(E.make(op, x, b) for x in a)
-        if op == "mul" and _is_num(a) and isinstance(b, tuple):
+        if op == "mul" and _is_num(a) and _is_vec(b):
             return tuple(E.make(op, a, y) for y in b)
         raise self.error(f"cannot apply {_SYMBOL[op]} to {_kind(a)} and {_kind(b)}", node)
 
@@ -272,7 +338,7 @@ class _Loader:
         a = self.eval(node.children[0], depth)
         if _is_num(a):
             return -a if isinstance(a, (int, float)) else E.make("neg", a)
-        if isinstance(a, tuple):
+        if _is_vec(a):
             return tuple(E.make("neg", x) for x in a)
         raise self.error(f"cannot negate {_kind(a)}", node,
                          hint="use ~ for the complement of a shape")
@@ -327,11 +393,18 @@ class _Loader:
         name_tok, argnode = node.children
         name = str(name_tok)
         pos, kw = self._args(argnode, depth)
-        if name in self.scope:
-            f = self.scope[name]
-            if not isinstance(f, _Func):
-                raise self.error(f"{name!r} is {_kind(f)}, not a function", name_tok)
+        f, line = self.lookup(name)
+        if isinstance(f, _Func):
             return self._call_def(node, f, pos, kw, depth)
+        if f is _UNKNOWN:
+            raise self.error(f"unknown function {name!r}", name_tok,
+                             hint=self.suggest(name, self.known_names()))
+        if f is not _BUILTIN:
+            hint = ""
+            if name in REGISTRY or name in MATH:
+                hint = (f"{name!r} bound on line {line} hides the built-in {name}() here; "
+                        "rename it to call the built-in")
+            raise self.error(f"{name!r} is {_kind(f)}, not a function", name_tok, hint=hint)
         if name in REGISTRY:
             entry = REGISTRY[name]
             if entry.kind == "method":
@@ -414,14 +487,14 @@ class _Loader:
         if missing:
             raise self.error(f"{f.name}() is missing argument(s) {', '.join(missing)}", node,
                              hint=f"def {f.name}({', '.join(f.args)}) on line {f.line}")
-        saved = self.scope
-        self.scope = {**saved, **bound}
+        saved = self.locals, self.limit, self.func_line
+        self.locals, self.limit, self.func_line = bound, f.seq, f.line
         self.call_stack.append(f.name)
         try:
             return self.eval(f.body, depth)
         finally:
             self.call_stack.pop()
-            self.scope = saved
+            self.locals, self.limit, self.func_line = saved
 
 
 _SYMBOL = {"add": "+", "sub": "-", "mul": "*", "div": "/"}
@@ -464,7 +537,76 @@ def loads(text: str, file: str = "<string>") -> Shape:
     return shape
 
 
+_CLOSER = {"(": ")", "[": "]"}
+_STRING_AT = re.compile(r"\"[A-Za-z0-9_+\-]{0,16}\"|'[A-Za-z0-9_+\-]{0,16}'")
+
+
+def _open_brackets(text: str, end: int) -> list[tuple[str, int, int]]:
+    """The brackets still open at character offset ``end``, outermost first, as
+    ``(bracket, line, column)`` (1-based). Comments and strings are skipped; a closing
+    bracket closes the innermost open one (a mismatch is the parser's error)."""
+    stack: list[tuple[str, int, int]] = []
+    line, line_start, i = 1, 0, 0
+    end = min(end, len(text))
+    while i < end:
+        ch = text[i]
+        if ch == "\n":
+            line, line_start = line + 1, i + 1
+        elif ch == "#":
+            j = text.find("\n", i)
+            i = end if j < 0 else j
+            continue
+        elif ch in "\"'":
+            m = _STRING_AT.match(text, i)
+            if m is not None:
+                i = m.end()
+                continue
+        elif ch in _CLOSER:
+            stack.append((ch, line, i - line_start + 1))
+        elif ch in ")]" and stack:
+            stack.pop()
+        i += 1
+    return stack
+
+
+def _bracket_error(exc: UnexpectedInput, loader: _Loader) -> ModelError | None:
+    """Python's report for a bracket problem, or None: ``'(' was never closed`` at the
+    opening bracket when the model ends, or a keyword (which cannot stand inside
+    brackets) follows, while it is open; ``closing bracket ']' does not match opening
+    bracket '('`` at a closing bracket of the other kind."""
+    text = loader.text
+    if isinstance(exc, UnexpectedEOF):
+        tok = None
+    elif isinstance(exc, UnexpectedToken):
+        tok = exc.token
+    else:
+        return None
+    at_end = tok is None or tok.type == "$END"
+    end = len(text) if at_end or tok.start_pos is None else tok.start_pos
+    stack = _open_brackets(text, end)
+    if not stack:
+        return None
+    ch, line, col = stack[-1]
+    src = loader.lines[line - 1] if 0 < line <= len(loader.lines) else ""
+    if at_end or str(tok) in KEYWORDS:
+        where = "the end of the model" if at_end else f"{str(tok)!r} on line {tok.line}"
+        return ModelError(f"{ch!r} was never closed", file=loader.file, line=line,
+                          column=col, source_line=src,
+                          hint=f"add the matching {_CLOSER[ch]!r} before {where}")
+    if str(tok) in (")", "]") and str(tok) != _CLOSER[ch]:
+        tline = tok.line or 0
+        tsrc = loader.lines[tline - 1] if 0 < tline <= len(loader.lines) else ""
+        return ModelError(f"closing bracket {str(tok)!r} does not match opening bracket "
+                          f"{ch!r} on line {line}", file=loader.file, line=tline,
+                          column=tok.column or 0, source_line=tsrc,
+                          hint=f"the {ch!r} at {line}:{col} needs {_CLOSER[ch]!r}")
+    return None
+
+
 def _syntax_error(exc: UnexpectedInput, loader: _Loader) -> ModelError:
+    bracket = _bracket_error(exc, loader)
+    if bracket is not None:
+        return bracket
     line = getattr(exc, "line", 0) or 0
     col = getattr(exc, "column", 0) or 0
     if isinstance(exc, UnexpectedCharacters):

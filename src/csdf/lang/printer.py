@@ -4,6 +4,12 @@ The text loads back (:func:`csdf.loads`) to the same expression, hence identical
 bytecode: floats are printed with ``repr`` (exact), parameter expressions are printed
 fully parenthesised with the op names the language knows, every shape node is printed as
 the call that made it, and a shape used more than once is bound once with ``let``.
+
+Names: ``let`` names are fresh (never a parameter's or a built-in's name). A parameter
+may be named like a built-in (``param box = ...``); it then shadows the built-in after
+its ``param`` statement, so each call of a shadowed built-in (and ``inf``, in ranges and
+arguments) goes through a small ``def`` printed before the parameters, whose body still
+sees the built-in (the language's scoping is lexical).
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ import numpy as np
 from ..errors import CsdfError
 from ..expr import Expr
 from ..shapes.base import REGISTRY, Shape
+from .loader import CONSTANTS, KEYWORDS, MATH
 
 __all__ = ["dumps"]
 
@@ -23,35 +30,84 @@ _INFIX = {"add": "+", "sub": "-", "mul": "*", "div": "/"}
 _INFIX_CSG = {"union": "|", "intersection": "&", "difference": "-"}
 
 
-def _num(v: float) -> str:
-    if math.isinf(v):
-        return "inf" if v > 0 else "(-inf)"
-    if math.isnan(v):
-        raise CsdfError("a NaN number cannot be written in a model")
-    r = repr(float(v))
-    return f"({r})" if r.startswith("-") else r
-
-
-def _expr(e: Expr) -> str:
-    if e.op == "const":
-        return _num(float(e.value))  # type: ignore[arg-type]
-    if e.op == "param":
-        return e.value.name  # type: ignore[union-attr]
-    if e.op in ("x", "y", "z"):
-        raise CsdfError("a shape argument depends on x, y or z; it cannot be printed")
-    if e.op in _INFIX:
-        return f"({_expr(e.args[0])} {_INFIX[e.op]} {_expr(e.args[1])})"
-    if e.op == "neg":
-        return f"(-{_expr(e.args[0])})"
-    return f"{e.op}({', '.join(_expr(a) for a in e.args)})"
+_BUILTINS = frozenset(REGISTRY) | frozenset(MATH) | frozenset(CONSTANTS)
 
 
 class _Printer:
-    def __init__(self, root: Shape):
+    """Prints one shape; ``param_names``: the names its ``param`` statements bind."""
+
+    def __init__(self, root: Shape, param_names: set[str]):
         self.uses: Counter[int] = Counter()
         self._count(root, set())
         self.names: dict[int, str] = {}
         self.lets: list[str] = []
+        self.shadowed = param_names & _BUILTINS
+        self.taken = set(param_names) | _BUILTINS | set(KEYWORDS)
+        self.wrappers: dict[tuple, str] = {}  # (builtin, n positional, keywords) -> def
+        self.defs: list[str] = []
+
+    # -------------------------------------------------------------- names
+    def fresh(self, prefix: str) -> str:
+        """A name bound nowhere else in the printed model."""
+        i = 1
+        while f"{prefix}{i}" in self.taken:
+            i += 1
+        name = f"{prefix}{i}"
+        self.taken.add(name)
+        return name
+
+    def call(self, name: str, pos: list[str], kw: list[tuple[str, str]]) -> str:
+        """The text of a call of the built-in ``name`` with printed arguments: direct,
+        or through a wrapper ``def`` (printed before the parameters) when a parameter
+        shadows ``name``."""
+        if name in self.shadowed:
+            key = (name, len(pos), tuple(k for k, _ in kw))
+            a = [f"a{i + 1}" for i in range(len(pos))]
+            b = [f"b{i + 1}" for i in range(len(kw))]
+            w = self.wrappers.get(key)
+            if w is None:
+                w = self.fresh(f"builtin_{name}_")
+                inner = a + [f"{k}={v}" for (k, _), v in zip(kw, b)]
+                self.defs.append(f"def {w}({', '.join(a + b)}) = {name}({', '.join(inner)})")
+                self.wrappers[key] = w
+            name, kw = w, [(bk, v) for bk, (_, v) in zip(b, kw)]
+        parts = pos + [f"{k}={v}" for k, v in kw]
+        return f"{name}({', '.join(parts)})"
+
+    def inf(self) -> str:
+        """The constant ``inf``, or a call of ``def builtin_inf_N() = inf`` when a
+        parameter is named ``inf``."""
+        if "inf" not in self.shadowed:
+            return "inf"
+        w = self.wrappers.get(("inf",))
+        if w is None:
+            w = self.fresh("builtin_inf_")
+            self.defs.append(f"def {w}() = inf")
+            self.wrappers[("inf",)] = w
+        return f"{w}()"
+
+    def num(self, v: float) -> str:
+        """A float, exactly (``repr``); negative numbers parenthesised."""
+        if math.isinf(v):
+            return self.inf() if v > 0 else f"(-{self.inf()})"
+        if math.isnan(v):
+            raise CsdfError("a NaN number cannot be written in a model")
+        r = repr(float(v))
+        return f"({r})" if r.startswith("-") else r
+
+    def expr(self, e: Expr) -> str:
+        """A parameter expression, fully parenthesised."""
+        if e.op == "const":
+            return self.num(float(e.value))  # type: ignore[arg-type]
+        if e.op == "param":
+            return e.value.name  # type: ignore[union-attr]
+        if e.op in ("x", "y", "z"):
+            raise CsdfError("a shape argument depends on x, y or z; it cannot be printed")
+        if e.op in _INFIX:
+            return f"({self.expr(e.args[0])} {_INFIX[e.op]} {self.expr(e.args[1])})"
+        if e.op == "neg":
+            return f"(-{self.expr(e.args[0])})"
+        return self.call(e.op, [self.expr(a) for a in e.args], [])
 
     def _count(self, s: Shape, seen: set[int]) -> None:
         stack = [s]
@@ -67,13 +123,13 @@ class _Printer:
         if isinstance(v, Shape):
             return self.shape(v)
         if isinstance(v, Expr):
-            return _expr(v)
+            return self.expr(v)
         if isinstance(v, bool):
             raise CsdfError("booleans cannot be written in a model")
         if isinstance(v, (int, np.integer)):
             return str(int(v))
         if isinstance(v, (float, np.floating)):
-            return _num(float(v))
+            return self.num(float(v))
         if isinstance(v, str):
             return f'"{v}"'
         if isinstance(v, np.ndarray):
@@ -91,7 +147,7 @@ class _Printer:
             return name
         text = self._call(s)
         if self.uses[id(s)] > 1:
-            name = f"s{len(self.names) + 1}"
+            name = self.fresh("s")
             self.names[id(s)] = name
             self.lets.append(f"let {name} = {text}")
             return name
@@ -111,8 +167,8 @@ class _Printer:
             return f"({self.value(args[0])} {_INFIX_CSG[s.name]} {self.value(args[1])})"
         if s.name == "complement" and not kw:
             return f"(~{self.value(args[0])})"
-        parts = [self.value(a) for a in args] + [f"{k}={self.value(v)}" for k, v in kw.items()]
-        return f"{s.name}({', '.join(parts)})"
+        return self.call(s.name, [self.value(a) for a in args],
+                         [(k, self.value(v)) for k, v in kw.items()])
 
 
 def _all_params(shape: Shape) -> list:
@@ -149,15 +205,19 @@ def dumps(shape: Shape) -> str:
     """
     if not isinstance(shape, Shape):
         raise CsdfError(f"dumps expects a Shape, got {type(shape).__name__}")
-    lines = ["# written by csdf.dumps"]
-    for p in _all_params(shape):
+    params = _all_params(shape)
+    for p in params:
+        if p.name in KEYWORDS:
+            raise CsdfError(f"parameter name {p.name!r} is a keyword of the .csdf language; "
+                            "it cannot be written in a model")
+    pr = _Printer(shape, {p.name for p in params})
+    body = pr.shape(shape)
+    decls = []
+    for p in params:
         rng = ""
         if not (math.isinf(p.lo) and math.isinf(p.hi)):
-            rng = f" in [{_num(p.lo)}, {_num(p.hi)}]"
-        lines.append(f"param {p.name} = {_num(p.default)}{rng}")
-    pr = _Printer(shape)
-    body = pr.shape(shape)
-    lines += pr.lets
-    lines.append(f"export {body}")
+            rng = f" in [{pr.num(p.lo)}, {pr.num(p.hi)}]"
+        decls.append(f"param {p.name} = {pr.num(p.default)}{rng}")
+    lines = ["# written by csdf.dumps", *pr.defs, *decls, *pr.lets, f"export {body}"]
     return "\n".join(lines) + "\n"
 

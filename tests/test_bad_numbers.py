@@ -250,3 +250,12 @@ def test_bytecode_with_too_many_parameters_is_refused():
     data = big.to_bytes()
     with pytest.raises(csdf.BytecodeError, match=f"more than {MAX_PARAMS}"):
         Program.from_bytes(data)
+
+
+@pytest.mark.parametrize("text", ["export sphere(0/0)", "export sphere(1/0)",
+                                  "export sphere(1).translate((0/0, 0, 0))",
+                                  "export box((1e308 * 10, 1, 1))"])
+def test_folded_non_finite_constants_are_refused(text):
+    """The language folds ``0/0`` to a constant NaN: shapes refuse it like a float NaN."""
+    with pytest.raises(csdf.ModelError, match="must be finite"):
+        csdf.loads(text)

@@ -9,28 +9,74 @@ Build shapes from primitives and operators, with named parameters::
     d = prog(points, r=1.2)           # (N,) signed distances
     g = prog.gradient(points)         # (N, 3) exact gradients
     J = prog.param_jacobian(points)   # (N, P) derivatives by parameter
+
+``import csdf`` loads only the expression, shape and compiler layers; the consumers
+(meshing, rendering, fitting, I/O, the language, the zoo: whatever pulls in Numba, SciPy
+or trimesh) load on first use of one of their names (``csdf.mesh``, ``csdf.zoo``,
+``from csdf import fit``, ...), so that the command line and scripts start quickly.
 """
 
 from __future__ import annotations
 
-from . import io
+import importlib
+import importlib.util
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
 from .compiler import Call, Program
 from .errors import BytecodeError, CsdfError, ModelError, ParamError, ShapeError
 from .expr import Expr, Param, param
-from .field import Field, as_field, glsl_params, shadertoy, to_glsl
-from .fit import FitResult, fit, icp
-from .lang import dumps, load, loads
-from .mesh import mesh
 from .pose import Pose
-from .render import Camera, Render, render
-from .sample import sample_surface, sample_volume
-from .scan import scan
 from .shapes import *  # noqa: F403
 from .shapes import REGISTRY, Shape
 from .shapes import __all__ as _shape_names
-from .slicing import save_slice
-from .slicing import slice as slice  # noqa: A004 - public name csdf.slice (not in __all__)
 from .version import __version__
+
+if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
+    from . import io, zoo
+    from .field import Field, as_field, glsl_params, shadertoy, to_glsl
+    from .fit import FitResult, fit, icp
+    from .lang import dumps, load, loads
+    from .mesh import mesh
+    from .render import Camera, Render, render
+    from .sample import sample_surface, sample_volume
+    from .scan import scan
+    from .slicing import save_slice
+    from .slicing import slice as slice  # noqa: A004 - public name csdf.slice
+
+#: public name -> (module relative to this package, attribute; ``None``: the module
+#: itself), loaded on first access by :func:`__getattr__`
+_LAZY: dict[str, tuple[str, str | None]] = {
+    "io": (".io", None),
+    "zoo": (".zoo", None),
+    "Field": (".field", "Field"),
+    "as_field": (".field", "as_field"),
+    "glsl_params": (".field", "glsl_params"),
+    "shadertoy": (".field", "shadertoy"),
+    "to_glsl": (".field", "to_glsl"),
+    "FitResult": (".fit", "FitResult"),
+    "fit": (".fit", "fit"),
+    "icp": (".fit", "icp"),
+    "dumps": (".lang", "dumps"),
+    "load": (".lang", "load"),
+    "loads": (".lang", "loads"),
+    "mesh": (".mesh", "mesh"),
+    "Camera": (".render", "Camera"),
+    "Render": (".render", "Render"),
+    "render": (".render", "render"),
+    "sample_surface": (".sample", "sample_surface"),
+    "sample_volume": (".sample", "sample_volume"),
+    "scan": (".scan", "scan"),
+    "save_slice": (".slicing", "save_slice"),
+    "slice": (".slicing", "slice"),  # public name csdf.slice (not in __all__)
+}
+
+#: public functions named like the subpackage that defines them (``csdf.mesh`` is the
+#: function ``csdf.mesh.mesh``): the import system's binding of the subpackage on this
+#: package is refused, so the name always means the function
+_FUNCTION_OVER_MODULE = frozenset(
+    name for name, (mod, attr) in _LAZY.items() if attr is not None and mod == "." + name)
 
 
 def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
@@ -40,10 +86,45 @@ def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
     return shape.compile()
 
 
+def __getattr__(name: str) -> Any:
+    """Load a lazily exported name (see :data:`_LAZY`) on first access and keep it; any
+    other submodule (``csdf.field``, ``csdf.backends``, ...) is imported on first access
+    too, as if ``import csdf`` had loaded it."""
+    try:
+        module_name, attr = _LAZY[name]
+    except KeyError:
+        if name.startswith("_") or importlib.util.find_spec(f"{__name__}.{name}") is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+        module_name, attr = "." + name, None
+    module = importlib.import_module(module_name, __name__)
+    value = module if attr is None else getattr(module, attr)
+    globals()[name] = value  # (the module's dict: bypasses _Namespace.__setattr__)
+    return value
+
+
+def __dir__() -> list[str]:
+    """The module's names, the lazy ones included."""
+    return sorted(set(globals()) | set(_LAZY))
+
+
+class _Namespace(types.ModuleType):
+    """This package's module type: keeps ``csdf.mesh``, ``csdf.fit``, ``csdf.render``
+    and ``csdf.scan`` the functions when their subpackages are first imported (the import
+    system then sets the subpackage as an attribute of its parent)."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if (name in _FUNCTION_OVER_MODULE and isinstance(value, types.ModuleType)
+                and value.__name__ == f"{__name__}.{name}"):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Namespace
+
 __all__ = [
-    "compile", "param", "Param", "mesh", "io", "Expr", "Program", "Call", "Shape", "REGISTRY",
-    "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError", "__version__",
-    "sample_surface", "sample_volume", "save_slice", "Camera", "Render", "render", "scan",
-    "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit", "icp", "FitResult",
-    "Field", "as_field", "Pose", *_shape_names,
+    "compile", "param", "Param", "mesh", "io", "zoo", "Expr", "Program", "Call", "Shape",
+    "REGISTRY", "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
+    "__version__", "sample_surface", "sample_volume", "save_slice", "Camera", "Render",
+    "render", "scan", "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit",
+    "icp", "FitResult", "Field", "as_field", "Pose", *_shape_names,
 ]

@@ -21,6 +21,7 @@ from typing import Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from . import __version__
@@ -144,12 +145,13 @@ def _run(fn: Callable[[], None]) -> None:
         with _signals():
             fn()
     except CsdfError as exc:
-        err.print(f"[bold red]error:[/] {exc}", highlight=False, markup=True, soft_wrap=True)
+        err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, markup=True,
+                  soft_wrap=True)
         raise typer.Exit(2) from None
     except OSError as exc:  # (csdf's own writes and reads say CsdfError; a safety net)
         where = f"{exc.filename}: " if exc.filename else ""
-        err.print(f"[bold red]error:[/] {where}{exc.strerror or exc}", highlight=False,
-                  markup=True, soft_wrap=True)
+        err.print(f"[bold red]error:[/] {escape(where + str(exc.strerror or exc))}",
+                  highlight=False, markup=True, soft_wrap=True)
         raise typer.Exit(2) from None
     except Exception as exc:
         # a signal raised inside a compiled kernel's call comes out as a SystemError
@@ -326,8 +328,10 @@ def fit(
     seed: int = typer.Option(0, "--seed", help="Seed of the multistart subsampling."),
     viewpoint: str | None = typer.Option(None, "--viewpoint", help="x,y,z: the sensor "
                                          "position of a single-view scan (0,0,0 for "
-                                         "camera-frame clouds such as csdf scan's); points "
-                                         "are then matched to surfaces facing it."),
+                                         "camera-frame clouds); points are then matched to "
+                                         "surfaces facing it. Default: the position the "
+                                         "PLY header records ('comment csdf viewpoint X Y "
+                                         "Z', written by csdf scan); 'none' ignores it."),
     solver: str = typer.Option("lm", "--solver", help="lm (robust Levenberg-Marquardt) or "
                                "scipy (least_squares)."),
     escape: bool = typer.Option(True, "--escape/--no-escape", help="Test turns about the "
@@ -346,24 +350,53 @@ def fit(
     def go():
         import json
 
+        from .fit import check_fit
         from .fit import fit as fit_fn
-        from .io import atomic_path, read_points
+        from .io import atomic_path, read_point_cloud
 
         if overlay is not None and overlay.suffix.lower() != ".png":
             raise CsdfError(f"{overlay}: the overlay must end in .png")
         m = _load(model)
-        pts, _ = read_points(scan)
+        cloud = read_point_cloud(scan)
+        pts = cloud.points
+        if viewpoint is not None and viewpoint.strip().lower() == "none":
+            vp, source = None, "none (--viewpoint none)"
+        elif viewpoint is not None:
+            vp, source = _vec3(viewpoint, "--viewpoint"), "--viewpoint"
+        elif cloud.viewpoint is not None:
+            vp, source = tuple(float(v) for v in cloud.viewpoint), f"{scan}'s header"
+        else:
+            vp, source = None, f"none ({scan} records no viewpoint; give --viewpoint for " \
+                "a single-view scan)"
+        # solver='scipy' has no visibility term: the viewpoint then serves the success
+        # test only
+        fit_vp = vp if solver != "scipy" or source == "--viewpoint" else None
         res = fit_fn(m, pts, init={"params": _params(param)} if param else None,
                      estimate=estimate, multistart=multistart, loss=loss, seed=seed,
-                     viewpoint=_vec3(viewpoint, "--viewpoint"), solver=solver,
-                     escape=escape, debias=debias)
+                     viewpoint=fit_vp, solver=solver, escape=escape, debias=debias)
+        if vp is not None and fit_vp is None:
+            res = check_fit(m, pts, res, viewpoint=vp)
+        record = res.to_dict()
+        record["viewpoint"] = None if vp is None else list(vp)
+        record["viewpoint_source"] = source
+        if not res.success:
+            record["warning"] = ("the fit does not explain the cloud: "
+                                 + "; ".join(res.quality.get("reasons", [])))
         with atomic_path(output) as tmp:
-            tmp.write_text(json.dumps(res.to_dict(), indent=2))
+            tmp.write_text(json.dumps(record, indent=2))
+        if vp is None:
+            out.print(f"viewpoint: {source}", soft_wrap=True, markup=False)
+        else:
+            where = ",".join(f"{v:g}" for v in vp)
+            out.print(f"viewpoint: {where} (from {source})", soft_wrap=True, markup=False)
         out.print(f"{output}: rmse {res.rmse:.3g}, inliers {res.inlier_fraction:.1%}, "
                   f"scale {res.scale:.4g}, {res.iterations} evaluations, "
-                  f"{res.seconds * 1e3:.0f} ms, converged={res.converged}", soft_wrap=True)
+                  f"{res.seconds * 1e3:.0f} ms, converged={res.converged}, "
+                  f"success={res.success}", soft_wrap=True)
         for note in res.notes:
             out.print(f"note: {note}", soft_wrap=True)
+        if not res.success:
+            out.print(f"warning: {record['warning']}", soft_wrap=True, markup=False)
         if overlay is not None:
             from PIL import Image
 
@@ -540,7 +573,9 @@ def scan_(
         pts, nrm = scan(m, cam, noise=noise, outliers=outliers, seed=seed, params=params)
         if world:
             pts, nrm = cam.camera_to_world(pts), nrm @ cam.R.T
-        write_points(output, pts, nrm, ascii=ascii_)
+        # the sensor position in the cloud's frame, recorded in the PLY header
+        vp = tuple(float(v) for v in cam.t) if world else (0.0, 0.0, 0.0)
+        write_points(output, pts, nrm, ascii=ascii_, viewpoint=vp)
         frame = "world" if world else "camera"
         out.print(f"{output}: {len(pts):,} points ({frame} frame), "
                   f"{time.perf_counter() - t0:.2f} s", soft_wrap=True)

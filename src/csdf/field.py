@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,7 @@ from .pose import as_pose
 __all__ = [
     "Field", "as_field", "field_bounds", "planar_bounds", "auto_bounds", "choose_backend",
     "check_bounds", "params_in_ranges", "AUTO_FAST_POINTS", "to_glsl", "shadertoy", "glsl_params",
-    "glsl_float", "numba_available",
+    "glsl_float", "numba_available", "kernel_cache_dir",
 ]
 
 #: point sets at least this large get the compiled backend under ``'auto'``
@@ -66,6 +67,13 @@ AUTO_FAST_POINTS = 2000
 def numba_available() -> bool:
     """True when the compiled (Numba) evaluators can run on this machine."""
     return bool(_fast_backend.available())
+
+
+def kernel_cache_dir() -> Path:
+    """Where the compiled evaluator caches its kernels on disk (``$CSDF_CACHE_DIR``,
+    default ``~/.cache/csdf/kernels``; created on demand), for messages such as the
+    mesher's "compiling kernels (first use only; cached in ...)"."""
+    return _fast_backend.cache_dir()
 
 
 def choose_backend(backend: str = "auto", work: int | None = None) -> str:
@@ -427,6 +435,16 @@ class Field:
         if self.backend != "fast" or not self.pose.is_identity():
             return None
         return _fast_backend.serial_values(self.program, self.pvals)
+
+    def kernels_ready(self, modes: tuple[str, ...] = ("value",)) -> bool:
+        """False when this field's evaluator is the compiled one and the kernel of one
+        of ``modes`` (``'value'``, ``'grad'``, ``'jac'``, ``'all'``) is neither in memory
+        nor cached on disk (:func:`kernel_cache_dir`): its first evaluation in that
+        mode then compiles it (seconds to a minute, once per machine). True otherwise,
+        and for every other evaluator (nothing to compile)."""
+        if self.backend != "fast":
+            return True
+        return all(_fast_backend.is_ready(self.program, m) for m in modes)
 
     def glsl(self, name: str = "sdf", gradient: bool = True) -> str:
         """This field's program as GLSL (:func:`csdf.to_glsl`; parameters as

@@ -12,7 +12,8 @@ Figures are made without pyplot (``matplotlib.figure.Figure`` with the Agg canva
 nothing is opened on screen and nothing needs closing; in Jupyter the returned figure
 displays as usual. :func:`save_slice` writes one atomically.
 
-Needs matplotlib (``pip install matplotlib``).
+Needs matplotlib, which a plain ``pip install csdf`` does not install:
+``pip install 'csdf[plot]'``.
 """
 
 from __future__ import annotations
@@ -174,6 +175,19 @@ def _iso_levels(f: np.ndarray, levels: Any) -> np.ndarray:
     return vals
 
 
+#: the one-line message when matplotlib is missing (it comes with the ``plot`` extra)
+MATPLOTLIB_MISSING = "csdf slice needs matplotlib: pip install 'csdf[plot]'"
+
+
+def _need_matplotlib() -> None:
+    """Raise :class:`CsdfError` (:data:`MATPLOTLIB_MISSING`) when matplotlib cannot be
+    imported: a plain ``pip install csdf`` does not install it."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise CsdfError(MATPLOTLIB_MISSING) from None
+
+
 def _axes(ax: Any, panels: int, figsize: tuple[float, float] | None):
     """``(figure, [axes])``: new ones (Agg canvas, no pyplot), or the caller's."""
     from matplotlib.axes import Axes
@@ -244,10 +258,8 @@ def slice(  # noqa: A001 - public name csdf.slice
     Raises:
         CsdfError: bad arguments; matplotlib not installed.
     """
-    try:
-        from matplotlib.colors import Normalize
-    except ImportError:  # pragma: no cover - depends on the environment
-        raise CsdfError("csdf.slice needs matplotlib: pip install matplotlib") from None
+    _need_matplotlib()
+    from matplotlib.colors import Normalize
 
     data = slice_values(shape, axis, at, extent, params, resolution,
                         gradient=bool(show_gradient_error))
@@ -324,6 +336,7 @@ def save_slice(
     """
     from .io import atomic_path
 
+    _need_matplotlib()
     target = Path(path)
     fmt = SLICE_FORMATS.get(target.suffix.lower())
     if fmt is None:

@@ -4,12 +4,13 @@ Modules, in the order of the data flow: ``result`` (:class:`FitResult`), ``probl
 (validated inputs, residuals, Jacobian, robust losses), ``lm`` (the Levenberg-Marquardt
 iteration, visibility term and escape step), ``bias`` (noise-bias correction),
 ``stages`` (the staged ``solver='lm'`` engine), ``scipy_engine`` (``solver='scipy'``),
-``init`` (the global initialisation of ``multistart=True``), ``api`` (:func:`fit` and
+``init`` (the global initialisation of ``multistart=True``), ``quality`` (the success
+test of :attr:`FitResult.success`), ``api`` (:func:`fit` and
 ``loss='auto'``) and ``icp`` (the ICP baseline).
 """
 
-from .api import fit
+from .api import check_fit, fit
 from .icp import icp
 from .result import FitResult
 
-__all__ = ["fit", "icp", "FitResult"]
+__all__ = ["fit", "check_fit", "icp", "FitResult"]

@@ -20,17 +20,19 @@ also restarts from the same start), and the lowest Cauchy cost wins (:func:`auto
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from ..errors import CsdfError
 from .problem import Problem, loss_weights, make_result, prepare, residuals
+from .quality import assess
 from .result import FitResult
 from .scipy_engine import solve_scipy, solve_scipy_staged
 from .stages import refine, solve_lm
 
-__all__ = ["fit", "FitResult", "auto_continue", "AUTO_SWITCH", "AUTO_CLEAN",
+__all__ = ["fit", "check_fit", "FitResult", "auto_continue", "AUTO_SWITCH", "AUTO_CLEAN",
            "AUTO_INLIER_K"]
 
 #: ``loss='auto'``: Huber first; if the fraction of points with ``|r| <= AUTO_INLIER_K *
@@ -172,7 +174,12 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
             only): near-symmetric parts have wrong minima one feature spacing away.
 
     Returns:
-        :class:`FitResult`.
+        :class:`FitResult`. Its ``success`` says whether the fit explains the cloud
+        (inliers, residual against ``f_scale``, and with ``viewpoint`` the model's
+        visible surface; :mod:`csdf.fit.quality`, a few percent of the fit's time), with
+        the figures and reasons in ``quality``; ``converged`` only says how the
+        optimiser stopped. :func:`check_fit` judges a result against a viewpoint the fit
+        did not use.
 
     Raises:
         CsdfError: empty cloud, NaNs, bad options, fewer points than unknowns;
@@ -205,7 +212,8 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
         if auto:
             prob, stats = auto_continue(prob, stats, start, max_iter, viewpoint,
                                         bool(escape), bool(debias))
-        return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)
+        return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold,
+                           viewpoint)
     start = (prob.R, prob.t, prob.s, prob.values.copy())
     prob, stats = solve_scipy_staged(prob, max_iter=max_iter)
     if auto:
@@ -219,3 +227,43 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
                                     scipy_solver=cauchy_scipy)
     stats["loss"] = prob.loss
     return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold)
+
+
+def check_fit(shape, points, result: FitResult, viewpoint=None, f_scale=None,
+              inlier_threshold=None, backend: str = "auto") -> FitResult:
+    """The success test of :attr:`FitResult.success` (:mod:`csdf.fit.quality`) for a
+    given result, e.g. with a viewpoint the fit itself did not use (``solver='scipy'``,
+    a fit made before the sensor position was known).
+
+    Args:
+        shape: the fitted :class:`csdf.Shape` or :class:`csdf.Program`.
+        points: ``(N, 3)`` the scene points it was fitted to (scene units).
+        result: the :class:`FitResult` (its pose, scale and parameters are judged).
+        viewpoint: ``(3,)`` sensor position in the scene frame, or None.
+        f_scale: the noise level (default: the result's ``quality['noise_level']``,
+            else 1% of the model's size times its scale, as :func:`fit`).
+        inlier_threshold: default the result's.
+        backend: evaluator backend.
+
+    Returns:
+        A copy of ``result`` with ``success`` and ``quality`` replaced.
+
+    Raises:
+        CsdfError: as :func:`fit` for bad points or a bad viewpoint.
+    """
+    if f_scale is None:
+        f_scale = result.quality.get("noise_level") if result.quality else None
+    prob = prepare(shape, points, init=result, f_scale=f_scale, backend=backend)
+    vp = None
+    if viewpoint is not None:
+        vp = np.asarray(viewpoint, dtype=float)
+        if vp.shape != (3,) or not np.all(np.isfinite(vp)):
+            raise CsdfError(f"viewpoint must be a finite (3,) position; got {viewpoint!r}")
+    thr = result.inlier_threshold if inlier_threshold is None else float(inlier_threshold)
+    t0 = time.perf_counter()
+    r = residuals(prob, prob.R, prob.t, prob.s, prob.values)
+    pv = {p.name: float(v) for p, v in zip(prob.prog.params, prob.values)}
+    ok, quality = assess(prob.prog, pv, prob.backend, prob.R, prob.t, prob.s, prob.bounds,
+                         prob.points, r, thr, prob.f_scale, vp)
+    quality["seconds"] = time.perf_counter() - t0
+    return dataclasses.replace(result, success=bool(ok), quality=quality)

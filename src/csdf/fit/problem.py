@@ -21,6 +21,7 @@ that both engines (:mod:`.lm`, :mod:`.scipy_engine`) minimise the same cost.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,7 @@ import numpy as np
 from ..errors import CsdfError, ParamError
 from ..field import as_field, field_bounds
 from ..pose import Pose
+from .quality import assess
 from .result import FitResult
 
 __all__ = ["ESTIMATES", "LOSSES", "Problem", "prepare", "residuals", "jacobian",
@@ -59,6 +61,7 @@ class Problem:
     loss: str
     backend: str
     estimate: tuple = ()
+    bounds: np.ndarray | None = None  # (2, 3) object-frame box of the model, model units
 
     @property
     def pnames(self) -> list[str]:
@@ -165,7 +168,7 @@ def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="hub
     if not fs > 0:
         raise CsdfError(f"f_scale must be positive, got {f_scale}")
     return Problem(prog, P, "pose" in est, "scale" in est, names, values, R, t, s, centre,
-                   size, fs, loss, fld.backend, est)
+                   size, fs, loss, fld.backend, est, np.asarray(bounds, dtype=float))
 
 
 def merge_values(prob: Problem, idx: list[int], cvals: np.ndarray) -> np.ndarray:
@@ -241,20 +244,28 @@ def loss_weights(r: np.ndarray, fs: float, loss: str) -> tuple[float, np.ndarray
 
 
 def make_result(prob: Problem, stats: dict, seconds: float, method: str,
-                inlier_threshold: float | None) -> FitResult:
+                inlier_threshold: float | None, viewpoint=None) -> FitResult:
     """The :class:`FitResult` of ``prob``'s current state, scored by its signed-distance
     residuals; ``stats`` holds ``nfev``, ``converged``, ``notes`` and optionally
     ``cost`` and ``loss``; ``seconds`` is the wall time; ``inlier_threshold`` in scene
-    units (default ``3 f_scale``)."""
+    units (default ``3 f_scale``); ``viewpoint`` (3,) or None for the success test
+    (:func:`csdf.fit.quality.assess`, timed in ``quality['seconds']`` and included in
+    the result's ``seconds``)."""
     r = residuals(prob, prob.R, prob.t, prob.s, prob.values)
     thr = 3.0 * prob.f_scale if inlier_threshold is None else float(inlier_threshold)
     inl = np.abs(r) <= thr
     rmse = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else math.inf
+    t0 = time.perf_counter()
+    pv = {p.name: float(v) for p, v in zip(prob.prog.params, prob.values)}
+    ok, quality = assess(prob.prog, pv, prob.backend, prob.R, prob.t, prob.s, prob.bounds,
+                         prob.points, r, thr, prob.f_scale, viewpoint)
+    quality["seconds"] = time.perf_counter() - t0
     return FitResult(
         rotation=prob.R.copy(), translation=prob.t.copy(), scale=float(prob.s),
         params={p.name: float(v) for p, v in zip(prob.prog.params, prob.values)},
         rmse=rmse, inlier_fraction=float(inl.mean()), inlier_threshold=thr,
-        converged=bool(stats["converged"]), iterations=int(stats["nfev"]), seconds=seconds,
+        converged=bool(stats["converged"]), iterations=int(stats["nfev"]),
+        seconds=seconds + quality["seconds"],
         cost=float(stats.get("cost", math.nan)), method=method, notes=list(stats["notes"]),
-        loss=stats.get("loss"),
+        loss=stats.get("loss"), success=bool(ok), quality=quality,
     )

@@ -33,6 +33,21 @@ class FitResult:
         notes: remarks such as scale/parameter ambiguity, or what ``loss='auto'`` did.
         loss: the robust loss of the final solve (``'huber'`` or ``'cauchy'`` when
             ``loss='auto'`` was asked; None for :func:`csdf.icp`).
+        success: the fit explains the cloud (unlike ``converged``, which only says how
+            the optimiser stopped). All of: (1) ``inlier_fraction >= INLIER_MIN``
+            (0.8); (2) the inlier ``rmse <= RMSE_MAX`` (1.5) ``x f_scale``, the noise
+            level the fit assumes; (3) when a viewpoint is known, at most
+            ``VISIBLE_MAX_UNEXPLAINED`` (5%) of the fitted model's surface visible from
+            it (ray-cast on a ``VIEW_RAYS`` x ``VIEW_RAYS`` grid, within the cloud's view)
+            is unexplained: seen through (the measured points there lie behind it) or
+            without points. The constants and the exact rules are in
+            :mod:`csdf.fit.quality`.
+        quality: the figures of the success test: ``inlier_fraction``, ``rmse``,
+            ``noise_level`` (f_scale), ``rmse_ratio``, ``visible_checked``,
+            ``visible_rays``, ``visible_unexplained``, ``visible_see_through``,
+            ``visible_empty`` (fractions of the judged rays), the thresholds used,
+            ``seconds`` (cost of the test) and ``reasons``: one sentence per failed
+            criterion (empty on success).
     """
 
     rotation: np.ndarray
@@ -49,6 +64,8 @@ class FitResult:
     method: str = "csdf"
     notes: list[str] = field(default_factory=list)
     loss: str | None = None
+    success: bool = False
+    quality: dict = field(default_factory=dict)
 
     @property
     def pose(self) -> Pose:
@@ -72,5 +89,21 @@ class FitResult:
             "inlier_fraction": self.inlier_fraction, "inlier_threshold": self.inlier_threshold,
             "converged": self.converged, "iterations": self.iterations,
             "seconds": self.seconds, "cost": self.cost, "notes": list(self.notes),
-            "loss": self.loss,
+            "loss": self.loss, "success": self.success,
+            "quality": _jsonable(self.quality),
         }
+
+
+def _jsonable(v):
+    """``v`` with NumPy scalars and non-finite floats made JSON-ready (inf -> None)."""
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else None
+    return v

@@ -8,7 +8,7 @@ STL, OBJ, PLY, GLB), ``points`` (point clouds as PLY files).
 
 from .atomic import atomic_path
 from .mesh import MESH_FORMATS, write_mesh
-from .points import read_point_properties, read_points, write_points
+from .points import PointCloud, read_point_cloud, read_point_properties, read_points, write_points
 
 __all__ = ["atomic_path", "write_mesh", "MESH_FORMATS", "read_points", "write_points",
-           "read_point_properties"]
+           "read_point_properties", "read_point_cloud", "PointCloud"]

@@ -9,11 +9,22 @@ order) PLY files with a ``vertex`` element holding ``x, y, z`` and optionally
 body, counts larger than the data can hold, missing coordinates) raises
 :class:`csdf.CsdfError` naming the file and what is wrong; nothing is allocated from a
 count before it is checked against the file's size.
+
+**Viewpoint.** A cloud seen from one sensor position records it in the header as one
+comment line (written by ``write_points(..., viewpoint=...)`` and ``csdf scan``)::
+
+    comment csdf viewpoint X Y Z
+
+``X Y Z``: three finite decimal numbers (``repr`` of floats), the sensor position in the
+cloud's frame and units (``0 0 0`` for a camera-frame cloud). :func:`read_point_cloud`
+returns it (None when the line is absent, as in files written by other tools);
+:func:`read_points` ignores it (its return value is unchanged).
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +33,11 @@ import numpy as np
 from ..errors import CsdfError
 from .atomic import atomic_path
 
-__all__ = ["write_points", "read_points", "read_point_properties", "PLY_TYPES",
-           "MAX_HEADER_BYTES"]
+__all__ = ["write_points", "read_points", "read_point_cloud", "read_point_properties",
+           "PointCloud", "PLY_TYPES", "MAX_HEADER_BYTES", "VIEWPOINT_COMMENT"]
+
+#: the header comment that records the sensor position: ``comment csdf viewpoint X Y Z``
+VIEWPOINT_COMMENT = "csdf viewpoint"
 
 #: PLY scalar type names -> numpy type codes (without byte order)
 PLY_TYPES = {
@@ -59,6 +73,7 @@ def write_points(
     *,
     scalars: dict[str, Any] | None = None,
     ascii: bool = False,
+    viewpoint: Any = None,
 ) -> Path:
     """Write a point cloud as a PLY file, atomically.
 
@@ -73,14 +88,26 @@ def write_points(
             the points' type (e.g. ``{'distance': d}`` for volume samples); names are
             letters, digits and ``_``. Read back with :func:`read_point_properties`.
         ascii: write ``format ascii`` instead of ``binary_little_endian``.
+        viewpoint: optional ``(3,)`` sensor position in the points' frame and units,
+            recorded as the header line ``comment csdf viewpoint X Y Z`` (see the module
+            docs); read back by :func:`read_point_cloud`.
 
     Returns:
         The path written.
 
     Raises:
         CsdfError: wrongly shaped arrays, colours out of range, bad or repeated property
-            names, an unwritable folder.
+            names, a viewpoint that is not 3 finite numbers, an unwritable folder.
     """
+    vp_line = None
+    if viewpoint is not None:
+        try:
+            vp = np.asarray(viewpoint, dtype=np.float64)
+        except (TypeError, ValueError):
+            vp = np.zeros(0)
+        if vp.shape != (3,) or not np.all(np.isfinite(vp)):
+            raise CsdfError(f"viewpoint must be 3 finite numbers, got {viewpoint!r}")
+        vp_line = f"comment {VIEWPOINT_COMMENT} " + " ".join(repr(float(v)) for v in vp)
     pts = _as_array(points, None, "points", (3,))
     n = pts.shape[0]
     ftype = "f4" if pts.dtype == np.float32 else "f8"
@@ -114,7 +141,10 @@ def write_points(
         columns.append(col[:, 0])
     ply_name = {"f4": "float", "f8": "double", "u1": "uchar"}  # PLY type of each field
     header = ["ply", f"format {'ascii' if ascii else 'binary_little_endian'} 1.0",
-              "comment written by csdf", f"element vertex {n}"]
+              "comment written by csdf"]
+    if vp_line is not None:
+        header.append(vp_line)
+    header.append(f"element vertex {n}")
     header += [f"property {ply_name[t]} {name}" for name, t in fields]
     header.append("end_header")
     head = ("\n".join(header) + "\n").encode("ascii")
@@ -146,8 +176,9 @@ class _Element:
         self.props: list[tuple[str, str | None, str | None]] = []  # name, type, list count
 
 
-def _parse_header(data: bytes, where: str):
-    """``(format, elements, offset of the body)`` of a PLY file's bytes."""
+def _parse_header(data: bytes, where: str, comments: list[tuple[int, str]] | None = None):
+    """``(format, elements, offset of the body)`` of a PLY file's bytes; the ``comment``
+    lines' ``(line number, text after 'comment')`` are appended to ``comments`` if given."""
     if not data.startswith(b"ply"):
         raise CsdfError(f"{where}: not a PLY file (it must start with 'ply')")
     lines: list[str] = []
@@ -173,6 +204,8 @@ def _parse_header(data: bytes, where: str):
     for no, raw in enumerate(lines[1:], start=2):
         words = raw.split()
         if not words or words[0] in ("comment", "obj_info"):
+            if comments is not None and words and words[0] == "comment":
+                comments.append((no, raw.strip()[len("comment"):].strip()))
             continue
         key = words[0]
         if key == "format":
@@ -337,15 +370,16 @@ def _check_ascii_ranges(table: np.ndarray, el: _Element, line_nos: list[int],
                             f"({limits})")
 
 
-def _read_vertex(path: str | os.PathLike):
-    """``(scalar columns of the vertex element, coordinate names, normal names)``."""
+def _read_vertex(path: str | os.PathLike, comments: list[tuple[int, str]] | None = None):
+    """``(scalar columns of the vertex element, property names, coordinate names, normal
+    names)``; the header's comments are appended to ``comments`` if given."""
     p = Path(path)
     where = str(p)
     try:
         data = p.read_bytes()
     except OSError as exc:
         raise CsdfError(f"cannot read {where}: {exc.strerror or exc}") from None
-    fmt, elements, offset = _parse_header(data, where)
+    fmt, elements, offset = _parse_header(data, where, comments)
     if not any(el.name == "vertex" for el in elements):
         raise CsdfError(f"{where}: no 'vertex' element in the header")
     if sum(el.name == "vertex" for el in elements) > 1:
@@ -380,6 +414,71 @@ def read_points(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None]
     normals = np.stack([np.asarray(cols[c], dtype=np.float64) for c in nrm], axis=1) \
         if nrm else None
     return points, normals
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """A point cloud read by :func:`read_point_cloud`.
+
+    Attributes:
+        points: ``(N, 3)`` float64 positions (the file's units).
+        normals: ``(N, 3)`` float64 normals, or None.
+        viewpoint: ``(3,)`` float64 sensor position recorded in the header (``comment
+            csdf viewpoint X Y Z``), or None when the file records none.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray | None
+    viewpoint: np.ndarray | None
+
+
+def _viewpoint(comments: list[tuple[int, str]], where: str) -> np.ndarray | None:
+    """The viewpoint of the header's ``comment csdf viewpoint X Y Z`` line (or None)."""
+    found = None
+    key = VIEWPOINT_COMMENT.split()
+    for no, text in comments:
+        words = text.split()
+        if words[:2] != key:
+            continue
+        if found is not None:
+            raise CsdfError(f"{where}: header line {no}: a second '{VIEWPOINT_COMMENT}' "
+                            "comment")
+        try:
+            if len(words) != 5:
+                raise ValueError
+            vp = np.array([float(w) for w in words[2:]])
+        except ValueError:
+            raise CsdfError(f"{where}: header line {no}: expected 'comment "
+                            f"{VIEWPOINT_COMMENT} X Y Z' (three numbers), got "
+                            f"{text[:80]!r}") from None
+        if not np.all(np.isfinite(vp)):
+            raise CsdfError(f"{where}: header line {no}: the viewpoint must be finite, "
+                            f"got {text[:80]!r}")
+        found = vp
+    return found
+
+
+def read_point_cloud(path: str | os.PathLike) -> PointCloud:
+    """Read a PLY point cloud with the sensor position its header records.
+
+    Args:
+        path: a PLY file as for :func:`read_points`.
+
+    Returns:
+        :class:`PointCloud` with ``points``, ``normals`` (as :func:`read_points`) and
+        ``viewpoint`` (``(3,)`` or None; see the module docs).
+
+    Raises:
+        CsdfError: as :func:`read_points`, and a malformed or repeated ``comment csdf
+            viewpoint`` line.
+    """
+    comments: list[tuple[int, str]] = []
+    cols, _, pos, nrm = _read_vertex(path, comments)
+    vp = _viewpoint(comments, str(Path(path)))
+    points = np.stack([np.asarray(cols[c], dtype=np.float64) for c in pos], axis=1)
+    normals = np.stack([np.asarray(cols[c], dtype=np.float64) for c in nrm], axis=1) \
+        if nrm else None
+    return PointCloud(points, normals, vp)
 
 
 def read_point_properties(path: str | os.PathLike) -> dict[str, np.ndarray]:

@@ -132,7 +132,7 @@ class _Loader:
     def __init__(self, text: str, file: str):
         self.text = text
         self.file = file
-        self.lines = text.splitlines()
+        self.lines = _lines(text)
         self.globals: dict[str, _Global] = {}  # top-level bindings, in order
         self.locals: dict[str, Any] = {}  # the arguments of the def being evaluated
         self.limit = sys.maxsize  # globals with seq < limit are "before" this point
@@ -603,6 +603,16 @@ def _bracket_error(exc: UnexpectedInput, loader: _Loader) -> ModelError | None:
     return None
 
 
+def _lines(text: str) -> list[str]:
+    """The model's lines as the parser numbers them: split at ``\n`` only (``splitlines``
+    also splits at ``\r``, ``\x0c``, ``\u2028``, ..., which the parser counts as spaces
+    or comment text), without the empty piece after a final newline."""
+    lines = text.split("\n")
+    if len(lines) > 1 and lines[-1] == "":
+        lines.pop()
+    return lines
+
+
 def _syntax_error(exc: UnexpectedInput, loader: _Loader) -> ModelError:
     bracket = _bracket_error(exc, loader)
     if bracket is not None:
@@ -616,14 +626,14 @@ def _syntax_error(exc: UnexpectedInput, loader: _Loader) -> ModelError:
         if ch in "\"'":
             hint = "strings are short names such as 'x' or \"xy\" (letters, digits, _ + -)"
     elif isinstance(exc, UnexpectedEOF):
-        lines = loader.text.splitlines() or [""]
+        lines = loader.lines or [""]
         line, col = len(lines), len(lines[-1]) + 1
         msg = "unexpected end of the model"
         hint = "an expression or statement is incomplete"
     elif isinstance(exc, UnexpectedToken):
         tok = exc.token
         if tok.type == "$END":
-            lines = loader.text.splitlines() or [""]
+            lines = loader.lines or [""]
             line, col = len(lines), len(lines[-1]) + 1
             msg = "unexpected end of the model"
         else:

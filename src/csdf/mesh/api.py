@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CsdfError
-from ..field import Field, as_field, auto_bounds, check_bounds
+from ..field import Field, as_field, auto_bounds, check_bounds, kernel_cache_dir
 from .grid import Grid
 from .reference import extract
 
@@ -85,6 +85,9 @@ def mesh(
     t0 = time.perf_counter()
     reporter = _Progress() if progress else None
     try:
+        if reporter and not fld.kernels_ready(("value",) if method == "mc" else
+                                              ("value", "grad")):
+            reporter.compiling(kernel_cache_dir())
         serial = fld.serial_values()
         if serial is not None:
             # compiled, streamed over the octree's bricks (same results, see stream.py)
@@ -111,23 +114,37 @@ def mesh(
 
 
 class _Progress:
-    """A Rich progress bar over the mesher's stages (octree levels, samples, roots)."""
+    """A Rich progress bar on stderr over the mesher's stages (octree levels, samples,
+    roots), with a line when the field's kernels must first be compiled."""
 
     def __init__(self) -> None:
+        from rich.console import Console
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         self.bar: Any = Progress(TextColumn("meshing {task.description}"), BarColumn(),
-                                 TimeElapsedColumn(), transient=True)
+                                 TimeElapsedColumn(), transient=True,
+                                 console=Console(stderr=True))
         self.bar.start()
         self.task = self.bar.add_task("octree", total=4)
 
+    def compiling(self, where: Any) -> None:
+        """Say that the field's kernels are being compiled (their first use on this
+        machine: seconds to a minute) and where they are cached: as the bar's stage,
+        and as a line that stays (printed plainly when stderr is not a terminal)."""
+        self.bar.console.print(
+            f"csdf: compiling kernels (first use only; cached in {where})",
+            markup=False, highlight=False, soft_wrap=True)
+        self.bar.update(self.task, description="compiling kernels (first use only)")
+
     def update(self, stage: str, a: int, b: int) -> None:
+        """Show stage ``stage`` at ``a`` of ``b`` items."""
         # octree: up to 1; samples (a of b bricks, called per chunk): 1 to 3; roots: 4
         done = {"octree": 1.0, "samples": 1.0 + 2.0 * a / max(b, 1)}.get(stage, 4.0)
         label = f"{stage} ({b:,} {'cells' if stage == 'octree' else 'items'})"
         self.bar.update(self.task, description=label, completed=done)
 
     def close(self) -> None:
+        """Stop the display (it leaves no bar behind)."""
         self.bar.stop()
 
 

@@ -278,6 +278,9 @@ def scalar_arg(v: Any, what: str) -> Expr:
     if isinstance(v, Expr):
         if any(n in (X, Y, Z) for n in _leaves(v)):
             raise ShapeError(f"{what} must not depend on x, y or z")
+        if v.op == "const" and not math.isfinite(float(v.value)):  # type: ignore[arg-type]
+            # a folded constant (the language's ``0/0``, ``1/0``)
+            raise ShapeError(f"{what} must be finite, got {float(v.value)}")  # type: ignore[arg-type]
         return v
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise ShapeError(f"{what} must be a number or a parameter, got {type(v).__name__}")

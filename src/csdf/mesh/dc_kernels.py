@@ -27,7 +27,7 @@ from . import kernels as K
 
 __all__ = [
     "dc_chunk", "dc_vertices_range", "dc_case_tables", "dc_found", "dc_quads",
-    "dc_midpoints", "dc_split", "edge_flags", "sym_eig3", "newton_step",
+    "dc_midpoints", "dc_split", "edge_flags", "sym_eig3", "newton_step", "has_short_edge",
 ]
 
 _CUT = 0.05  # singular values below this fraction of the largest are dropped (as NumPy)
@@ -421,3 +421,20 @@ def _finite(x):
     if np.isinf(x):
         return 1.7976931348623157e308 if x > 0 else -1.7976931348623157e308
     return x
+
+
+@njit(cache=True, nogil=True)
+def has_short_edge(verts, faces, min2):
+    """True when some triangle edge of ``faces (F, 3)`` over ``verts (V, 3)`` has squared
+    length below ``min2`` (one pass, no temporaries; see
+    :func:`csdf.mesh.api.separate_close_vertices`)."""
+    for r in range(faces.shape[0]):
+        for k in range(3):
+            a = faces[r, k]
+            b = faces[r, (k + 1) % 3]
+            d0 = verts[a, 0] - verts[b, 0]
+            d1 = verts[a, 1] - verts[b, 1]
+            d2 = verts[a, 2] - verts[b, 2]
+            if d0 * d0 + d1 * d1 + d2 * d2 < min2:
+                return True
+    return False

@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import CsdfError
 
-__all__ = ["Pose", "as_pose"]
+__all__ = ["Pose", "as_pose", "check_rotation"]
 
 _ORTHO_TOL = 1e-6   # |R^T R - I| allowed in a given rotation
 _ROW_TOL = 1e-9     # |last row - (0, 0, 0, 1)| allowed in a 4x4 matrix
@@ -39,7 +39,13 @@ def _vec3(v: Any, what: str) -> np.ndarray:
     return a
 
 
-def _rotation(R: Any, what: str) -> np.ndarray:
+def check_rotation(R: Any, what: str) -> np.ndarray:
+    """``R`` as a ``(3, 3)`` float64 rotation (orthonormal to 1e-6, determinant +1).
+
+    Raises:
+        CsdfError: naming ``what``: not an array of numbers, another shape, non-finite
+            entries, or not a rotation.
+    """
     try:
         a = np.asarray(R, dtype=np.float64)
     except (TypeError, ValueError):
@@ -74,7 +80,7 @@ class Pose:
     __slots__ = ("rotation", "translation", "scale")
 
     def __init__(self, rotation: Any = None, translation: Any = None, scale: float = 1.0):
-        R = np.eye(3) if rotation is None else _rotation(rotation, "rotation")
+        R = np.eye(3) if rotation is None else check_rotation(rotation, "rotation")
         t = np.zeros(3) if translation is None else _vec3(translation, "translation")
         try:
             s = float(scale)

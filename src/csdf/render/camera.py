@@ -24,6 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import CsdfError
+from ..pose import check_rotation
 
 __all__ = ["Camera", "MAX_SIDE", "MAX_PIXELS", "check_resolution"]
 
@@ -82,17 +83,7 @@ def _vector(v, name: str, n: int = 3) -> np.ndarray:
 
 
 def _rotation(R, name: str = "camera rotation R") -> np.ndarray:
-    try:
-        a = np.asarray(R, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CsdfError(f"{name} must be a (3, 3) array, got {R!r}") from None
-    if a.shape != (3, 3):
-        raise CsdfError(f"{name} must have shape (3, 3), got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise CsdfError(f"{name} must be finite")
-    if np.max(np.abs(a.T @ a - np.eye(3))) > 1e-6 or np.linalg.det(a) < 0:
-        raise CsdfError(f"{name} must be a rotation matrix (orthonormal, determinant +1)")
-    return a
+    return check_rotation(R, name)
 
 
 def _points(points, name: str = "points") -> tuple[np.ndarray, tuple[int, ...]]:

@@ -397,6 +397,10 @@ def fit(
             out.print(f"note: {note}", soft_wrap=True)
         if not res.success:
             out.print(f"warning: {record['warning']}", soft_wrap=True, markup=False)
+            if not multistart:
+                out.print("hint: one start (the model unrotated, centred on the cloud) can "
+                          "end in a wrong minimum; try --multistart", soft_wrap=True,
+                          markup=False)
         if overlay is not None:
             from PIL import Image
 

@@ -259,7 +259,7 @@ class Field:
 
     def __init__(self, model: Any, params: Mapping[str, float] | None = None,
                  backend: str = "auto", bounds: Any = None, *, pose: Any = None,
-                 work: int | None = None):
+                 work: int | None = None, what: str = "field"):
         if isinstance(model, Field):
             base = model
             self.program, self.shape = base.program, base.shape
@@ -270,7 +270,7 @@ class Field:
             if bounds is None and base._bounds_given is not None:
                 bounds = base._bounds_given
         else:
-            self.program, self.shape = as_program(model, "field")
+            self.program, self.shape = as_program(model, what)
         self.params = dict(params or {})
         self.pvals = self.program.param_values(self.params)  # validates names and values
         self.pose = as_pose(pose, "pose")
@@ -472,6 +472,5 @@ def as_field(model: Any, params: Mapping[str, float] | None = None, pose: Any = 
             return model
         return model.replace(params=params, pose=pose, bounds=bounds,
                              backend=None if backend == "auto" else backend)
-    if what is not None:
-        as_program(model, what)  # the caller's message for a wrong type
-    return Field(model, params, backend, bounds, pose=pose, work=work)
+    return Field(model, params, backend, bounds, pose=pose, work=work,
+                 what="field" if what is None else what)

@@ -145,19 +145,12 @@ def separate_close_vertices(verts: np.ndarray, faces: np.ndarray, min_edge: floa
     """
     moves = 0
     for _ in range(rounds):
-        if not _any_short_edge(verts, faces, min_edge):
+        if not _may_have_short_edge(verts, faces, min_edge):
             break
-        ends = []
-        for a in range(0, len(faces), _EDGE_CHUNK):
-            f = faces[a:a + _EDGE_CHUNK]
-            for i, j in ((0, 1), (1, 2), (2, 0)):
-                d = verts[f[:, i]] - verts[f[:, j]]
-                short = np.einsum("ij,ij->i", d, d) < min_edge * min_edge
-                if short.any():
-                    ends.append(f[short][:, [i, j]])
-        if not ends:
+        ends = _short_edge_ends(verts, faces, min_edge)
+        if not len(ends):
             break
-        idx = np.unique(np.concatenate(ends))
+        idx = np.unique(ends)
         # the faces around those vertices, and each vertex's neighbours' centroid
         near = faces[np.isin(faces, idx).any(axis=1)]
         e = near[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
@@ -176,23 +169,32 @@ def separate_close_vertices(verts: np.ndarray, faces: np.ndarray, min_edge: floa
     return moves
 
 
-def _any_short_edge(verts: np.ndarray, faces: np.ndarray, min_edge: float) -> bool:
-    """Whether some edge is shorter than ``min_edge``: one compiled pass when Numba is
-    there (the common case costs ~10 ms per million faces), else NumPy in blocks."""
+def _may_have_short_edge(verts: np.ndarray, faces: np.ndarray, min_edge: float) -> bool:
+    """False when no edge is shorter than ``min_edge``, found in one compiled pass
+    (~10 ms per million faces; the common case); True when there may be one, or when
+    Numba is missing (then :func:`_short_edge_ends` decides)."""
     try:
         from .dc_kernels import has_short_edge
     except ImportError:  # pragma: no cover - Numba is a dependency
-        has_short_edge = None
-    if has_short_edge is not None and verts.dtype == np.float64:
-        return bool(has_short_edge(verts, np.ascontiguousarray(faces, dtype=np.int64),
-                                   min_edge * min_edge))
+        return True
+    if verts.dtype != np.float64:
+        return True
+    return bool(has_short_edge(verts, np.ascontiguousarray(faces, dtype=np.int64),
+                               min_edge * min_edge))
+
+
+def _short_edge_ends(verts: np.ndarray, faces: np.ndarray, min_edge: float) -> np.ndarray:
+    """``(K, 2)`` vertex pairs of the triangle edges shorter than ``min_edge`` (NumPy,
+    in blocks of :data:`_EDGE_CHUNK` faces)."""
+    ends = [np.zeros((0, 2), dtype=faces.dtype)]
     for a in range(0, len(faces), _EDGE_CHUNK):
         f = faces[a:a + _EDGE_CHUNK]
         for i, j in ((0, 1), (1, 2), (2, 0)):
             d = verts[f[:, i]] - verts[f[:, j]]
-            if (np.einsum("ij,ij->i", d, d) < min_edge * min_edge).any():
-                return True
-    return False
+            short = np.einsum("ij,ij->i", d, d) < min_edge * min_edge
+            if short.any():
+                ends.append(f[short][:, [i, j]])
+    return np.concatenate(ends)
 
 
 class _Progress:

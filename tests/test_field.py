@@ -79,8 +79,12 @@ def test_bounds_policy():
     # given bounds win
     np.testing.assert_array_equal(field_bounds(prog, bounds=((-3, -3, -3), (3, 3, 3))),
                                   [[-3] * 3, [3] * 3])
-    # no values: the program's own box (it holds over the whole range, r up to 2)
-    np.testing.assert_allclose(as_field(s).bounds, [[-2] * 3, [2] * 3])
+    # a program with parameters: the interval search at its values (defaults here), not
+    # its own box (which holds over the whole range, r up to 2), so defaults and the
+    # same values given as params= get the same box
+    b = as_field(s).bounds
+    assert np.all(b[1] >= 1.0) and np.all(b[0] <= -1.0) and np.all(np.abs(b) < 1.02)
+    np.testing.assert_array_equal(as_field(s, {"r": 1.0}).bounds, b)
     # values given: the interval search, tighter, and close to the surface
     b = as_field(s, {"r": 0.6}).bounds
     assert np.all(b[1] - b[0] < 1.4) and np.all(b[1] >= 0.6) and np.all(b[0] <= -0.6)

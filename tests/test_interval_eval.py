@@ -190,7 +190,7 @@ def check_program(prog, lo, hi, pint, seed: int, n: int = 48) -> None:
         for pv in settings_:
             if not pv:  # parameters without an interval are at their defaults
                 pv = {k: v[0] for k, v in pint.items()}
-            vals = prog(pts, pv, backend="numpy")
+            vals = prog(pts, pv, backend="numpy", check_ranges=False)
             assert_contains(vals, ol[i], oh[i], f"box {i} {lo[i]}..{hi[i]} params {pv}")
 
 
@@ -534,10 +534,11 @@ def test_simplify_agrees_in_box(e, bx, data, seed):
     rng = np.random.default_rng(seed)
     pts = sample_box(rng, lo, hi, 48)
     pv = {k: v[0] for k, v in pint.items()}
-    assert_same_values(prog(pts, pv, backend="numpy"), small(pts, pv, backend="numpy"))
+    kw = {"backend": "numpy", "check_ranges": False}  # the intervals may leave the ranges
+    assert_same_values(prog(pts, pv, **kw), small(pts, pv, **kw))
     if pint:
         pv = {k: v[1] for k, v in pint.items()}
-        assert_same_values(prog(pts, pv, backend="numpy"), small(pts, pv, backend="numpy"))
+        assert_same_values(prog(pts, pv, **kw), small(pts, pv, **kw))
 
 
 @_settings(60)

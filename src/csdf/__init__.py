@@ -25,7 +25,7 @@ import types
 from typing import TYPE_CHECKING, Any
 
 from .compiler import Call, Program
-from .errors import BytecodeError, CsdfError, ModelError, ParamError, ShapeError
+from .errors import BytecodeError, CsdfError, MeshWarning, ModelError, ParamError, ShapeError
 from .expr import Expr, Param, param
 from .pose import Pose
 from .shapes import *  # noqa: F403
@@ -124,7 +124,7 @@ sys.modules[__name__].__class__ = _Namespace
 __all__ = [
     "compile", "param", "Param", "mesh", "io", "zoo", "Expr", "Program", "Call", "Shape",
     "REGISTRY", "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
-    "__version__", "sample_surface", "sample_volume", "save_slice", "Camera", "Render",
-    "render", "scan", "load", "loads", "dumps", "to_glsl", "shadertoy", "glsl_params", "fit",
-    "icp", "FitResult", "Field", "as_field", "Pose", *_shape_names,
+    "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
+    "Render", "render", "scan", "load", "loads", "dumps", "to_glsl", "shadertoy",
+    "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", *_shape_names,
 ]

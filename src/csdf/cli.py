@@ -1,7 +1,10 @@
 """The ``csdf`` command line (Typer + Rich).
 
 Models are ``.csdf`` files, or compiled programs (``.csdfb`` bytecode, ``.csdft`` text
-listings). Every error is printed as one clear message (with file, line and column for
+listings). A ``--param name=value`` outside the parameter's declared range is refused
+(the message names the range) unless ``--no-check-ranges`` is given. Commands whose
+evaluator must first be compiled say so on stderr ("csdf: compiling kernels (first use
+only; cached in DIR)"). Every error is printed as one clear message (with file, line and column for
 model errors; with the file's name for errors in compiled programs) and exits with
 status 2; outputs are written atomically. SIGINT and SIGTERM stop a command promptly
 (no partial output or temporary file is left) with status 130 and 143.
@@ -14,6 +17,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,7 +29,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from . import __version__
-from .errors import CsdfError
+from .errors import CsdfError, MeshWarning
 
 app = typer.Typer(
     add_completion=False,
@@ -76,6 +80,66 @@ def _field(model):
     from .field import as_field
 
     return as_field(model, what="csdf")
+
+
+#: the end of a range error's message on the command line
+_RANGE_HINT = "pass --no-check-ranges to use it anyway"
+_NO_CHECK_HELP = ("Accept --param values outside their parameters' declared ranges (the "
+                  "model's distance and bounds are then not promised).")
+
+
+def _checked_params(model, values: list[str], no_check_ranges: bool) -> dict[str, float]:
+    """The ``--param`` values for a loaded model: names and numbers validated and,
+    unless ``--no-check-ranges``, each inside its parameter's declared range.
+
+    Raises:
+        ParamError: an unknown name, or a value outside its range (the message names
+            the range and the flag).
+    """
+    params = _params(values)
+    _field(model).program.param_values(params, check_ranges=not no_check_ranges,
+                                       range_hint=_RANGE_HINT)
+    return params
+
+
+def _param_field(model, values: list[str], no_check_ranges: bool):
+    """The :class:`csdf.field.Field` of a loaded model with its ``--param`` values
+    (:func:`_checked_params`), for consumers that take a field as it is."""
+    from .field import as_field
+
+    params = _checked_params(model, values, no_check_ranges)
+    return as_field(model, params, what="csdf", check_ranges=False)  # checked above
+
+
+def _note_compiling(*jobs: tuple[Any, tuple[str, ...]]) -> None:
+    """Say on stderr, once and as the mesher does, that compiled kernels a command will
+    use are not built yet (their first use on this machine takes seconds to a minute).
+
+    Args:
+        jobs: ``(field, modes)`` pairs: a :class:`csdf.field.Field` made as the
+            consumer makes it (same backend policy) and the evaluation modes it uses
+            (:meth:`csdf.field.Field.kernels_ready`).
+    """
+    from .field import kernel_cache_dir
+
+    if not all(fld.kernels_ready(modes) for fld, modes in jobs):
+        err.print(f"csdf: compiling kernels (first use only; cached in {kernel_cache_dir()})",
+                  markup=False, highlight=False, soft_wrap=True)
+
+
+def _fit_modes(estimate: str, solver: str, multistart: bool, debias: bool | None
+               ) -> tuple[str, ...]:
+    """The evaluation modes a ``csdf fit`` run certainly uses (so that the compiling
+    notice is not repeated for a kernel that is never built): residual values; with
+    ``lm``, gradients for the pose (parameter Jacobians too when parameters are
+    estimated, and gradients again for the noise-bias correction and the multistart
+    search); ``scipy`` uses the full Jacobian."""
+    params = "params" in estimate
+    if solver == "scipy":
+        return ("value", "all")
+    if not params:
+        return ("value", "grad")
+    return ("value", "all", "grad") if multistart or debias is not False else ("value", "all")
 
 
 def _params(values: list[str]) -> dict[str, float]:
@@ -233,12 +297,21 @@ def info(model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft
 def mesh(
     model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
     output: Path = typer.Option(..., "-o", "--output", help="Mesh file: .stl .obj .ply .glb"),
-    resolution: int | None = typer.Option(None, "--resolution", "-r",
-                                             help="Voxels along the longest side (default 128)."),
+    resolution: int | None = typer.Option(
+        None, "--resolution", "-r", help="Voxels along the longest side (default: 128, "
+        "or finer where the shape has thin parts, up to --max-resolution)."),
     voxel_size: float | None = typer.Option(None, "--voxel-size", help="Voxel edge length."),
     method: str = typer.Option("mc", "--method", help="mc (marching cubes) or dc (dual "
                                "contouring: keeps sharp edges)."),
+    max_resolution: int = typer.Option(1024, "--max-resolution",
+                                       help="The finest default resolution."),
+    min_feature: float | None = typer.Option(
+        None, "--min-feature", help="Thinnest part or gap to look for (model units; "
+        "default 1/8 voxel)."),
+    check_thin: bool = typer.Option(True, "--check-thin/--no-check-thin",
+                                    help="Look for parts thinner than a voxel."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ):
     """Mesh a model to a watertight triangle mesh."""
@@ -247,11 +320,22 @@ def mesh(
         from . import io
         from .mesh import mesh as mesh_fn
 
-        m = _load(model)
+        m = _param_field(_load(model), param, no_check_ranges)  # with the --param values
         t0 = time.perf_counter()
-        result = mesh_fn(m, resolution=resolution, voxel_size=voxel_size, method=method,
-                         params=_params(param), progress=not quiet and err.is_terminal)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MeshWarning)
+            result = mesh_fn(m, resolution=resolution, voxel_size=voxel_size,
+                             method=method,
+                             progress=not quiet and err.is_terminal,
+                             max_resolution=max_resolution, min_feature=min_feature,
+                             check_thin=check_thin)
         dt = time.perf_counter() - t0
+        for w in caught:
+            if issubclass(w.category, MeshWarning):
+                err.print(f"warning: {w.message}", soft_wrap=True, markup=False,
+                          highlight=False)
+            else:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
         io.write_mesh(result, output)
         out.print(f"{output}: {len(result.faces):,} triangles, {len(result.vertices):,} "
                   f"vertices, watertight={result.is_watertight}, {dt:.2f} s "
@@ -341,6 +425,7 @@ def fit(
                                        "parameters are estimated)."),
     param: list[str] = typer.Option([], "--param", "-p", help="Initial name=value "
                                     "(repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
     overlay: Path | None = typer.Option(None, "--overlay", help="Also write a PNG of the "
                                         "fitted model with the points drawn over it "
                                         "(green: inliers, red: outliers)."),
@@ -350,13 +435,16 @@ def fit(
     def go():
         import json
 
+        from .field import as_field
         from .fit import check_fit
         from .fit import fit as fit_fn
         from .io import atomic_path, read_point_cloud
+        from .render.trace import trace_field
 
         if overlay is not None and overlay.suffix.lower() != ".png":
             raise CsdfError(f"{overlay}: the overlay must end in .png")
         m = _load(model)
+        init_params = _checked_params(m, param, no_check_ranges)
         cloud = read_point_cloud(scan)
         pts = cloud.points
         if viewpoint is not None and viewpoint.strip().lower() == "none":
@@ -371,9 +459,16 @@ def fit(
         # solver='scipy' has no visibility term: the viewpoint then serves the success
         # test only
         fit_vp = vp if solver != "scipy" or source == "--viewpoint" else None
-        res = fit_fn(m, pts, init={"params": _params(param)} if param else None,
+        fld = as_field(m, backend="auto", work=len(pts), what="csdf")  # as fit makes it
+        jobs = [(fld, _fit_modes(estimate, solver, multistart, debias))]
+        if vp is not None:  # the success test traces the model's visible surface (a sweep)
+            jobs.append((trace_field(m, init_params, what="fit", check_ranges=False),
+                         ("value", "grad")))
+        _note_compiling(*jobs)
+        res = fit_fn(m, pts, init={"params": init_params} if param else None,
                      estimate=estimate, multistart=multistart, loss=loss, seed=seed,
-                     viewpoint=fit_vp, solver=solver, escape=escape, debias=debias)
+                     viewpoint=fit_vp, solver=solver, escape=escape, debias=debias,
+                     check_ranges=not no_check_ranges)
         if vp is not None and fit_vp is None:
             res = check_fit(m, pts, res, viewpoint=vp)
         record = res.to_dict()
@@ -406,7 +501,7 @@ def fit(
 
             from .render.overlay import fit_overlay
 
-            img = fit_overlay(m, pts, res)
+            img = fit_overlay(m, pts, res, check_ranges=not no_check_ranges)
             with atomic_path(overlay) as tmp:
                 Image.fromarray(img).save(tmp, format="PNG")
             out.print(f"{overlay}: overlay of the fit", soft_wrap=True)
@@ -430,6 +525,7 @@ def sample(
     seed: int | None = typer.Option(None, "--seed", help="Random seed."),
     ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
 ):
     """Sample points uniformly on a model's surface (with normals), or in its volume
     (with field values)."""
@@ -441,13 +537,15 @@ def sample(
         if output.suffix.lower() != ".ply":
             raise CsdfError(f"{output}: the output must end in .ply")
         m = _load(model)
+        params = _checked_params(m, param, no_check_ranges)
         t0 = time.perf_counter()
         if volume:
             pts, d = sample_volume(m, count, near_surface=near, sigma=sigma, seed=seed,
-                                   params=_params(param))
+                                   params=params, check_ranges=False)  # checked above
             write_points(output, pts, scalars={"distance": d}, ascii=ascii_)
         else:
-            pts, nrm = sample_surface(m, count, seed=seed, params=_params(param))
+            pts, nrm = sample_surface(m, count, seed=seed, params=params,
+                                      check_ranges=False)
             write_points(output, pts, nrm, ascii=ascii_)
         out.print(f"{output}: {len(pts):,} {'volume' if volume else 'surface'} points, "
                   f"{time.perf_counter() - t0:.2f} s", soft_wrap=True)
@@ -466,14 +564,21 @@ def slice_(
     gradient_error: bool = typer.Option(False, "--gradient-error",
                                         help="Add a panel of |grad f| - 1."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
 ):
     """Plot the distance field on a plane: filled values, isolines, the surface in bold."""
 
     def go():
         from .slicing import save_slice
 
-        save_slice(_load(model), output, axis=axis, at=at, resolution=resolution,
-                   show_gradient_error=gradient_error, params=_params(param))
+        m = _load(model)
+        params = _checked_params(m, param, no_check_ranges)
+        # the field as slice makes it (a sweep)
+        _note_compiling((_param_field(m, param, no_check_ranges),
+                         ("value", "grad") if gradient_error else ("value",)))
+        save_slice(m, output, axis=axis, at=at, resolution=resolution,
+                   show_gradient_error=gradient_error, params=params,
+                   check_ranges=False)  # checked above
         out.print(f"{output}: slice {axis} = {at:g}", soft_wrap=True)
 
     _run(go)
@@ -507,7 +612,8 @@ def _view(m, size: str, eye: str | None, target: str | None, fov: float, params:
 
     w, h = _size(size)
     return auto_camera(m, w, h, fov=fov, eye=_vec3(eye, "--eye"),
-                       target=_vec3(target, "--target"), params=params)
+                       target=_vec3(target, "--target"), params=params,
+                       check_ranges=False)  # (the caller checked them)
 
 
 _EYE_HELP = "Camera position x,y,z (default: looking at the model from the +x -y +z octant)."
@@ -525,6 +631,7 @@ def render_(
     shadows: bool = typer.Option(False, "--shadows", help="Soft shadows."),
     ao: bool = typer.Option(False, "--ao", help="Ambient occlusion."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
 ):
     """Render a model to a PNG by sphere tracing (exact normals, Lambert shading)."""
 
@@ -533,10 +640,13 @@ def render_(
 
         if output.suffix.lower() != ".png":
             raise CsdfError(f"{output}: the output must end in .png")
+        from .render.trace import trace_field
+
         m = _load(model)
-        params = _params(param)
+        params = _checked_params(m, param, no_check_ranges)
         cam = _view(m, size, eye, target, fov, params)
-        r = render(m, cam, params=params, shadows=shadows, ao=ao)
+        _note_compiling((trace_field(m, params, check_ranges=False), ("value", "grad")))
+        r = render(m, cam, params=params, shadows=shadows, ao=ao, check_ranges=False)
         r.save(output)
         out.print(f"{output}: {cam.width}x{cam.height}, {r.mask.mean():.0%} of the pixels "
                   f"on the surface, {r.stats['seconds']:.2f} s", soft_wrap=True)
@@ -561,6 +671,7 @@ def scan_(
                                "the camera frame, OpenCV: x right, y down, z forward)."),
     ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
 ):
     """Simulate a depth sensor: the visible surface points of a model, with normals."""
 
@@ -570,11 +681,16 @@ def scan_(
 
         if output.suffix.lower() != ".ply":
             raise CsdfError(f"{output}: the output must end in .ply")
+        from .render.trace import trace_field
+
         m = _load(model)
-        params = _params(param)
+        params = _checked_params(m, param, no_check_ranges)
         cam = _view(m, size, eye, target, fov, params)
+        _note_compiling((trace_field(m, params, what="scan", check_ranges=False),
+                         ("value", "grad")))
         t0 = time.perf_counter()
-        pts, nrm = scan(m, cam, noise=noise, outliers=outliers, seed=seed, params=params)
+        pts, nrm = scan(m, cam, noise=noise, outliers=outliers, seed=seed, params=params,
+                        check_ranges=False)  # checked above
         if world:
             pts, nrm = cam.camera_to_world(pts), nrm @ cam.R.T
         # the sensor position in the cloud's frame, recorded in the PLY header

@@ -6,7 +6,8 @@ was wrong and where (argument name, byte offset, line number, ...).
 
 from __future__ import annotations
 
-__all__ = ["CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError"]
+__all__ = ["CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
+           "MeshWarning"]
 
 
 class CsdfError(ValueError):
@@ -60,3 +61,8 @@ class ModelError(CsdfError):
         if self.hint:
             out += f"\nhint: {self.hint}"
         return out
+
+
+class MeshWarning(UserWarning):
+    """:func:`csdf.mesh` made a mesh that misses something the field has (parts or gaps
+    thinner than a voxel); the message says how much, where, and what to change."""

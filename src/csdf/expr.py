@@ -42,7 +42,8 @@ __all__ = [
 
 Number = int | float
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-RESERVED_PARAM_NAMES = frozenset({"points", "params", "backend", "dtype", "level"})
+RESERVED_PARAM_NAMES = frozenset({"points", "params", "backend", "dtype", "level",
+                                  "check_ranges", "range_hint"})
 
 
 @dataclass(frozen=True)

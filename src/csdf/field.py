@@ -8,10 +8,11 @@ share one answer to each of the questions they all have:
 
 **Which box holds the surface?** (:func:`field_bounds`, the one bounds policy)
     1. the ``bounds=`` the caller gave (validated: finite, ``min < max``);
-    2. else the program's own box (from its shape; it holds for every parameter value
-       inside the declared ranges) when no parameter values are given;
-    3. else a box found by interval arithmetic for the given values
-       (:func:`auto_bounds`: tighter than the program's when values are given);
+    2. else the program's own box (from its shape) when it has no parameters;
+    3. else a box found by interval arithmetic for the parameter values, given or
+       default (:func:`auto_bounds`: tighter than the program's own box, which holds
+       for every value in the declared ranges); so a model meshed with ``params=``
+       and the same model with those values as defaults get the same box;
     4. where interval arithmetic is too loose to find one (polygons' winding sign,
        blends), the program's box when every given value lies inside its parameter's
        finite range;
@@ -199,7 +200,7 @@ def field_bounds(prog: Program, params: Mapping[str, float] | None = None, bound
         raise CsdfError("a 2D program is an infinite prism in 3D; pass bounds=")
     own = _own_bounds(prog, shape)
     pv = dict(params or {})
-    if own is not None and not pv:
+    if own is not None and not prog.params:
         return own
     try:
         return auto_bounds(prog, pv)
@@ -245,26 +246,34 @@ class Field:
             similarity matrix, or None for the identity).
         work: the job's size for the ``'auto'`` policy: None for a sweep, else the
             number of points.
+        check_ranges: refuse a value of ``params`` outside its parameter's declared
+            range (:class:`csdf.ParamError` naming the range); False accepts it (the
+            shape's distance contract and own box are then not promised). Only the
+            values given here are checked: those of a given Field were accepted when
+            it was made.
 
     Attributes:
         program: the :class:`csdf.Program`; shape: the :class:`csdf.Shape` it was
             compiled from, or None; params: the given values ``{name: value}``;
             pvals: ``(P,)`` float64 all parameter values in program order; pose: the
-            :class:`csdf.Pose`; backend: the resolved evaluator name.
+            :class:`csdf.Pose`; backend: the resolved evaluator name;
+            check_ranges: whether this field's given values were range-checked.
 
     Raises:
         CsdfError: not a shape or program, unknown parameters, a bad pose, backend or
-            box.
+            box; ParamError (a CsdfError): a value outside its range (with
+            ``check_ranges``).
     """
 
     def __init__(self, model: Any, params: Mapping[str, float] | None = None,
                  backend: str = "auto", bounds: Any = None, *, pose: Any = None,
-                 work: int | None = None, what: str = "field"):
+                 work: int | None = None, what: str = "field", check_ranges: bool = True):
+        given = dict(params or {})
         if isinstance(model, Field):
             base = model
             self.program, self.shape = base.program, base.shape
             merged = dict(base.params)
-            merged.update(params or {})
+            merged.update(given)
             params = merged
             pose = base.pose if pose is None else pose
             if bounds is None and base._bounds_given is not None:
@@ -272,7 +281,11 @@ class Field:
         else:
             self.program, self.shape = as_program(model, what)
         self.params = dict(params or {})
-        self.pvals = self.program.param_values(self.params)  # validates names and values
+        self.check_ranges = bool(check_ranges)
+        # validates names and values: the ranges of the values given now (a base
+        # field's own values were accepted when it was made)
+        self.program.param_values(given, check_ranges=self.check_ranges)
+        self.pvals = self.program.param_values(self.params, check_ranges=False)
         self.pose = as_pose(pose, "pose")
         if self.program.dim != 3 and not self.pose.is_identity():
             raise CsdfError("a 2D program cannot be posed in 3D; extrude or revolve it")
@@ -338,10 +351,12 @@ class Field:
         return float(np.linalg.norm(b[1] - b[0]))
 
     def replace(self, *, params: Mapping[str, float] | None = None, pose: Any = None,
-                bounds: Any = None, backend: str | None = None) -> Field:
-        """A new field with some of its inputs changed (parameters are merged)."""
+                bounds: Any = None, backend: str | None = None,
+                check_ranges: bool = True) -> Field:
+        """A new field with some of its inputs changed (parameters are merged; the
+        values given here are range-checked unless ``check_ranges`` is False)."""
         out = Field(self, params, self.backend if backend is None else backend, bounds,
-                    pose=pose)
+                    pose=pose, check_ranges=check_ranges)
         out._auto = self._auto if backend is None else backend == "auto"
         return out
 
@@ -352,15 +367,16 @@ class Field:
     # ------------------------------------------------------------------ evaluation
     def _call(self, method: str, p: np.ndarray):
         fn = getattr(self.program, method)
+        # the values were checked (or accepted) when the field was made
         try:
-            return fn(p, self.params, backend=self.backend)
+            return fn(p, self.params, backend=self.backend, check_ranges=False)
         except CsdfError:
             raise
         except Exception:  # a kernel the fast backend cannot build: same values elsewhere
             if not self._auto or self.backend != "fast":
                 raise
             self.backend = "interp"
-            return fn(p, self.params, backend=self.backend)
+            return fn(p, self.params, backend=self.backend, check_ranges=False)
 
     def _local(self, points: Any) -> Any:
         return points if self.pose.is_identity() else self.pose.apply_inverse(points)
@@ -454,13 +470,14 @@ class Field:
 
 def as_field(model: Any, params: Mapping[str, float] | None = None, pose: Any = None, *,
              bounds: Any = None, backend: str = "auto", work: int | None = None,
-             what: str | None = None) -> Field:
+             what: str | None = None, check_ranges: bool = True) -> Field:
     """The :class:`Field` of a shape, program or field (a field given with nothing to
     change is returned as is).
 
     Args:
         model: a :class:`csdf.Shape`, :class:`csdf.Program` or :class:`Field`.
-        params, pose, bounds, backend, work: as for :class:`Field`.
+        params, pose, bounds, backend, work, check_ranges: as for :class:`Field` (only
+            the values given here are range-checked).
         what: the caller's name for error messages (``"mesh expects a Shape or
             Program, got int"``).
 
@@ -471,6 +488,7 @@ def as_field(model: Any, params: Mapping[str, float] | None = None, pose: Any = 
         if not params and pose is None and bounds is None and backend == "auto":
             return model
         return model.replace(params=params, pose=pose, bounds=bounds,
-                             backend=None if backend == "auto" else backend)
+                             backend=None if backend == "auto" else backend,
+                             check_ranges=check_ranges)
     return Field(model, params, backend, bounds, pose=pose, work=work,
-                 what="field" if what is None else what)
+                 what="field" if what is None else what, check_ranges=check_ranges)

@@ -484,8 +484,10 @@ def param_bounds(
     """Parameter intervals of a program: each is its value (a point) unless given.
 
     Args:
-        prog: the program (anything with ``param_values(params)`` and ``param_names``,
-            as :class:`csdf.Program` has).
+        prog: the program (anything with ``param_values(params, check_ranges=)`` and
+            ``param_names``, as :class:`csdf.Program` has). Values outside their
+            declared ranges are not refused here: interval arithmetic holds for any
+            value (the evaluation API and :class:`csdf.field.Field` check ranges).
         params: ``{name: value}`` point values (others take their defaults).
         param_intervals: ``{name: (lo, hi)}`` ranges.
 
@@ -497,7 +499,7 @@ def param_bounds(
             value, an interval that is not a pair with ``lo <= hi``, or a name given
             both as a value and as an interval.
     """
-    pv = prog.param_values(params)
+    pv = prog.param_values(params, check_ranges=False)
     plo, phi = pv.copy(), pv.copy()
     given = dict(param_intervals or {})
     twice = set(given) & set(params or {})

@@ -39,10 +39,11 @@ _MIN_NORMAL_COS = 0.99      # the gradient at a point vs. just off it: agreement
 
 # ---------------------------------------------------------------------- helpers
 def _field(shape: Any, what: str, params: dict | None, backend: str, n: int,
-           bounds: Any = None) -> Field:
+           bounds: Any = None, check_ranges: bool = True) -> Field:
     """The :class:`csdf.field.Field` of a 3D shape or program (a point-set job of ``n``
     points for the backend policy); its bounds follow the field layer's policy."""
-    fld = as_field(shape, params, bounds=bounds, backend=backend, work=n, what=what)
+    fld = as_field(shape, params, bounds=bounds, backend=backend, work=n, what=what,
+                   check_ranges=check_ranges)
     if fld.dim != 3:
         raise CsdfError(f"{what} needs a 3D shape; extrude or revolve a 2D shape first")
     return fld
@@ -206,6 +207,7 @@ def sample_surface(
     *,
     resolution: int | None = None,
     backend: str = "auto",
+    check_ranges: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Points uniformly distributed by area on the surface ``f = 0``, with normals.
 
@@ -227,6 +229,8 @@ def sample_surface(
         params: parameter values ``{name: value}`` (defaults otherwise).
         resolution: mesh resolution override (voxels along the longest side).
         backend: evaluation backend for the projection (see :class:`csdf.Program`).
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False samples it anyway.
 
     Returns:
         ``(points (n, 3), normals (n, 3))`` float64: points in model units with
@@ -237,10 +241,11 @@ def sample_surface(
 
     Raises:
         CsdfError: bad arguments, a 2D shape, an empty shape (no surface found), or
-            points that cannot be projected onto the surface.
+            points that cannot be projected onto the surface; ParamError: a value
+            outside its range (with ``check_ranges``).
     """
     n = _count(n)
-    fld = _field(shape, "sample_surface", params, backend, n)
+    fld = _field(shape, "sample_surface", params, backend, n, check_ranges=check_ranges)
     rng = _rng(seed)
     if n == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
@@ -257,6 +262,7 @@ def sample_volume(
     bounds: Any = None,
     *,
     backend: str = "auto",
+    check_ranges: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Points in and around a shape with their field values (SDF training data).
 
@@ -278,6 +284,8 @@ def sample_volume(
             shapes such as planes); default the shape's bounding box (analytic, else by
             interval arithmetic).
         backend: evaluation backend (see :class:`csdf.Program`).
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False samples it anyway.
 
     Returns:
         ``(points (n, 3) float64, distances (n,) float64)``: the field value at each
@@ -286,10 +294,11 @@ def sample_volume(
         ``'bound'`` field never overestimates the distance; see the distance contract).
 
     Raises:
-        CsdfError: bad arguments, a 2D shape, or an empty shape.
+        CsdfError: bad arguments, a 2D shape, or an empty shape; ParamError: a value
+            outside its range (with ``check_ranges``).
     """
     n = _count(n)
-    fld = _field(shape, "sample_volume", params, backend, n, bounds)
+    fld = _field(shape, "sample_volume", params, backend, n, bounds, check_ranges)
     if isinstance(near_surface, bool) or not isinstance(near_surface, (int, float, np.number)):
         raise CsdfError(f"near_surface must be a number in [0, 1], got {near_surface!r}")
     frac = float(near_surface)

@@ -39,7 +39,7 @@ def _fraction(v, name: str, hi: float = math.inf) -> float:
 def scan(shape, camera: Camera, width: int | None = None, height: int | None = None,
          noise: float = 0.0, outliers: float = 0.0, seed=None, object_pose=None,
          params: dict | None = None, *, min_cos: float = MIN_COS, backend: str = "auto",
-         bounds=None) -> tuple[np.ndarray, np.ndarray]:
+         bounds=None, check_ranges: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Simulate a depth sensor: the visible surface points of a shape as a point cloud.
 
     Args:
@@ -65,6 +65,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         backend: evaluation backend (``'auto'``: the fast Numba kernels).
         bounds: ``(2, 3)`` box containing the surface in the object frame (for unbounded
             shapes).
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False scans it anyway.
 
     Returns:
         ``(points (M, 3), normals (M, 3))`` float64 in the **camera frame** (OpenCV),
@@ -73,7 +75,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
 
     Raises:
         CsdfError: bad resolution, non-finite or negative noise, an outlier fraction
-            outside ``[0, 1]``, a pose that is not rigid, unknown parameters.
+            outside ``[0, 1]``, a pose that is not rigid, unknown parameters;
+            ParamError: a value outside its range (with ``check_ranges``).
     """
     if not isinstance(camera, Camera):
         raise CsdfError(f"camera must be a csdf.Camera, got {type(camera).__name__}")
@@ -84,7 +87,7 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     min_cos = _fraction(min_cos, "min_cos", 1.0)
     pose = as_pose(object_pose, "object_pose", rigid=True)
     rng = np.random.default_rng(seed)
-    fld = trace_field(shape, params, backend, bounds, what="scan")
+    fld = trace_field(shape, params, backend, bounds, what="scan", check_ranges=check_ranges)
 
     dcam = cam.pixel_directions()  # (N, 3) unit, camera frame
     M = pose.rotation.T @ cam.R  # camera frame -> object frame (rotation)

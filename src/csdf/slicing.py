@@ -85,6 +85,8 @@ def slice_values(
     params: dict | None = None,
     resolution: int = 400,
     gradient: bool = False,
+    *,
+    check_ranges: bool = True,
 ) -> dict[str, Any]:
     """The field sampled on a plane (the data :func:`slice` draws).
 
@@ -99,6 +101,8 @@ def slice_values(
         resolution: samples along the longer side of ``extent`` (2..4096); the other
             side gets as many as keep the samples square.
         gradient: also compute the exact gradient.
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False samples it anyway.
 
     Returns:
         dict with ``'u' (nu,)`` and ``'v' (nv,)`` sample coordinates, ``'f' (nv, nu)``
@@ -114,7 +118,8 @@ def slice_values(
             not 2 <= resolution <= MAX_SLICE_RESOLUTION:
         raise CsdfError(f"resolution must be an integer in [2, {MAX_SLICE_RESOLUTION}], "
                         f"got {resolution!r}")
-    fld = as_field(shape, params, what="slice")  # a sweep: one evaluator for the plane
+    # a sweep: one evaluator for the plane
+    fld = as_field(shape, params, what="slice", check_ranges=check_ranges)
     ext = _check_extent(_default_extent(fld, axis) if extent is None else extent)
     (u0, u1), (v0, v1) = ext
     su, sv = u1 - u0, v1 - v0
@@ -221,6 +226,7 @@ def slice(  # noqa: A001 - public name csdf.slice
     *,
     title: str | None = None,
     figsize: tuple[float, float] | None = None,
+    check_ranges: bool = True,
 ):
     """Plot a distance field on the plane ``axis = at``.
 
@@ -248,6 +254,8 @@ def slice(  # noqa: A001 - public name csdf.slice
             ``show_gradient_error``) instead of a new figure.
         title: title of the field panel (default: the plane, e.g. ``'z = 0.3'``).
         figsize: size of a new figure in inches.
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False plots it anyway.
 
     Returns:
         ``matplotlib.figure.Figure``. The bold zero contour is the ``ContourSet`` in
@@ -262,7 +270,7 @@ def slice(  # noqa: A001 - public name csdf.slice
     from matplotlib.colors import Normalize
 
     data = slice_values(shape, axis, at, extent, params, resolution,
-                        gradient=bool(show_gradient_error))
+                        gradient=bool(show_gradient_error), check_ranges=check_ranges)
     f = data["f"]
     u, v = data["u"], data["v"]
     (u0, u1), (v0, v1) = data["extent"]

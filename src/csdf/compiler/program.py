@@ -20,7 +20,20 @@ from .binary import decode_fields, encode, validate
 from .calls import INSTR_REF, Call
 from .text import assemble_fields, disassemble
 
-__all__ = ["Program", "Call", "as_program", "INSTR_REF"]
+__all__ = ["Program", "Call", "as_program", "INSTR_REF", "RANGE_HINT", "range_message"]
+
+#: how the range error of :meth:`Program.param_values` says the check can be skipped
+RANGE_HINT = "pass check_ranges=False to evaluate it anyway"
+
+
+def range_message(p: Param, value: float, hint: str = RANGE_HINT) -> str:
+    """The message for a value given to parameter ``p`` outside its declared range, e.g.
+    ``"parameter 'board' = 0.5 is outside its range [0.012, 0.03]; pass
+    check_ranges=False to evaluate it anyway"`` (``hint`` appended when not empty)."""
+    lo = "-inf" if math.isinf(p.lo) else f"{p.lo:g}"
+    hi = "inf" if math.isinf(p.hi) else f"{p.hi:g}"
+    msg = f"parameter {p.name!r} = {value:g} is outside its range [{lo}, {hi}]"
+    return f"{msg}; {hint}" if hint else msg
 
 
 def as_program(shape, what: str):
@@ -154,12 +167,26 @@ class Program:
         )
 
     # ------------------------------------------------------------------ parameters
-    def param_values(self, params: dict | None = None, **kw: Any) -> np.ndarray:
+    def param_values(self, params: dict | None = None, *, check_ranges: bool = True,
+                     range_hint: str = RANGE_HINT, **kw: Any) -> np.ndarray:
         """Parameter vector ``(P,)`` float64 from defaults overridden by ``params``/``kw``.
+
+        This is the one place where parameter values are resolved: every evaluation
+        method, :class:`csdf.field.Field` and the consumers come through it.
+
+        Args:
+            params: ``{name: value}``; keyword arguments work too.
+            check_ranges: refuse a given value outside its parameter's declared range
+                ``[lo, hi]`` (an infinite end is unbounded). NaN is not refused (NaN
+                in, NaN out). Defaults always lie inside their ranges.
+            range_hint: the end of that error's message (what to do about it; the
+                command line names its own flag); ``''`` for none.
 
         Raises:
             ParamError: an unknown name (the message lists the known ones), a value
-                that is not a real number, or one too large for float64 (``10**400``).
+                that is not a real number, one too large for float64 (``10**400``),
+                or, with ``check_ranges``, one outside its range (the message names
+                the parameter, the value and the range).
         """
         vals = np.array([p.default for p in self.params], dtype=np.float64)
         given = dict(params or {})
@@ -188,20 +215,26 @@ class Program:
                 raise ParamError(
                     f"parameter {name!r} must be a real number, got {type(v).__name__}"
                 ) from None
+            if check_ranges:
+                p = self.params[i]
+                x = vals[i]
+                if x < p.lo or x > p.hi:  # (False for NaN: NaN in, NaN out)
+                    raise ParamError(range_message(p, float(x), range_hint))
         return vals
 
     # ------------------------------------------------------------------ evaluation
-    def _run(self, points, params, kw, mode: str, backend: str):
+    def _run(self, points, params, kw, mode: str, backend: str, check_ranges: bool = True):
         from ..backends import select
         from ..points import as_points
 
         pts, batch, dtype = as_points(points, self.dim)
-        pv = self.param_values(params, **kw)
+        pv = self.param_values(params, check_ranges=check_ranges, **kw)
         impl = select(backend, pts.shape[0], self, mode)
         return impl.evaluate(self, pts, pv, mode), batch, pts.shape[1]
 
     def __call__(
-        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+        self, points, params: dict | None = None, *, backend: str = "auto",
+        check_ranges: bool = True, **kw: Any
     ) -> np.ndarray:
         """Signed distances.
 
@@ -211,44 +244,52 @@ class Program:
             params: optional ``{name: value}``; keyword arguments work too.
             backend: ``'auto' | 'numpy' | 'interp' | 'fast'`` (see :mod:`csdf.backends`);
                 every evaluation method takes it.
+            check_ranges: refuse a parameter value outside its declared range
+                (:class:`csdf.ParamError` naming the range); False evaluates it anyway
+                (the shape's distance contract and bounds are then not promised).
+                Every evaluation method takes it.
 
         Returns:
             ``(N,)`` (or ``(...)``) distances in the points' dtype. A point with a NaN
             coordinate gives NaN (NaN in, NaN out), as does a NaN parameter value.
         """
-        res, batch, _ = self._run(points, params, kw, "value", backend)
+        res, batch, _ = self._run(points, params, kw, "value", backend, check_ranges)
         return res["value"].reshape(batch)
 
     def gradient(
-        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+        self, points, params: dict | None = None, *, backend: str = "auto",
+        check_ranges: bool = True, **kw: Any
     ) -> np.ndarray:
         """Exact spatial gradient ``(..., D)`` (D = the points' last dimension), by
         forward-mode differentiation of the tape. Where the function is not
         differentiable (a kink of ``min``/``abs``) one of the one-sided gradients is
         returned; ``sqrt`` at 0 gets derivative 0."""
-        res, batch, d = self._run(points, params, kw, "grad", backend)
+        res, batch, d = self._run(points, params, kw, "grad", backend, check_ranges)
         return res["grad"][:, :d].reshape(*batch, d)
 
     def value_and_grad(
-        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+        self, points, params: dict | None = None, *, backend: str = "auto",
+        check_ranges: bool = True, **kw: Any
     ):
         """``(values (...), gradients (..., D))`` in one pass."""
-        res, batch, d = self._run(points, params, kw, "grad", backend)
+        res, batch, d = self._run(points, params, kw, "grad", backend, check_ranges)
         return res["value"].reshape(batch), res["grad"][:, :d].reshape(*batch, d)
 
     def param_jacobian(
-        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+        self, points, params: dict | None = None, *, backend: str = "auto",
+        check_ranges: bool = True, **kw: Any
     ) -> np.ndarray:
         """Exact derivatives of the distance by each parameter, ``(..., P)``, columns in
         :attr:`params` order."""
-        res, batch, _ = self._run(points, params, kw, "jac", backend)
+        res, batch, _ = self._run(points, params, kw, "jac", backend, check_ranges)
         return res["jac"].reshape(*batch, len(self.params))
 
     def value_grad_param_jacobian(
-        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+        self, points, params: dict | None = None, *, backend: str = "auto",
+        check_ranges: bool = True, **kw: Any
     ):
         """``(values (...), gradients (..., D), param Jacobian (..., P))`` in one pass."""
-        res, batch, d = self._run(points, params, kw, "all", backend)
+        res, batch, d = self._run(points, params, kw, "all", backend, check_ranges)
         return (
             res["value"].reshape(batch),
             res["grad"][:, :d].reshape(*batch, d),
@@ -256,10 +297,11 @@ class Program:
         )
 
     def contains(
-        self, points, params: dict | None = None, *, backend: str = "auto", **kw: Any
+        self, points, params: dict | None = None, *, backend: str = "auto",
+        check_ranges: bool = True, **kw: Any
     ) -> np.ndarray:
         """Boolean ``(...)``: True where the distance is ``<= 0`` (NaN gives False)."""
-        v = self(points, params, backend=backend, **kw)
+        v = self(points, params, backend=backend, check_ranges=check_ranges, **kw)
         with np.errstate(invalid="ignore"):
             return v <= 0
 

@@ -26,7 +26,8 @@ Endpoints (all JSON bodies must be ``application/json``; bodies over
 
 Errors are JSON ``{'ok': false, 'error': ...}`` with a 4xx status: 400 for a malformed
 request (not JSON, nested deeper than :data:`MAX_JSON_DEPTH`, a lone surrogate in a
-string, numbers out of range), 403 for a refused origin or file, 413 for size, 415 for
+string, numbers out of range, an unknown parameter or a value outside its parameter's
+declared range), 403 for a refused origin or file, 413 for size, 415 for
 the content type and 422 for a model that does not load, compile or mesh. Only a failing
 disk (reading or writing the opened file) gives a 5xx.
 
@@ -59,7 +60,7 @@ from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, R
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from ..errors import CsdfError, ModelError
+from ..errors import CsdfError, ModelError, ParamError
 from ..field import Field, as_field, glsl_float, glsl_params, shadertoy, to_glsl
 
 __all__ = ["create_app", "serve", "free_port", "model_info", "MAX_BODY_BYTES",
@@ -167,7 +168,10 @@ def _load_text(text: str, name: str) -> Field:
 
 
 def _params(value: Any, prog) -> dict[str, float]:
-    """Validated ``{name: value}`` for the program's parameters (unknown names refused)."""
+    """Validated ``{name: value}`` for the program's parameters: unknown names, values
+    that are not finite numbers and values outside their parameter's declared range
+    (a slider left from an edit that narrowed it) are refused with 400 and a message
+    naming the parameter (and the range)."""
     if value is None:
         return {}
     if not isinstance(value, dict):
@@ -187,6 +191,10 @@ def _params(value: Any, prog) -> dict[str, float]:
         if not math.isfinite(f):
             raise bad
         out[k] = f
+    try:
+        prog.param_values(out, range_hint="")
+    except ParamError as exc:
+        raise _ApiError(400, str(exc)) from None
     return out
 
 

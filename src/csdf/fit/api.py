@@ -121,7 +121,7 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
 def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
         f_scale=None, multistart=False, seed=None, max_iter=100, inlier_threshold=None,
         backend="auto", viewpoint=None, solver="lm", debias=None,
-        escape=True) -> FitResult:
+        escape=True, *, check_ranges: bool = True) -> FitResult:
     """Fit a model to a point cloud: pose, optionally scale and shape parameters.
 
     Args:
@@ -172,6 +172,11 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
         escape: after the coarse stage, test turns about the model's axes and the cloud's
             principal axes for a lower minimum (:func:`csdf.fit.lm.escape`; ``'lm'``
             only): near-symmetric parts have wrong minima one feature spacing away.
+        check_ranges: refuse an initial value (``init``'s ``params``) of a parameter
+            that is not estimated when it lies outside the parameter's declared range
+            (:class:`csdf.ParamError` naming the range); False fits with it anyway.
+            Estimated parameters never leave their ranges: their initial values are
+            clipped to them, as are the solvers' steps.
 
     Returns:
         :class:`FitResult`. Its ``success`` says whether the fit explains the cloud
@@ -183,12 +188,14 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
 
     Raises:
         CsdfError: empty cloud, NaNs, bad options, fewer points than unknowns;
-        ParamError: unknown parameter names.
+        ParamError: unknown parameter names, a held value outside its range (with
+            ``check_ranges``).
     """
     t0 = time.perf_counter()
     if solver not in ("lm", "scipy"):
         raise CsdfError(f"solver must be 'lm' or 'scipy'; got {solver!r}")
-    prob = prepare(shape, points, init, estimate, params, loss, f_scale, backend)
+    prob = prepare(shape, points, init, estimate, params, loss, f_scale, backend,
+                   check_ranges=check_ranges)
     auto = prob.loss == "auto"
     if auto:
         prob.loss = "huber"  # first; auto_continue may switch to 'cauchy'
@@ -253,7 +260,9 @@ def check_fit(shape, points, result: FitResult, viewpoint=None, f_scale=None,
     """
     if f_scale is None:
         f_scale = result.quality.get("noise_level") if result.quality else None
-    prob = prepare(shape, points, init=result, f_scale=f_scale, backend=backend)
+    # the result's values are the fit's (estimated ones kept inside their ranges)
+    prob = prepare(shape, points, init=result, f_scale=f_scale, backend=backend,
+                   check_ranges=False)
     vp = None
     if viewpoint is not None:
         vp = np.asarray(viewpoint, dtype=float)

@@ -41,7 +41,7 @@ def correct_noise_bias(prob: Problem, st: State, idx: list[int], max_iter: int =
     s = math.exp(st.sigma)
     pv = dict(zip(prob.pnames, merge_values(prob, idx, st.cvals)))
     q = ((prob.points - st.t) @ st.R) / s
-    f = np.asarray(prob.prog(q, pv, backend=prob.backend))
+    f = np.asarray(prob.prog(q, pv, backend=prob.backend, check_ranges=False))
     inl = np.abs(s * f) <= 3.0 * prob.f_scale
     if inl.sum() < 10:
         return st, 0
@@ -65,7 +65,7 @@ def correct_noise_bias(prob: Problem, st: State, idx: list[int], max_iter: int =
             s2 = math.exp(st_sim.sigma)
             pv2 = dict(zip(prob.pnames, merge_values(prob, idx, st_sim.cvals)))
             rs = s2 * np.asarray(prob.prog(((sim - st_sim.t) @ st_sim.R) / s2, pv2,
-                                           backend=prob.backend))
+                                           backend=prob.backend, check_ranges=False))
             rs = rs[np.abs(rs) <= 3.0 * prob.f_scale]
             rms_sim = float(np.sqrt(np.mean(rs ** 2))) if len(rs) else rms
             k = (rms / rms_sim) ** 2 if rms_sim > 0 else 1.0
@@ -85,10 +85,10 @@ def _simulate(prob: Problem, P: np.ndarray, st: State, idx: list[int], rms: floa
     pv = dict(zip(prob.pnames, merge_values(prob, idx, st.cvals)))
     y = ((P - st.t) @ st.R) / s
     for _ in range(4):
-        fy, gy = prob.prog.value_and_grad(y, pv, backend=prob.backend)
+        fy, gy = prob.prog.value_and_grad(y, pv, backend=prob.backend, check_ranges=False)
         gy = np.asarray(gy)
         y = y - (np.asarray(fy) / np.maximum(np.sum(gy * gy, axis=1), 1e-30))[:, None] * gy
-    fy = np.asarray(prob.prog(y, pv, backend=prob.backend))
+    fy = np.asarray(prob.prog(y, pv, backend=prob.backend, check_ranges=False))
     y = y[np.abs(fy) < 1e-3 * rms / s]
     if len(y) < 10:
         return None

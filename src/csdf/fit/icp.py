@@ -24,25 +24,28 @@ __all__ = ["icp"]
 def _model_samples(prob, n: int, seed) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
+    from ..field import as_field
     from ..mesh.api import mesh
 
     pv = dict(zip((p.name for p in prob.prog.params), prob.values))
     b = np.array([prob.centre - prob.size / 2, prob.centre + prob.size / 2])
-    m = mesh(prob.prog, resolution=64, bounds=b, params=pv, progress=False)
+    # the fit's own values (a held one as given): accepted, not range-checked again
+    fld = as_field(prob.prog, pv, what="icp", check_ranges=False)
+    m = mesh(fld, resolution=64, bounds=b, progress=False, check_thin=False)
     pts, _ = trimesh.sample.sample_surface(m, n, seed=seed)
     pts = np.asarray(pts)
     for _ in range(3):  # onto the exact surface
-        f, g = prob.prog.value_and_grad(pts, pv, backend=prob.backend)
+        f, g = prob.prog.value_and_grad(pts, pv, backend=prob.backend, check_ranges=False)
         gg = np.maximum(np.sum(g * g, axis=1), 1e-300)
         pts = pts - (f / gg)[:, None] * g
-    _, g = prob.prog.value_and_grad(pts, pv, backend=prob.backend)
+    _, g = prob.prog.value_and_grad(pts, pv, backend=prob.backend, check_ranges=False)
     nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     return pts, nrm
 
 
 def icp(shape, points, init=None, n_model: int = 20000, max_iter: int = 60,
         tol: float = 1e-7, trim: float = 3.0, seed=None, params=None,
-        inlier_threshold=None, backend="auto") -> FitResult:
+        inlier_threshold=None, backend="auto", *, check_ranges: bool = True) -> FitResult:
     """Point-to-plane ICP of the cloud to samples of the model's surface (pose only).
 
     Args:
@@ -53,6 +56,8 @@ def icp(shape, points, init=None, n_model: int = 20000, max_iter: int = 60,
         tol: stop when the pose update (radians + model units) is below this.
         trim: reject pairs farther than ``trim`` times the median pair distance.
         seed: seeds the model sampling.
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False uses it anyway.
 
     Returns:
         :class:`FitResult` with ``method='icp'`` and ``scale = 1``.
@@ -61,7 +66,8 @@ def icp(shape, points, init=None, n_model: int = 20000, max_iter: int = 60,
     init_d = init
     if params:
         init_d = {"params": dict(params)} if init is None else init
-    prob = prepare(shape, points, init_d, ("pose",), None, "linear", None, backend)
+    prob = prepare(shape, points, init_d, ("pose",), None, "linear", None, backend,
+                   check_ranges=check_ranges)
     M, N = _model_samples(prob, n_model, seed)
     tree = cKDTree(M)
     # work with the inverse transform: scene point p -> model frame q = Ri p + ti

@@ -22,11 +22,14 @@ __all__ = ["multistart", "model_points"]
 
 def model_points(prob, n: int = 2000) -> np.ndarray:
     """Points on the model's surface in its frame (a coarse mesh's vertices)."""
+    from ..field import as_field
     from ..mesh.api import mesh
 
     pv = dict(zip((p.name for p in prob.prog.params), prob.values))
     b = np.array([prob.centre - prob.size / 2, prob.centre + prob.size / 2])
-    m = mesh(prob.prog, resolution=32, bounds=b, params=pv, progress=False)
+    # the fit's own values (a held one as given): accepted, not range-checked again
+    fld = as_field(prob.prog, pv, what="multistart", check_ranges=False)
+    m = mesh(fld, resolution=32, bounds=b, progress=False, check_thin=False)
     V = np.asarray(m.vertices)
     if len(V) > n:
         V = V[np.random.default_rng(0).choice(len(V), n, replace=False)]
@@ -49,7 +52,7 @@ def _gn_pose(prob, P, R, t, s, iters: int, fs: float):
     for _ in range(iters + 1):
         a = P - t
         q = (a @ R) / s
-        f, g = prob.prog.value_and_grad(q, pv, backend=prob.backend)
+        f, g = prob.prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
         r = s * f
         ar = np.abs(r)
         cost = float(np.sum(np.where(ar <= fs, 0.5 * r * r, fs * (ar - 0.5 * fs))))

@@ -119,7 +119,7 @@ def _raycast(prog, pv, backend, c_m: np.ndarray, D_m: np.ndarray, centre: np.nda
         if len(idx) == 0:
             break
         x = c_m + u[idx, None] * D_m[idx]
-        f = np.asarray(prog(x, pv, backend=backend))
+        f = np.asarray(prog(x, pv, backend=backend, check_ranges=False))
         done = f < tol
         hit[idx[done]] = True
         u[idx[~done]] += 0.9 * f[~done]
@@ -171,10 +171,10 @@ def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
     a = P - st.t
     q = (a @ st.R) / s
     if idx:
-        f, g, J = prog.value_grad_param_jacobian(q, pv, backend=prob.backend)
+        f, g, J = prog.value_grad_param_jacobian(q, pv, backend=prob.backend, check_ranges=False)
         Jp = s * J[:, idx]
     else:
-        f, g = prog.value_and_grad(q, pv, backend=prob.backend)
+        f, g = prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
         Jp = None
     f = np.asarray(f, dtype=float)
     gw = np.asarray(g) @ st.R.T
@@ -186,10 +186,11 @@ def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
         if len(sel):
             # back-face matches: point-to-plane residual at the ray's first hit instead
             if idx:
-                fh, gh, Jh = prog.value_grad_param_jacobian(X, pv, backend=prob.backend)
+                fh, gh, Jh = prog.value_grad_param_jacobian(X, pv, backend=prob.backend,
+                                                            check_ranges=False)
                 Jp[sel] = s * Jh[:, idx]
             else:
-                fh, gh = prog.value_and_grad(X, pv, backend=prob.backend)
+                fh, gh = prog.value_and_grad(X, pv, backend=prob.backend, check_ranges=False)
             gh = np.asarray(gh)
             n = gh / np.maximum(np.linalg.norm(gh, axis=1), 1e-300)[:, None]
             nw = n @ st.R.T
@@ -340,10 +341,11 @@ def escape(prob, P: np.ndarray, st: State, fs: float, keep: int = 4, iters: int 
     # q_kp = R_k^T (Q_p - t_k) / s, all at once: Q @ [R_1 .. R_K] minus t_k R_k
     QR = (Qr @ np.transpose(Rs, (1, 0, 2)).reshape(3, 3 * K)).reshape(M, K, 3)
     q = (np.transpose(QR, (1, 0, 2)) - np.einsum("ki,kij->kj", ts, Rs)[:, None]) / s
-    f = np.asarray(prob.prog(q.reshape(-1, 3), pv, backend=prob.backend))
+    f = np.asarray(prob.prog(q.reshape(-1, 3), pv, backend=prob.backend, check_ranges=False))
     z = (s * f.reshape(len(Ts), -1) / (RANK_SCALE * fs)) ** 2
     costs = np.sum(loss_rho(z, prob.loss), axis=1)
-    f0 = np.asarray(prob.prog(((Qr - st.t) @ st.R) / s, pv, backend=prob.backend))
+    f0 = np.asarray(prob.prog(((Qr - st.t) @ st.R) / s, pv, backend=prob.backend,
+                              check_ranges=False))
     c0 = float(np.sum(loss_rho((s * f0 / (RANK_SCALE * fs)) ** 2, prob.loss)))
     changed = False
     for j in np.argsort(costs)[:keep]:

@@ -121,9 +121,13 @@ def _init_pose(init, prob_params: dict) -> tuple:
 
 
 def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="huber",
-            f_scale=None, backend="auto") -> Problem:
+            f_scale=None, backend="auto", *, check_ranges: bool = True) -> Problem:
     """Validate the inputs of :func:`csdf.fit` and build the starting state (arguments as
-    there; ``loss`` may still be ``'auto'``, which the caller resolves)."""
+    there; ``loss`` may still be ``'auto'``, which the caller resolves).
+
+    Initial values of estimated parameters are clipped to their ranges (the solvers
+    keep them inside); those of held parameters are range-checked unless
+    ``check_ranges`` is False (then used as given)."""
     P = _as_points(points)
     # a point-set job for the backend policy: the compiled backend (values, gradients
     # and parameter derivatives in one call) for clouds of 2,000 points or more
@@ -146,7 +150,13 @@ def prepare(shape, points, init=None, estimate=("pose",), params=None, loss="hub
             raise CsdfError("params names were given but 'params' is not in estimate")
         names = []
     R0, t0, s0, p0 = _init_pose(init, {})
-    values = prog.param_values(p0)  # validates names of the initial values
+    # validates names and numbers of the initial values
+    values = prog.param_values(p0, check_ranges=False)
+    prog.param_values({k: v for k, v in p0.items() if k not in names},
+                      check_ranges=check_ranges)
+    for i, p in enumerate(prog.params):
+        if p.name in names:
+            values[i] = np.clip(values[i], p.lo, p.hi)
     # the box must hold while the parameters move: the program's own box (valid over
     # the declared ranges), else the bounds policy at the initial values, else a unit box
     bounds = fld.own_bounds
@@ -184,7 +194,7 @@ def residuals(prob: Problem, R, t, s, values) -> np.ndarray:
     (3, 3), ``t`` (3,), ``s`` with parameter values ``values`` (P,)."""
     q = ((prob.points - t) @ R) / s
     pv = dict(zip((p.name for p in prob.prog.params), values))
-    return s * prob.prog(q, pv, backend=prob.backend)
+    return s * prob.prog(q, pv, backend=prob.backend, check_ranges=False)
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -128,7 +128,7 @@ def _visibility(prog, pvals: dict, backend: str, R: np.ndarray, t: np.ndarray, s
     dirs = a2 + gx.reshape(-1, 1) * f1 + gy.reshape(-1, 1) * f2
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     # trace in the model's frame: q = R^T (p - t) / s
-    fld = trace_field(prog, pvals, backend, bounds, what="fit")
+    fld = trace_field(prog, pvals, backend, bounds, what="fit", check_ranges=False)
     o_m = (R.T @ (viewpoint - t)) / s
     d_m = dirs @ R
     tm, n_m, _ = trace_hits(fld, o_m, d_m, max_iter=TRACE_ITER)

@@ -67,7 +67,7 @@ class _Residuals:
         a = p.points - t
         q = (a @ R) / s  # rows: R^T a / s
         pv = dict(zip((q_.name for q_ in p.prog.params), values))
-        f, g, J = p.prog.value_grad_param_jacobian(q, pv, backend=p.backend)
+        f, g, J = p.prog.value_grad_param_jacobian(q, pv, backend=p.backend, check_ranges=False)
         self._cache_x = x.copy()
         self._cache = (R, s, a, q, f, g, J)
         return self._cache

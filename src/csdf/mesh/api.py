@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from typing import Any
 
 import numpy as np
 
-from ..errors import CsdfError
+from ..errors import CsdfError, MeshWarning
 from ..field import Field, as_field, auto_bounds, check_bounds, kernel_cache_dir
 from .grid import Grid
 from .reference import extract
+from .thin import ThinReport, thin_parts
 
 __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_MESH_RESOLUTION", "MAX_VOXELS"]
 
@@ -21,6 +23,9 @@ MAX_VOXELS = 4096**3
 _PAD = 5  # voxels added to the bounds' count along each axis (2 + jitter each side)
 #: the largest ``resolution`` (voxels along the bounds' longest side) within the limits
 MAX_MESH_RESOLUTION = MAX_RESOLUTION - _PAD
+#: the finest resolution the thin-part check chooses by default
+DEFAULT_MAX_RESOLUTION = 1024
+_BASE_RESOLUTION = 128  # the default resolution of a shape without thin parts
 
 
 def mesh(
@@ -31,12 +36,18 @@ def mesh(
     method: str = "mc",
     params: dict | None = None,
     progress: bool = True,
+    *,
+    max_resolution: int = DEFAULT_MAX_RESOLUTION,
+    min_feature: float | None = None,
+    check_thin: bool = True,
+    check_ranges: bool = True,
 ):
     """Triangle mesh of the surface ``f = 0``.
 
     Args:
         shape: a :class:`csdf.Shape` (or a compiled :class:`csdf.Program`).
-        resolution: voxels along the longest side of the bounds (default 128).
+        resolution: voxels along the longest side of the bounds. Default: chosen from
+            the shape, 128 or finer where it has thin parts (see ``check_thin``).
         voxel_size: voxel edge length in model units (instead of ``resolution``).
         bounds: ``((xmin, ymin, zmin), (xmax, ymax, zmax))``; default: the shape's
             bounding box, else one found by interval arithmetic; padded by 2 voxels.
@@ -45,6 +56,22 @@ def mesh(
             and corners, using exact gradients).
         params: parameter values ``{name: value}``.
         progress: show a progress bar on stderr (Rich).
+        max_resolution: the finest default resolution (a ``resolution`` chosen by the
+            thin-part check never exceeds it; default 1024).
+        min_feature: the thinnest part or gap (model units) the thin-part check looks
+            for: cells are refined with interval arithmetic down to this edge.
+            Default: 1/8 voxel of the grid checked.
+        check_thin: look for parts and gaps thinner than a voxel, which a grid loses
+            between its samples (:mod:`csdf.mesh.thin`). Without ``resolution`` and
+            ``voxel_size``, the resolution is 128, doubled (up to ``max_resolution``)
+            while the grid loses more than :data:`~csdf.mesh.thin.LOST_FRACTION` of
+            the volume in thin parts, while the mesh's volume differs from the
+            field's Monte Carlo volume by more than :data:`VOLUME_TOLERANCE`, or while
+            a lost part lies between two pieces of the mesh; a
+            :class:`csdf.MeshWarning` says when the last grid still falls short. With
+            them, the warning says when the grid loses thin parts and how much.
+            ``False`` skips the checks (128 by default).
+        check_ranges: refuse parameter values outside their declared ranges.
 
     Returns:
         ``trimesh.Trimesh``: watertight, 2-manifold, consistently wound (normals point
@@ -65,22 +92,14 @@ def mesh(
         raise CsdfError("give resolution or voxel_size, not both")
     # a sweep (csdf.field): one evaluator for the whole mesh, since a sample shared by
     # two bricks must get the same value (and sign) whichever chunk evaluates it
-    fld = as_field(shape, params, what="mesh")
+    fld = as_field(shape, params, what="mesh", check_ranges=check_ranges)
     if fld.shape is not None and fld.shape.dim != 3:
         raise CsdfError("mesh needs a 3D shape; extrude or revolve a 2D shape first")
     if bounds is not None:
         fld = Field(fld, bounds=check_bounds(bounds))
-    origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
-    grid = Grid(origin=origin, h=h, dims=dims)
-
-    def values(p):
-        return fld.value(p)
-
-    def gradients(p):
-        return fld.gradient(p)
-
-    def intervals(lo, hi):
-        return fld.intervals(lo, hi)
+    max_resolution = _check_max_resolution(max_resolution)
+    if min_feature is not None:
+        min_feature = _check_min_feature(min_feature)
 
     t0 = time.perf_counter()
     reporter = _Progress() if progress else None
@@ -88,21 +107,32 @@ def mesh(
         if reporter and not fld.kernels_ready(("value",) if method == "mc" else
                                               ("value", "grad")):
             reporter.compiling(kernel_cache_dir())
-        serial = fld.serial_values()
-        if serial is not None:
-            # compiled, streamed over the octree's bricks (same results, see stream.py)
-            from .stream import extract_dc, extract_mc
-
-            update = reporter.update if reporter else None
-            if method == "mc":
-                verts, faces = extract_mc(grid, values, intervals, update, serial=serial)
-            else:
-                verts, faces = extract_dc(
-                    grid, values, gradients, intervals, update, serial=serial,
-                    values_and_gradients=fld.value_and_grad)
-        else:
-            verts, faces = extract(grid, values, gradients, intervals, method,
-                                   reporter.update if reporter else None)
+        auto = resolution is None and voxel_size is None
+        if auto:
+            resolution = min(_BASE_RESOLUTION, max_resolution)
+        thin, agrees = None, True
+        while True:
+            if check_thin:
+                if reporter:
+                    reporter.stage("checking for thin parts")
+                thin = _thin_report(fld, resolution, voxel_size, min_feature)
+                if auto and thin.too_coarse() and 2 * resolution <= max_resolution:
+                    resolution *= 2
+                    continue
+            origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
+            grid = Grid(origin=origin, h=h, dims=dims)
+            verts, faces = _extract(fld, grid, method, reporter)
+            if auto and check_thin and 2 * resolution <= max_resolution:
+                agrees = _volume_agrees(verts, faces, thin)
+                if not agrees or _bridges_lost(verts, faces, thin):
+                    resolution *= 2
+                    continue
+            elif auto and check_thin:
+                agrees = _volume_agrees(verts, faces, thin)
+            break
+        if thin is not None and (thin.too_coarse() or not agrees):
+            _warn_thin(thin, auto, max_resolution, None if agrees else
+                       _mesh_volume(verts, faces))
     finally:
         if reporter:
             reporter.close()
@@ -114,8 +144,136 @@ def mesh(
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     m.metadata["csdf"] = {
         "method": method, "voxel_size": h, "dims": dims, "seconds": time.perf_counter() - t0,
+        "resolution": resolution,
+        "thin_fraction": None if thin is None else thin.fraction,
+        "field_volume": None if thin is None else thin.field_volume,
     }
     return m
+
+
+#: the default resolution is doubled while the mesh's volume and the field's differ by
+#: more than this (relative), besides three standard errors of the field's estimate
+VOLUME_TOLERANCE = 0.01
+
+
+def _extract(fld: Field, grid: Grid, method: str, reporter: Any
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (V, 3), faces (F, 3))`` of the field's zero set on ``grid``: compiled
+    and streamed where the field has a serial evaluator, else the NumPy reference."""
+    serial = fld.serial_values()
+    update = reporter.update if reporter else None
+    if serial is not None:
+        # compiled, streamed over the octree's bricks (same results, see stream.py)
+        from .stream import extract_dc, extract_mc
+
+        if method == "mc":
+            return extract_mc(grid, fld.value, fld.intervals, update, serial=serial)
+        return extract_dc(grid, fld.value, fld.gradient, fld.intervals, update,
+                          serial=serial, values_and_gradients=fld.value_and_grad)
+    return extract(grid, fld.value, fld.gradient, fld.intervals, method, update)
+
+
+def _mesh_volume(verts: np.ndarray, faces: np.ndarray) -> float:
+    """Enclosed volume (units^3) of a closed, outward-wound triangle mesh."""
+    vol = 0.0
+    for a in range(0, len(faces), _EDGE_CHUNK):
+        f = faces[a:a + _EDGE_CHUNK]
+        v0, v1, v2 = verts[f[:, 0]], verts[f[:, 1]], verts[f[:, 2]]
+        vol += float(np.einsum("ij,ij->", v0, np.cross(v1, v2)))
+    return vol / 6.0
+
+
+def _bridges_lost(verts: np.ndarray, faces: np.ndarray, rep: ThinReport) -> bool:
+    """A lost part lies between two pieces of the mesh (within a voxel diagonal of
+    both): the grid has broken a thin connection (a rod, a rim) that holds the shape
+    together, although little volume is lost."""
+    pts = rep.lost_parts
+    if pts is None or not len(pts) or not len(faces):
+        return False
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(verts)
+    e = faces[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(e), dtype=np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
+    n_comp, label = connected_components(graph, directed=False)
+    if n_comp < 2:
+        return False
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(verts).query_ball_point(pts, r=float(np.sqrt(3.0)) * rep.h)
+    return any(len({int(label[i]) for i in idx}) > 1 for idx in near)
+
+
+def _volume_agrees(verts: np.ndarray, faces: np.ndarray, rep: ThinReport) -> bool:
+    """The mesh's volume is within :data:`VOLUME_TOLERANCE` (plus three standard
+    errors) of the field's Monte Carlo volume on the same grid."""
+    want = rep.field_volume
+    if not math.isfinite(want) or want <= 0:
+        return True
+    return abs(_mesh_volume(verts, faces) - want) <= VOLUME_TOLERANCE * want + \
+        3.0 * rep.field_volume_se
+
+
+def _thin_report(fld: Field, resolution: Any, voxel_size: Any,
+                 min_feature: float | None) -> ThinReport:
+    """The thin-part report (:func:`.thin.thin_parts`) of the grid the arguments give."""
+    origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
+    grid = Grid(origin=origin, h=h, dims=dims)
+    lip = fld.lipschitz
+    return thin_parts(grid, fld.value, fld.intervals,
+                      lip if math.isfinite(lip) and lip > 0 else None, min_cell=min_feature)
+
+
+
+def _warn_thin(rep: ThinReport, auto: bool, max_resolution: int,
+               mesh_volume: float | None) -> None:
+    """A :class:`csdf.MeshWarning` that the grid loses thin parts (how much, where), or
+    (``mesh_volume`` given) that the mesh's volume is off the field's."""
+    if auto:
+        fix = (f"the default resolution stops at max_resolution={max_resolution}; raise "
+               "it, or give resolution= or voxel_size=")
+    else:
+        fix = "use a finer resolution or voxel_size (leave both unset to choose one)"
+    if rep.too_coarse():
+        where = "" if rep.where is None else \
+            f", e.g. near ({', '.join(_num(v) for v in rep.where)})"
+        what = "parts" if rep.lost_volume >= rep.gap_volume else "gaps"
+        share = f"{100 * rep.fraction:.2g}%" if rep.fraction < 10 else "many times"
+        text = (f"the grid (voxel {_num(rep.h)}) loses {what} thinner than a voxel: "
+                f"about {share} of the shape's volume in {rep.voxels:,} voxels{where}")
+    else:
+        off = 100 * (mesh_volume - rep.field_volume) / rep.field_volume
+        text = (f"the mesh's volume differs from the field's by {off:+.2g}% (voxel "
+                f"{_num(rep.h)}): parts or gaps about a voxel thin are resolved poorly")
+    warnings.warn(f"csdf.mesh: {text}; {fix}", MeshWarning, stacklevel=3)
+
+
+def _check_max_resolution(n: Any) -> int:
+    """``max_resolution`` checked: an integer in ``[2, MAX_MESH_RESOLUTION]``."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or \
+            not 2 <= n <= MAX_MESH_RESOLUTION:
+        raise CsdfError(f"max_resolution must be an integer in [2, {MAX_MESH_RESOLUTION}], "
+                        f"got {_show(n)}")
+    return int(n)
+
+
+def _check_min_feature(x: Any) -> float:
+    """``min_feature`` checked: a positive finite number."""
+    return _positive(x, "min_feature must be a positive number (model units)")
+
+
+def _positive(x: Any, what: str) -> float:
+    """``x`` as a positive finite float, else a :class:`CsdfError` ``"{what}, got x"``."""
+    bad = isinstance(x, bool)
+    v = math.nan
+    try:
+        v = float(x)
+    except (TypeError, ValueError, OverflowError):
+        bad = True
+    if bad or not (v > 0 and math.isfinite(v)):
+        raise CsdfError(f"{what}, got {_show(x)}")
+    return v
 
 
 #: dual-contouring vertices joined by an edge end at least this many voxels apart
@@ -137,7 +295,9 @@ def separate_close_vertices(verts: np.ndarray, faces: np.ndarray, min_edge: floa
     """Move apart, in place, the two ends of every triangle edge shorter than
     ``min_edge``: each end moves ``min_edge`` towards the centroid of its own
     neighbours (the ends have different neighbours, so they part; a move of 1e-4 voxel
-    changes no triangle's orientation). ``verts (V, 3)`` float64, ``faces (F, 3)``.
+    changes no triangle's orientation), and half the shortfall away from the other end
+    along the edge, so the edge reaches ``min_edge`` even where both centroids lie the
+    same way. ``verts (V, 3)`` float64, ``faces (F, 3)``.
 
     Returns:
         The number of vertex moves made (0 for almost every mesh: only the vertices of
@@ -164,7 +324,16 @@ def separate_close_vertices(verts: np.ndarray, faces: np.ndarray, min_edge: floa
         u = acc / np.maximum(cnt, 1.0)[:, None] - verts[idx]
         n = np.linalg.norm(u, axis=1)
         ok = n > 0
+        # the shortfall of each short edge, split between its ends along the edge
+        d = verts[ends[:, 0]] - verts[ends[:, 1]]
+        dn = np.linalg.norm(d, axis=1)
+        push = np.zeros((len(idx), 3))
+        along = dn > 0
+        step = (0.5 * (min_edge - dn[along]) + 0.5 * min_edge) / dn[along]
+        np.add.at(push, np.searchsorted(idx, ends[along, 0]), d[along] * step[:, None])
+        np.add.at(push, np.searchsorted(idx, ends[along, 1]), -d[along] * step[:, None])
         verts[idx[ok]] += min_edge * u[ok] / n[ok, None]
+        verts[idx] += push
         moves += int(ok.sum())
     return moves
 
@@ -219,6 +388,10 @@ class _Progress:
             f"csdf: compiling kernels (first use only; cached in {where})",
             markup=False, highlight=False, soft_wrap=True)
         self.bar.update(self.task, description="compiling kernels (first use only)")
+
+    def stage(self, text: str) -> None:
+        """Show a stage before the octree (a check, a search)."""
+        self.bar.update(self.task, description=text)
 
     def update(self, stage: str, a: int, b: int) -> None:
         """Show stage ``stage`` at ``a`` of ``b`` items."""
@@ -288,13 +461,7 @@ def _grid_layout(bounds: np.ndarray, resolution: Any, voxel_size: Any
         raise CsdfError(f"the bounds {box} have zero size (a point-like or empty "
                         "shape?); nothing to mesh")
     if voxel_size is not None:
-        bad = isinstance(voxel_size, bool)
-        try:
-            h = float(voxel_size)
-        except (TypeError, ValueError, OverflowError):
-            bad = True
-        if bad or not (h > 0 and math.isfinite(h)):
-            raise CsdfError(f"voxel_size must be a positive number, got {_show(voxel_size)}")
+        h = _positive(voxel_size, "voxel_size must be a positive number")
         h_min = side / MAX_MESH_RESOLUTION
         if h < h_min:
             raise CsdfError(

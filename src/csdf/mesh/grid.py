@@ -42,12 +42,15 @@ class Grid:
         return self.origin + ijk * self.h
 
 
-def octree(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:
+def octree(grid: Grid, intervals: Callable, progress: Callable | None,
+           inside: list[float] | None = None) -> np.ndarray:
     """Lower corners ``(K, 3)`` (sample indices) of the bricks that may hold surface.
 
     ``intervals``: ``(lo (M, 3), hi (M, 3)) -> (flo (M,), fhi (M,))``, conservative
     bounds of the field over boxes; ``progress``: optional ``callback(size, kept)`` after
-    each level (cell edge in voxels, cells kept)."""
+    each level (cell edge in voxels, cells kept); ``inside``: optional one-element list
+    to which the volume (model units^3) of the cells dropped as wholly inside is
+    added."""
     dims = np.array(grid.dims)
     size = BRICK
     while size < dims.max():
@@ -60,6 +63,9 @@ def octree(grid: Grid, intervals: Callable, progress: Callable | None) -> np.nda
         touches = np.any(lo_idx == 0, axis=1) | np.any(hi_idx >= dims, axis=1)
         keep = (lo <= 0) & ((hi >= 0) | touches)
         keep &= np.all(lo_idx < dims, axis=1)
+        if inside is not None:
+            full = ~keep & (hi < 0) & np.all(lo_idx < dims, axis=1)
+            inside[0] += float(np.prod(hi_idx[full] - lo_idx[full], axis=1).sum()) * grid.h**3
         cells = cells[keep]
         if progress:
             progress(size, len(cells))

@@ -34,10 +34,10 @@ from .cases import COMPONENT_TABLE, CORNERS, EDGE_AXIS, EDGE_ORIGIN, MAX_COMPONE
 from .dual import PROJECT_STEPS, TIE, dc_finish, dc_solve, edge_normals
 from .grid import BRICK, Grid, octree
 
-__all__ = ["extract"]
+__all__ = ["extract", "sample_bricks"]
 
 
-def _sample_bricks(grid: Grid, bricks: np.ndarray, values: Callable) -> np.ndarray:
+def sample_bricks(grid: Grid, bricks: np.ndarray, values: Callable) -> np.ndarray:
     """Field values ``(K, B+1, B+1, B+1)`` (x fastest last) at the bricks' samples."""
     n = BRICK + 1
     g = np.arange(n)
@@ -131,7 +131,7 @@ def extract(
                     else None)
     if len(bricks) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    vals = _sample_bricks(grid, bricks, values)
+    vals = sample_bricks(grid, bricks, values)
     if progress:
         progress("samples", len(bricks), len(bricks))
     B = BRICK

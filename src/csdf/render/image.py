@@ -158,7 +158,8 @@ def _background(h: int, w: int) -> np.ndarray:
 # ------------------------------------------------------------------------- render
 def auto_camera(shape, width: int = 640, height: int = 480, fov: float = 40.0, *,
                 eye=None, target=None, direction=(1.2, -1.5, 1.0),
-                params: dict | None = None, bounds=None) -> Camera:
+                params: dict | None = None, bounds=None, check_ranges: bool = True
+                ) -> Camera:
     """A camera that frames a shape (z up in the image).
 
     Args:
@@ -172,14 +173,17 @@ def auto_camera(shape, width: int = 640, height: int = 480, fov: float = 40.0, *
             (+x, -y, +z) octant).
         params: parameter values ``{name: value}`` (they may change the bounds).
         bounds: ``(2, 3)`` box of the surface (default: the shape's, see :func:`render`).
+        check_ranges: refuse a parameter value outside its declared range (False: use
+            it anyway).
 
     Raises:
-        CsdfError: bad arguments (see :meth:`Camera.look_at`), an unbounded shape.
+        CsdfError: bad arguments (see :meth:`Camera.look_at`), an unbounded shape;
+            ParamError: a value outside its range (with ``check_ranges``).
     """
     from .camera import _vector, check_resolution
 
     w, h = check_resolution(width, height)
-    b = trace_field(shape, params, "numpy", bounds).bounds
+    b = trace_field(shape, params, "numpy", bounds, check_ranges=check_ranges).bounds
     centre = 0.5 * (b[0] + b[1])
     tgt = centre if target is None else _vector(target, "target")
     if eye is None:
@@ -203,7 +207,7 @@ def auto_camera(shape, width: int = 640, height: int = 480, fov: float = 40.0, *
 
 def render(shape, camera: Camera, width: int | None = None, height: int | None = None,
            params: dict | None = None, shadows: bool = False, ao: bool = False,
-           backend: str = "auto", *, bounds=None) -> Render:
+           backend: str = "auto", *, bounds=None, check_ranges: bool = True) -> Render:
     """Sphere-trace an image of a shape (see :mod:`csdf.render.trace` for the tracer).
 
     Shading: Lambert from one key light (up and to the right of the camera) plus a
@@ -221,6 +225,8 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
         backend: evaluation backend; ``'auto'`` uses the fast Numba kernels.
         bounds: ``(2, 3)`` box containing the surface; needed for unbounded shapes
             (default the shape's box, else one found by interval arithmetic).
+        check_ranges: refuse a parameter value outside its declared range
+            (:class:`csdf.ParamError` naming the range); False renders it anyway.
 
     Returns:
         :class:`Render`: ``color`` (H, W, 3) uint8, ``depth`` (H, W) along the optical
@@ -229,7 +235,8 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     Raises:
         CsdfError: bad image size (0, over 8192 per side or 4096x4096 pixels), a camera
             that is not a :class:`Camera`, unknown parameters, an unbounded shape
-            without ``bounds``.
+            without ``bounds``; ParamError: a value outside its range (with
+            ``check_ranges``).
     """
     if not isinstance(camera, Camera):
         raise CsdfError(f"camera must be a csdf.Camera, got {type(camera).__name__}")
@@ -237,7 +244,7 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     h = camera.height if height is None else height
     cam = camera.scaled(w, h)
     t_start = time.perf_counter()
-    fld = trace_field(shape, params, backend, bounds)
+    fld = trace_field(shape, params, backend, bounds, check_ranges=check_ranges)
     dcam = cam.pixel_directions()
     dirs = dcam @ cam.R.T
     t, normals, stats = trace_hits(fld, cam.t, dirs)

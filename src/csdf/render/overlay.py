@@ -23,7 +23,7 @@ MAX_DOTS = 200_000  # points drawn at most (a seeded subset beyond that)
 
 
 def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
-                *, seed: int = 0) -> np.ndarray:
+                *, seed: int = 0, check_ranges: bool = True) -> np.ndarray:
     """Render the fitted model and draw the scan points over it.
 
     Args:
@@ -32,12 +32,15 @@ def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
         result: the :class:`csdf.fit.FitResult` (object-to-scene ``p = s R q + t``).
         width, height: image size in pixels.
         seed: seed of the subset drawn when there are more than ``MAX_DOTS`` points.
+        check_ranges: refuse result parameter values outside their declared ranges
+            (a fit keeps estimated ones inside; a held one is as it was given).
 
     Returns:
         ``(height, width, 3)`` uint8 sRGB image.
 
     Raises:
-        CsdfError: points that are not an ``(N, 3)`` array, or a bad image size.
+        CsdfError: points that are not an ``(N, 3)`` array, or a bad image size;
+            ParamError: a value outside its range (with ``check_ranges``).
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -49,7 +52,7 @@ def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
     s = pose.scale
     q = pose.apply_inverse(pts)  # object frame: q = R^T (p - t) / s
     params = dict(result.params)
-    fld = trace_field(shape, params, "numpy", what="fit_overlay")
+    fld = trace_field(shape, params, "numpy", what="fit_overlay", check_ranges=check_ranges)
     prog = fld.program
     # frame the model and the points (their 1-99 % box: a few outliers far away must not
     # shrink the view to nothing)
@@ -57,9 +60,10 @@ def fit_overlay(shape, points, result, width: int = 640, height: int = 480,
     if len(q):
         lo, hi = np.percentile(q, 1, axis=0), np.percentile(q, 99, axis=0)
         box = np.stack([np.minimum(box[0], lo), np.maximum(box[1], hi)])
-    cam = auto_camera(prog, width, height, params=params, bounds=box)
-    img = render(prog, cam, params=params)
-    resid = np.abs(prog(q, params)) * s  # scene units, as the fit measures them
+    # the values were checked (or accepted) above
+    cam = auto_camera(prog, width, height, params=params, bounds=box, check_ranges=False)
+    img = render(prog, cam, params=params, check_ranges=False)
+    resid = np.abs(prog(q, params, check_ranges=False)) * s  # scene units, as the fit measures them
     inlier = resid <= float(result.inlier_threshold)
 
     uv, depth = cam.project(q)

@@ -82,11 +82,13 @@ PAD_REL = 1e-3
 
 
 def trace_field(shape, params: dict | None = None, backend: str = "auto", bounds=None,
-                what: str = "rendering") -> Field:
+                what: str = "rendering", *, check_ranges: bool = True) -> Field:
     """The :class:`csdf.field.Field` a tracer runs on (a sweep: one evaluator for every
     ray); a 2D Shape is refused (a 2D Program renders as an infinite prism inside given
-    bounds), as is a field whose Lipschitz bound is not positive."""
-    fld = as_field(shape, params, backend=backend, bounds=bounds, what=what)
+    bounds), as is a field whose Lipschitz bound is not positive. ``check_ranges``: as
+    for :class:`csdf.field.Field` (a value outside its range raises ParamError)."""
+    fld = as_field(shape, params, backend=backend, bounds=bounds, what=what,
+                   check_ranges=check_ranges)
     if fld.shape is not None and fld.shape.dim != 3:
         raise CsdfError(f"{what} needs a 3D shape; extrude or revolve a 2D shape first")
     if not fld.lipschitz > 0:

@@ -13,7 +13,7 @@ import pytest
 import csdf
 from csdf import zoo
 from csdf.field import as_field
-from csdf.mesh.api import _grid_layout, _thin_report
+from csdf.mesh.api import _grid_layout
 from csdf.mesh.grid import Grid
 from csdf.mesh.thin import thin_parts
 
@@ -89,7 +89,9 @@ def test_default_resolution_follows_the_volume_of_slanted_shells():
     128, so nothing is lost outright, but the mesh breaks into pieces and loses volume:
     the default grid is refined until the mesh's volume matches the field's."""
     lamp = zoo.load("lamp")
-    rep = _thin_report(as_field(lamp, what="mesh"), 128, None, None)
+    f = as_field(lamp, what="mesh")
+    origin, h, dims = _grid_layout(f.bounds, 128, None)
+    rep = thin_parts(Grid(origin=origin, h=h, dims=dims), f.value, f.intervals, f.lipschitz)
     coarse = csdf.mesh(lamp, resolution=128, progress=False, check_thin=False)
     true = _mc_volume(lamp, n=1 << 21)
     assert not rep.too_coarse() and abs(coarse.volume / true - 1) > 0.05

@@ -13,7 +13,7 @@ from ..errors import CsdfError, MeshWarning
 from ..field import Field, as_field, auto_bounds, check_bounds, kernel_cache_dir
 from .grid import Grid
 from .reference import extract
-from .thin import ThinReport, thin_parts
+from .thin import MC_POINTS, ThinReport, ThinScan, thin_parts
 
 __all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_MESH_RESOLUTION", "MAX_VOXELS"]
 
@@ -112,23 +112,18 @@ def mesh(
             resolution = min(_BASE_RESOLUTION, max_resolution)
         thin, agrees = None, True
         while True:
-            if check_thin:
-                if reporter:
-                    reporter.stage("checking for thin parts")
-                thin = _thin_report(fld, resolution, voxel_size, min_feature)
-                if auto and thin.too_coarse() and 2 * resolution <= max_resolution:
-                    resolution *= 2
-                    continue
             origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
             grid = Grid(origin=origin, h=h, dims=dims)
-            verts, faces = _extract(fld, grid, method, reporter)
-            if auto and check_thin and 2 * resolution <= max_resolution:
-                agrees = _volume_agrees(verts, faces, thin)
-                if not agrees or _bridges_lost(verts, faces, thin):
-                    resolution *= 2
-                    continue
-            elif auto and check_thin:
-                agrees = _volume_agrees(verts, faces, thin)
+            verts, faces, thin = _extract(fld, grid, method, reporter, check_thin,
+                                          min_feature, auto)
+            if thin is None:
+                break
+            finer = auto and 2 * resolution <= max_resolution
+            agrees = not auto or _volume_agrees(verts, faces, thin)
+            if finer and (thin.too_coarse() or not agrees
+                          or _bridges_lost(verts, faces, thin)):
+                resolution *= 2
+                continue
             break
         if thin is not None and (thin.too_coarse() or not agrees):
             _warn_thin(thin, auto, max_resolution, None if agrees else
@@ -156,21 +151,39 @@ def mesh(
 VOLUME_TOLERANCE = 0.01
 
 
-def _extract(fld: Field, grid: Grid, method: str, reporter: Any
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """``(vertices (V, 3), faces (F, 3))`` of the field's zero set on ``grid``: compiled
-    and streamed where the field has a serial evaluator, else the NumPy reference."""
+def _extract(fld: Field, grid: Grid, method: str, reporter: Any, check_thin: bool,
+             min_feature: float | None, volume: bool
+             ) -> tuple[np.ndarray, np.ndarray, ThinReport | None]:
+    """``(vertices (V, 3), faces (F, 3), thin-part report or None)`` of the field's zero
+    set on ``grid``: compiled and streamed where the field has a serial evaluator (the
+    thin-part check then scans the mesher's own samples), else the NumPy reference.
+    ``volume``: the report estimates the field's volume too."""
+    lip = fld.lipschitz
+    lip = lip if math.isfinite(lip) and lip > 0 else None
+    mc = MC_POINTS if volume else 0
     serial = fld.serial_values()
     update = reporter.update if reporter else None
-    if serial is not None:
-        # compiled, streamed over the octree's bricks (same results, see stream.py)
-        from .stream import extract_dc, extract_mc
+    if serial is None:
+        verts, faces = extract(grid, fld.value, fld.gradient, fld.intervals, method, update)
+        rep = thin_parts(grid, fld.value, fld.intervals, lip, min_cell=min_feature,
+                         mc_points=mc) if check_thin else None
+        return verts, faces, rep
+    # compiled, streamed over the octree's bricks (same results, see stream.py)
+    from .stream import extract_dc, extract_mc
 
-        if method == "mc":
-            return extract_mc(grid, fld.value, fld.intervals, update, serial=serial)
-        return extract_dc(grid, fld.value, fld.gradient, fld.intervals, update,
-                          serial=serial, values_and_gradients=fld.value_and_grad)
-    return extract(grid, fld.value, fld.gradient, fld.intervals, method, update)
+    scan = ThinScan(grid, lip) if check_thin else None
+    if method == "mc":
+        verts, faces = extract_mc(grid, fld.value, fld.intervals, update, serial=serial,
+                                  scan=scan)
+    else:
+        verts, faces = extract_dc(grid, fld.value, fld.gradient, fld.intervals, update,
+                                  serial=serial, values_and_gradients=fld.value_and_grad,
+                                  scan=scan)
+    if scan is None:
+        return verts, faces, None
+    if reporter:
+        reporter.stage("checking for thin parts")
+    return verts, faces, scan.report(fld.value, fld.intervals, min_feature, mc_points=mc)
 
 
 def _mesh_volume(verts: np.ndarray, faces: np.ndarray) -> float:
@@ -213,17 +226,6 @@ def _volume_agrees(verts: np.ndarray, faces: np.ndarray, rep: ThinReport) -> boo
         return True
     return abs(_mesh_volume(verts, faces) - want) <= VOLUME_TOLERANCE * want + \
         3.0 * rep.field_volume_se
-
-
-def _thin_report(fld: Field, resolution: Any, voxel_size: Any,
-                 min_feature: float | None) -> ThinReport:
-    """The thin-part report (:func:`.thin.thin_parts`) of the grid the arguments give."""
-    origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
-    grid = Grid(origin=origin, h=h, dims=dims)
-    lip = fld.lipschitz
-    return thin_parts(grid, fld.value, fld.intervals,
-                      lip if math.isfinite(lip) and lip > 0 else None, min_cell=min_feature)
-
 
 
 def _warn_thin(rep: ThinReport, auto: bool, max_resolution: int,

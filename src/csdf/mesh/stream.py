@@ -62,6 +62,7 @@ def extract_mc(
     tol: float = 1e-6,
     chunk_samples: int = CHUNK_SAMPLES,
     serial: Callable | None = None,
+    scan: Callable | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes of the zero set on ``grid``, streamed over the octree's bricks.
 
@@ -74,12 +75,16 @@ def extract_mc(
         chunk_samples: samples per field evaluation (memory / call-overhead trade-off).
         serial: optional single-threaded ``values`` (same results), which lets the
             stages run side by side on worker threads (see :func:`_stream`).
+        scan: optional ``callback(bricks (C, 3), values (C, n, n, n))`` called with each
+            chunk's samples (on a worker thread; it must not keep ``values``), and
+            first ``scan.octree(bricks (K, 3), inside_volume)`` when it has that
+            attribute: how the thin-part check (:mod:`.thin`) shares the mesher's work.
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64 (what ``trimesh`` keeps, so
         it makes no copy), counter-clockwise seen from outside.
     """
-    bricks = _sorted_bricks(grid, intervals, progress)
+    bricks = _sorted_bricks(grid, intervals, progress, scan)
     if len(bricks) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     dims = np.array(grid.dims, dtype=np.int64)
@@ -96,7 +101,7 @@ def extract_mc(
         return table, n_used, ebuf, n_new
 
     verts = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel,
-                    est_faces // 2, serial)
+                    est_faces // 2, serial, scan)
     return verts, out[0][:out[1]]
 
 
@@ -110,6 +115,7 @@ def extract_dc(
     chunk_samples: int = CHUNK_SAMPLES,
     serial: Callable | None = None,
     values_and_gradients: Callable | None = None,
+    scan: Callable | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Manifold dual contouring of the zero set on ``grid``, streamed like
     :func:`extract_mc` and compiled (:mod:`.dc_kernels`): the same mesh as
@@ -124,6 +130,7 @@ def extract_dc(
         intervals, progress, tol, chunk_samples, serial: as for :func:`extract_mc`.
         values_and_gradients: optional ``(M, 3) -> ((M,), (M, 3))`` in one pass (for the
             projection of the vertices; else ``values`` and ``gradients``).
+        scan: as for :func:`extract_mc`.
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64, counter-clockwise seen
@@ -131,7 +138,7 @@ def extract_dc(
     """
     from . import dc_kernels as D
 
-    bricks = _sorted_bricks(grid, intervals, progress)
+    bricks = _sorted_bricks(grid, intervals, progress, scan)
     if len(bricks) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     dims = np.array(grid.dims, dtype=np.int64)
@@ -158,7 +165,7 @@ def extract_dc(
         return table, n_used, ebuf, n_new
 
     roots = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel, est,
-                    serial)
+                    serial, scan)
     n_e = len(roots)
     uaxis = st["axis"][:n_e].astype(np.int64)
     on_box = st["on_box"][:n_e].astype(bool)
@@ -181,16 +188,23 @@ def extract_dc(
     return dual.dc_finish(grid, verts, quads, found, st["f0"][:n_e], values, gradients_values)
 
 
-def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None) -> np.ndarray:
-    """The octree's bricks ``(K, 3)``, sorted by x, y, z (a deterministic, local sweep)."""
+def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None,
+                   scan: Callable | None = None) -> np.ndarray:
+    """The octree's bricks ``(K, 3)``, sorted by x, y, z (a deterministic, local sweep);
+    ``scan.octree`` (when there is one) is told them and the volume of the cells dropped
+    as wholly inside."""
+    inside = [0.0]
     bricks = octree(grid, intervals, (lambda s, n: progress("octree", s, n)) if progress
-                    else None)
-    return bricks[np.lexsort((bricks[:, 2], bricks[:, 1], bricks[:, 0]))]
+                    else None, inside=inside)
+    bricks = bricks[np.lexsort((bricks[:, 2], bricks[:, 1], bricks[:, 0]))]
+    if hasattr(scan, "octree"):
+        scan.octree(bricks, inside[0])
+    return bricks
 
 
 def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable | None,
             tol: float, chunk_samples: int, kernel: Callable, est_verts: int,
-            serial: Callable | None = None) -> np.ndarray:
+            serial: Callable | None = None, scan: Callable | None = None) -> np.ndarray:
     """Stream over ``bricks (K, 3)`` chunk by chunk: evaluate the samples, run ``kernel``
     (``(chunk, vals, table, n_used, n_verts, ebuf) -> (table, n_used, ebuf, n_new)``, which
     numbers the chunk's new crossed edges from ``n_verts`` in the edge hash map ``table``
@@ -243,7 +257,7 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
     def sample(k):
         if k < len(bricks) and k not in ahead:
             ahead[k] = pool.submit(_samples, bricks[k:k + per_chunk], f, origin, h, dims,
-                                   spare_vals)
+                                   spare_vals, scan)
 
     def search_owning(ebuf, n_new, out, base):
         rest = search(ebuf, n_new, out, base, f)
@@ -314,7 +328,8 @@ class _Inline:
 
 
 def _samples(chunk: np.ndarray, values: Callable, origin: np.ndarray, h: float,
-             dims: np.ndarray, spare: list | None = None) -> np.ndarray:
+             dims: np.ndarray, spare: list | None = None,
+             scan: Callable | None = None) -> np.ndarray:
     """Field values ``(C, n, n, n)`` at the samples of bricks ``chunk (C, 3)``, closed on
     the grid box (``n = BRICK + 1``).
 
@@ -338,6 +353,8 @@ def _samples(chunk: np.ndarray, values: Callable, origin: np.ndarray, h: float,
         assert vals.base is buf  # (so the kernel's caller can give buf back)
     vals = vals.reshape(len(chunk), n, n, n)
     K.close_on_box(chunk, vals, dims, h)
+    if scan is not None:
+        scan(chunk, vals)
     return vals
 
 

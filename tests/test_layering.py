@@ -26,6 +26,7 @@ LAYERS: dict[str, int] = {
     "csdf.parallel": 0, "csdf.memory": 0, "csdf.pose": 0, "csdf.opformula": 0,
     # 1 shapes: primitives, operators, and the text language that builds them
     "csdf.shapes": 1, "csdf.lang": 1, "csdf.zoo": 1,
+    "csdf.shapes.exprfield": 1, "csdf.lang.vm": 1,  # a field from an expression; .vm in
     # 2 compiler: tape, bytecode, simplification
     "csdf.compiler": 2,
     # 3 evaluators
@@ -34,7 +35,7 @@ LAYERS: dict[str, int] = {
     "csdf.field": 4,
     # 5 consumers
     "csdf.mesh": 5, "csdf.render": 5, "csdf.sample": 5, "csdf.slicing": 5, "csdf.scan": 5,
-    "csdf.fit": 5, "csdf.io": 5,
+    "csdf.fit": 5, "csdf.io": 5, "csdf.io.vm": 5,  # .vm out (and in, from csdf.lang.vm)
     # 6 apps
     "csdf.cli": 6, "csdf.editor": 6, "csdf.demo": 6, "csdf": 6,
 }

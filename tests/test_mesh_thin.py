@@ -151,7 +151,7 @@ def test_bookshelf_keeps_its_boards():
     assert m.volume == pytest.approx(true, rel=0.02)
     # an explicit grid too coarse for the boards: the mesh says what it lost
     m, caught = _mesh(shelf, params={"board": 0.012}, resolution=64)
-    assert len(caught) == 1 and "of the shape's volume" in str(caught[0].message)
+    assert len(caught) == 1 and "loses parts thinner than a voxel" in str(caught[0].message)
 
 
 @pytest.mark.parametrize("resolution", [64, None])
@@ -165,14 +165,21 @@ def test_params_and_defaults_give_the_same_mesh(resolution):
 
 
 def test_cli_prints_the_warning(tmp_path):
-    model = tmp_path / "plate.csdf"
-    model.write_text("export box((1, 1, 0.01))\n")
+    model = tmp_path / "plate.csdf"  # a ball in a plate 0.3 voxel thick at 12
+    model.write_text("export box((1, 1, 0.025)) | sphere(0.3)\n")
     out = tmp_path / "plate.stl"
     r = subprocess.run([sys.executable, "-m", "csdf.cli", "mesh", str(model), "-o", str(out),
-                        "-r", "16", "-q"], capture_output=True, text=True, timeout=300)
+                        "-r", "12", "-q"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "warning: csdf.mesh: the grid" in r.stderr and out.exists()
     r = subprocess.run([sys.executable, "-m", "csdf.cli", "mesh", str(model), "-o", str(out),
-                        "-r", "16", "-q", "--no-check-thin"], capture_output=True, text=True,
+                        "-r", "12", "-q", "--no-check-thin"], capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0 and "warning" not in r.stderr
+    # a grid that loses everything: the warning, then a clear error, and no file
+    out.unlink()
+    model.write_text("export box((1, 1, 0.025))\n")
+    r = subprocess.run([sys.executable, "-m", "csdf.cli", "mesh", str(model), "-o", str(out),
+                        "-r", "12", "-q"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "the mesh is empty" in r.stderr and not out.exists()
+    assert "most of the shape" in r.stderr or "% of the shape's volume" in r.stderr

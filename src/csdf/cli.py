@@ -42,12 +42,12 @@ err = Console(stderr=True)
 
 
 def _load(path: Path):
-    """A Shape (from .csdf) or a Program (from .csdfb/.csdft)."""
+    """A Shape (from .csdf or Fidget's .vm) or a Program (from .csdfb/.csdft)."""
     from . import load
     from .compiler.program import Program
 
     suffix = path.suffix.lower()
-    if suffix == ".csdf":
+    if suffix in (".csdf", ".vm"):
         return load(path)
     try:
         data = path.read_bytes()
@@ -71,7 +71,7 @@ def _load(path: Path):
         except TypeError:  # (an error class with another constructor)
             named = CsdfError(f"{path}: {exc}")
         raise named from None
-    raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .csdfb or .csdft")
+    raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .vm, .csdfb or .csdft")
 
 
 def _field(model):
@@ -307,7 +307,7 @@ def mesh(
                                        help="The finest default resolution."),
     min_feature: float | None = typer.Option(
         None, "--min-feature", help="Thinnest part or gap to look for (model units; "
-        "default 1/8 voxel)."),
+        "default 1/4 voxel)."),
     check_thin: bool = typer.Option(True, "--check-thin/--no-check-thin",
                                     help="Look for parts thinner than a voxel."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
@@ -336,6 +336,9 @@ def mesh(
                           highlight=False)
             else:
                 warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        if len(result.faces) == 0:
+            raise CsdfError(f"{model}: the mesh is empty (no surface inside the bounds, or "
+                            "only parts thinner than a voxel); nothing written")
         io.write_mesh(result, output)
         out.print(f"{output}: {len(result.faces):,} triangles, {len(result.vertices):,} "
                   f"vertices, watertight={result.is_watertight}, {dt:.2f} s "

@@ -663,8 +663,13 @@ def _pretty(t: str) -> str:
 
 
 def load(path: str | os.PathLike) -> Shape:
-    """Load a ``.csdf`` model file (see :func:`loads`)."""
+    """Load a ``.csdf`` model file (see :func:`loads`); a ``.vm`` file (Fidget's text
+    format) is read by :func:`csdf.lang.vm.load_vm`."""
     p = Path(path)
+    if p.suffix.lower() == ".vm":
+        from .vm import load_vm
+
+        return load_vm(p)
     try:
         size = p.stat().st_size
     except OSError as exc:

@@ -59,8 +59,8 @@ def mesh(
         max_resolution: the finest default resolution (a ``resolution`` chosen by the
             thin-part check never exceeds it; default 1024).
         min_feature: the thinnest part or gap (model units) the thin-part check looks
-            for: cells are refined with interval arithmetic down to this edge.
-            Default: 1/8 voxel of the grid checked.
+            for (thinner ones may go unnoticed): cells are refined with interval
+            arithmetic down to half of it. Default: 1/4 voxel.
         check_thin: look for parts and gaps thinner than a voxel, which a grid loses
             between its samples (:mod:`csdf.mesh.thin`). Without ``resolution`` and
             ``voxel_size``, the resolution is 128, doubled (up to ``max_resolution``)
@@ -241,9 +241,10 @@ def _warn_thin(rep: ThinReport, auto: bool, max_resolution: int,
         where = "" if rep.where is None else \
             f", e.g. near ({', '.join(_num(v) for v in rep.where)})"
         what = "parts" if rep.lost_volume >= rep.gap_volume else "gaps"
-        share = f"{100 * rep.fraction:.2g}%" if rep.fraction < 10 else "many times"
+        share = f"about {100 * rep.fraction:.2g}% of the shape's volume" \
+            if rep.fraction < 1 else "most of the shape"
         text = (f"the grid (voxel {_num(rep.h)}) loses {what} thinner than a voxel: "
-                f"about {share} of the shape's volume in {rep.voxels:,} voxels{where}")
+                f"{share}, in {rep.voxels:,} voxels{where}")
     else:
         off = 100 * (mesh_volume - rep.field_volume) / rep.field_volume
         text = (f"the mesh's volume differs from the field's by {off:+.2g}% (voxel "

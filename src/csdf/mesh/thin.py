@@ -109,7 +109,8 @@ def thin_parts(grid: Grid, values: Callable, intervals: Callable,
         lipschitz: ``L`` when ``|f(x) - f(y)| <= L |x - y|`` (a distance, a bound, or a
             field whose gradient is bounded by ``L``); None to test every same-sign
             voxel with intervals.
-        min_cell: the smallest cell edge to refine to (model units; default ``h / 8``).
+        min_cell: the thinnest part or gap to find (model units; default ``h / 4``):
+            cells are refined down to half of it.
         max_cells: the most cells refined at once (bounds time and memory).
         mc_points: Monte Carlo points for :attr:`ThinReport.field_volume` (0: none).
 
@@ -176,8 +177,9 @@ class ThinScan:
         for :func:`thin_parts`."""
         h = self.h
         if min_cell is None:
-            min_cell = h / 8
-        levels = max(0, math.ceil(math.log2(h / min_cell) - 1e-9)) if min_cell < h else 0
+            min_cell = h / 4
+        # cells down to half of min_cell: a part min_cell thick holds a whole one
+        levels = max(0, math.ceil(math.log2(2.0 * h / min_cell) - 1e-9))
         volume = self.inside_volume + self._inside * h ** 3
         fvol, fse = _brick_volume(self.grid, self.bricks, values, mc_points)
         fvol = fvol + self.inside_volume if mc_points > 0 else math.nan

@@ -27,6 +27,7 @@ LAYERS: dict[str, int] = {
     # 1 shapes: primitives, operators, and the text language that builds them
     "csdf.shapes": 1, "csdf.lang": 1, "csdf.zoo": 1,
     "csdf.shapes.exprfield": 1, "csdf.lang.vm": 1,  # a field from an expression; .vm in
+    "csdf.lang.source": 1,  # checks shared by the text readers
     # 2 compiler: tape, bytecode, simplification
     "csdf.compiler": 2,
     # 3 evaluators

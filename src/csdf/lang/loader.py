@@ -35,6 +35,7 @@ from .. import expr as E
 from ..errors import CsdfError, ModelError
 from ..expr import Expr
 from ..shapes.base import REGISTRY, Shape
+from .source import check_source
 
 __all__ = ["load", "loads", "parser", "MAX_FILE_BYTES", "MAX_DEPTH", "MAX_CALLS",
            "MAX_INSTRUCTIONS"]
@@ -509,11 +510,7 @@ def loads(text: str, file: str = "<string>") -> Shape:
     Raises:
         ModelError: with file, line, column, a caret under the offending text and a hint.
     """
-    if not isinstance(text, str):
-        raise ModelError(f"model text must be a string, got {type(text).__name__}", file=file)
-    size = len(text.encode("utf-8", "surrogatepass"))
-    if size > MAX_FILE_BYTES:
-        raise ModelError(f"model is {size} bytes; the limit is {MAX_FILE_BYTES}", file=file)
+    check_source(text, file, MAX_FILE_BYTES, "model text")
     loader = _Loader(text, file)
     try:
         tree = parser().parse(text)

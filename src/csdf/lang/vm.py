@@ -70,6 +70,7 @@ from ..errors import CsdfError, ModelError
 from ..expr import Expr
 from ..shapes.base import MAX_EXPR_NODES, Shape
 from ..shapes.exprfield import expr_shape
+from .source import check_source
 
 __all__ = ["load_vm", "loads_vm", "OPCODES", "VmOp", "MAX_VM_BYTES", "MAX_VM_NODES"]
 
@@ -249,11 +250,7 @@ def loads_vm(text: str, name: str = "<string>") -> Shape:
             file, or a limit exceeded (:data:`MAX_VM_BYTES`, :data:`MAX_VM_NODES`,
             :data:`~csdf.shapes.base.MAX_EXPR_NODES`, the compiler's slot limit).
     """
-    if not isinstance(text, str):
-        raise ModelError(f".vm text must be a string, got {type(text).__name__}", file=name)
-    size = len(text.encode("utf-8", "surrogatepass"))
-    if size > MAX_VM_BYTES:
-        raise ModelError(f"the file is {size} bytes; the limit is {MAX_VM_BYTES}", file=name)
+    check_source(text, name, MAX_VM_BYTES, ".vm text")
     src = _Lines(text, name)
     with E.node_budget(MAX_EXPR_NODES, "the .vm file"):
         root, uses_z, count = _parse(src)

@@ -197,3 +197,23 @@ def test_bad_listing_file_errors_name_the_file(tmp_path):
     r = runner.invoke(app, ["info", str(text)])
     assert r.exit_code == 2
     assert f"{text}: line" in r.output.replace("\n", ""), r.output
+
+
+def test_signalling_nan_in_a_float32_ply_reads_quietly(tmp_path):
+    """A signalling NaN in a binary float32 column reads as NaN, with no RuntimeWarning
+    (warnings are errors here)."""
+    import struct
+    import warnings
+
+    from csdf.io import read_point_cloud, read_points
+
+    path = tmp_path / "snan.ply"
+    hdr = (b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n"
+           b"property float y\nproperty float z\nend_header\n")
+    path.write_bytes(hdr + struct.pack("<I", 0x7FA00000) + struct.pack("<5f", 0, 0, 1, 2, 3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pts, _ = read_points(path)
+        cloud = read_point_cloud(path)
+    assert np.isnan(pts[0, 0]) and pts[1].tolist() == [1.0, 2.0, 3.0]
+    assert np.isnan(cloud.points[0, 0])

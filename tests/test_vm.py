@@ -379,3 +379,22 @@ def test_expr_shape_api():
         expr_shape(e + Z, dim=2)
     with pytest.raises(csdf.ShapeError):
         expr_shape(1.0)
+
+
+def test_cli_compiles_to_vm_and_back(tmp_path):
+    """`csdf compile model.csdf -o x.vm`, then `csdf info x.vm`: the same field."""
+    from typer.testing import CliRunner
+
+    from csdf.cli import app
+
+    model = tmp_path / "m.csdf"
+    model.write_text("export sphere(1) - box(1.5)\n")
+    out = tmp_path / "m.vm"
+    r = CliRunner().invoke(app, ["compile", str(model), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "as Fidget .vm" in r.output
+    back = csdf.load(out)
+    pts = np.random.default_rng(3).uniform(-1.5, 1.5, size=(500, 3))
+    np.testing.assert_array_equal(back(pts), csdf.load(model)(pts))
+    r = CliRunner().invoke(app, ["compile", str(model), "-o", str(tmp_path / "m.txt")])
+    assert r.exit_code == 2 and ".csdfb, .csdft or .vm" in r.output

@@ -349,19 +349,25 @@ def mesh(
 
 @app.command()
 def compile(  # noqa: A001 - the verb users type
-    model: Path = typer.Argument(..., help="A .csdf model."),
-    output: Path = typer.Option(..., "-o", "--output", help=".csdfb (bytecode) or .csdft "
-                                "(text listing)."),
+    model: Path = typer.Argument(..., help="A .csdf model (or .vm field)."),
+    output: Path = typer.Option(..., "-o", "--output", help=".csdfb (bytecode), .csdft "
+                                "(text listing) or .vm (Fidget's format)."),
 ):
-    """Compile a model to bytecode (.csdfb) or a readable listing (.csdft)."""
+    """Compile a model to bytecode (.csdfb), a readable listing (.csdft) or Fidget's .vm."""
 
     def go():
         from .io import atomic_path
 
         prog = _field(_load(model)).program
         suffix = output.suffix.lower()
-        if suffix not in (".csdfb", ".csdft"):
-            raise CsdfError(f"{output}: the output must end in .csdfb or .csdft")
+        if suffix not in (".csdfb", ".csdft", ".vm"):
+            raise CsdfError(f"{output}: the output must end in .csdfb, .csdft or .vm")
+        if suffix == ".vm":
+            from .io import save_vm
+
+            save_vm(prog, output)
+            out.print(f"{output}: {len(prog)} instructions as Fidget .vm", soft_wrap=True)
+            return
         with atomic_path(output) as tmp:
             if suffix == ".csdfb":
                 tmp.write_bytes(prog.to_bytes())

@@ -410,9 +410,7 @@ def read_points(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None]
             (the message says what and where).
     """
     cols, _, pos, nrm = _read_vertex(path)
-    points = np.stack([np.asarray(cols[c], dtype=np.float64) for c in pos], axis=1)
-    normals = np.stack([np.asarray(cols[c], dtype=np.float64) for c in nrm], axis=1) \
-        if nrm else None
+    points, normals = _xyz_normals(cols, pos, nrm)
     return points, normals
 
 
@@ -475,10 +473,18 @@ def read_point_cloud(path: str | os.PathLike) -> PointCloud:
     comments: list[tuple[int, str]] = []
     cols, _, pos, nrm = _read_vertex(path, comments)
     vp = _viewpoint(comments, str(Path(path)))
-    points = np.stack([np.asarray(cols[c], dtype=np.float64) for c in pos], axis=1)
-    normals = np.stack([np.asarray(cols[c], dtype=np.float64) for c in nrm], axis=1) \
-        if nrm else None
+    points, normals = _xyz_normals(cols, pos, nrm)
     return PointCloud(points, normals, vp)
+
+
+def _xyz_normals(cols: dict, pos: list, nrm: list) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(points (N, 3), normals (N, 3) or None)`` float64 from the vertex columns (a
+    signalling NaN in a float32 column becomes a quiet NaN without a warning)."""
+    with np.errstate(invalid="ignore"):
+        points = np.stack([np.asarray(cols[c], dtype=np.float64) for c in pos], axis=1)
+        normals = np.stack([np.asarray(cols[c], dtype=np.float64) for c in nrm], axis=1) \
+            if nrm else None
+    return points, normals
 
 
 def read_point_properties(path: str | os.PathLike) -> dict[str, np.ndarray]:

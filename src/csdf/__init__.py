@@ -39,6 +39,7 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
     from .fit import FitResult, fit, icp
     from .lang import dumps, load, loads
     from .mesh import mesh
+    from .raster import raster
     from .render import Camera, Render, render
     from .sample import sample_surface, sample_volume
     from .scan import scan
@@ -68,6 +69,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "sample_surface": (".sample", "sample_surface"),
     "sample_volume": (".sample", "sample_volume"),
     "scan": (".scan", "scan"),
+    "raster": (".raster", "raster"),
     "save_slice": (".slicing", "save_slice"),
     "slice": (".slicing", "slice"),  # public name csdf.slice (not in __all__)
 }
@@ -125,6 +127,6 @@ __all__ = [
     "compile", "param", "Param", "mesh", "io", "zoo", "Expr", "Program", "Call", "Shape",
     "REGISTRY", "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
     "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
-    "Render", "render", "scan", "load", "loads", "dumps", "to_glsl", "shadertoy",
+    "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
     "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", *_shape_names,
 ]

@@ -593,6 +593,51 @@ def slice_(
     _run(go)
 
 
+@app.command()
+def raster(
+    model: Path = typer.Argument(..., help="A 2D model: .csdf, .vm, .csdfb or .csdft."),
+    output: Path = typer.Option(..., "-o", "--output", help="Image: .png"),
+    size: str = typer.Option("1024x1024", "--size", help="WIDTHxHEIGHT in pixels."),
+    bounds: str | None = typer.Option(None, "--bounds", help="x0,y0,x1,y1 the image "
+                                      "covers (default: the shape's own box)."),
+    param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
+    no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
+):
+    """Rasterise a 2D field: black where it is negative (inside), white elsewhere; row 0
+    at the top of the bounds (a quadtree of tiles with shortened programs)."""
+
+    def go():
+        import numpy as np
+        from PIL import Image
+
+        from .io import atomic_path
+        from .raster import raster as raster_fn
+
+        if output.suffix.lower() != ".png":
+            raise CsdfError(f"{output}: the output must end in .png")
+        w, h = _size(size)
+        box = None
+        if bounds is not None:
+            try:
+                v = [float(t) for t in bounds.split(",")]
+                if len(v) != 4:
+                    raise ValueError
+            except ValueError:
+                raise CsdfError(f"--bounds expects x0,y0,x1,y1 (four numbers), got "
+                                f"{bounds!r}") from None
+            box = ((v[0], v[1]), (v[2], v[3]))
+        fld = _param_field(_load(model), param, no_check_ranges)
+        t0 = time.perf_counter()
+        inside = raster_fn(fld, w, h, box)
+        dt = time.perf_counter() - t0
+        with atomic_path(output) as tmp:
+            Image.fromarray(np.where(inside, 0, 255).astype(np.uint8)).save(tmp, "PNG")
+        out.print(f"{output}: {w}x{h}, {inside.mean():.1%} inside, {dt:.2f} s",
+                  soft_wrap=True)
+
+    _run(go)
+
+
 def _size(text: str) -> tuple[int, int]:
     w, sep, h = text.lower().partition("x")
     try:

@@ -57,7 +57,7 @@ from .pose import as_pose
 __all__ = [
     "Field", "as_field", "field_bounds", "planar_bounds", "auto_bounds", "choose_backend",
     "check_bounds", "params_in_ranges", "AUTO_FAST_POINTS", "to_glsl", "shadertoy", "glsl_params",
-    "glsl_float", "numba_available", "kernel_cache_dir",
+    "glsl_float", "numba_available", "kernel_cache_dir", "evaluate_intervals",
 ]
 
 #: point sets at least this large get the compiled backend under ``'auto'``

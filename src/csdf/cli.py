@@ -105,10 +105,15 @@ def _checked_params(model, values: list[str], no_check_ranges: bool) -> dict[str
 def _param_field(model, values: list[str], no_check_ranges: bool):
     """The :class:`csdf.field.Field` of a loaded model with its ``--param`` values
     (:func:`_checked_params`), for consumers that take a field as it is."""
+    return _field_with(model, _checked_params(model, values, no_check_ranges))
+
+
+def _field_with(model, params: dict[str, float]):
+    """The field of a loaded model with parameter values already checked
+    (:func:`_checked_params`)."""
     from .field import as_field
 
-    params = _checked_params(model, values, no_check_ranges)
-    return as_field(model, params, what="csdf", check_ranges=False)  # checked above
+    return as_field(model, params, what="csdf", check_ranges=False)
 
 
 def _note_compiling(*jobs: tuple[Any, tuple[str, ...]]) -> None:
@@ -583,7 +588,7 @@ def slice_(
         m = _load(model)
         params = _checked_params(m, param, no_check_ranges)
         # the field as slice makes it (a sweep)
-        _note_compiling((_param_field(m, param, no_check_ranges),
+        _note_compiling((_field_with(m, params),
                          ("value", "grad") if gradient_error else ("value",)))
         save_slice(m, output, axis=axis, at=at, resolution=resolution,
                    show_gradient_error=gradient_error, params=params,
@@ -616,16 +621,8 @@ def raster(
         if output.suffix.lower() != ".png":
             raise CsdfError(f"{output}: the output must end in .png")
         w, h = _size(size)
-        box = None
-        if bounds is not None:
-            try:
-                v = [float(t) for t in bounds.split(",")]
-                if len(v) != 4:
-                    raise ValueError
-            except ValueError:
-                raise CsdfError(f"--bounds expects x0,y0,x1,y1 (four numbers), got "
-                                f"{bounds!r}") from None
-            box = ((v[0], v[1]), (v[2], v[3]))
+        v = _numbers(bounds, "--bounds", "x0,y0,x1,y1")
+        box = None if v is None else ((v[0], v[1]), (v[2], v[3]))
         fld = _param_field(_load(model), param, no_check_ranges)
         t0 = time.perf_counter()
         inside = raster_fn(fld, w, h, box)
@@ -649,16 +646,25 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def _vec3(text: str | None, flag: str) -> tuple[float, float, float] | None:
+    """``x,y,z`` of option ``flag`` as three floats, or None when not given."""
+    v = _numbers(text, flag, "x,y,z")
+    return None if v is None else (v[0], v[1], v[2])
+
+
+def _numbers(text: str | None, flag: str, names: str) -> tuple[float, ...] | None:
+    """Comma-separated numbers of option ``flag``, as many as ``names`` lists
+    (``'x,y,z'``); None when not given."""
     if text is None:
         return None
+    n = names.count(",") + 1
     parts = text.split(",")
     try:
-        if len(parts) != 3:
+        if len(parts) != n:
             raise ValueError
-        x, y, z = (float(p) for p in parts)
+        return tuple(float(p) for p in parts)
     except ValueError:
-        raise CsdfError(f"{flag} expects x,y,z (three numbers), got {text!r}") from None
-    return x, y, z
+        count = {3: "three", 4: "four"}.get(n, str(n))
+        raise CsdfError(f"{flag} expects {names} ({count} numbers), got {text!r}") from None
 
 
 def _view(m, size: str, eye: str | None, target: str | None, fov: float, params: dict):

@@ -118,16 +118,15 @@ def mesh(
                                           min_feature, auto)
             if thin is None:
                 break
-            finer = auto and 2 * resolution <= max_resolution
-            agrees = not auto or _volume_agrees(verts, faces, thin)
-            if finer and (thin.too_coarse() or not agrees
-                          or _bridges_lost(verts, faces, thin)):
+            mesh_vol = _mesh_volume(verts, faces) if auto else None
+            agrees = mesh_vol is None or _volume_agrees(mesh_vol, thin)
+            if auto and 2 * resolution <= max_resolution and (
+                    thin.too_coarse() or not agrees or _bridges_lost(verts, faces, thin)):
                 resolution *= 2
                 continue
             break
         if thin is not None and (thin.too_coarse() or not agrees):
-            _warn_thin(thin, auto, max_resolution, None if agrees else
-                       _mesh_volume(verts, faces))
+            _warn_thin(thin, auto, max_resolution, None if agrees else mesh_vol)
     finally:
         if reporter:
             reporter.close()
@@ -189,8 +188,8 @@ def _extract(fld: Field, grid: Grid, method: str, reporter: Any, check_thin: boo
 def _mesh_volume(verts: np.ndarray, faces: np.ndarray) -> float:
     """Enclosed volume (units^3) of a closed, outward-wound triangle mesh."""
     vol = 0.0
-    for a in range(0, len(faces), _EDGE_CHUNK):
-        f = faces[a:a + _EDGE_CHUNK]
+    for a in range(0, len(faces), _FACE_BLOCK):
+        f = faces[a:a + _FACE_BLOCK]
         v0, v1, v2 = verts[f[:, 0]], verts[f[:, 1]], verts[f[:, 2]]
         vol += float(np.einsum("ij,ij->", v0, np.cross(v1, v2)))
     return vol / 6.0
@@ -218,14 +217,13 @@ def _bridges_lost(verts: np.ndarray, faces: np.ndarray, rep: ThinReport) -> bool
     return any(len({int(label[i]) for i in idx}) > 1 for idx in near)
 
 
-def _volume_agrees(verts: np.ndarray, faces: np.ndarray, rep: ThinReport) -> bool:
+def _volume_agrees(mesh_volume: float, rep: ThinReport) -> bool:
     """The mesh's volume is within :data:`VOLUME_TOLERANCE` (plus three standard
     errors) of the field's Monte Carlo volume on the same grid."""
     want = rep.field_volume
     if not math.isfinite(want) or want <= 0:
         return True
-    return abs(_mesh_volume(verts, faces) - want) <= VOLUME_TOLERANCE * want + \
-        3.0 * rep.field_volume_se
+    return abs(mesh_volume - want) <= VOLUME_TOLERANCE * want + 3.0 * rep.field_volume_se
 
 
 def _warn_thin(rep: ThinReport, auto: bool, max_resolution: int,
@@ -281,7 +279,7 @@ def _positive(x: Any, what: str) -> float:
 
 #: dual-contouring vertices joined by an edge end at least this many voxels apart
 MIN_EDGE_VOXELS = 1e-4
-_EDGE_CHUNK = 1 << 20  # faces per block in the edge-length scan (bounds temporaries)
+_FACE_BLOCK = 1 << 20  # faces per block in the scans of all faces (bounds temporaries)
 
 
 def min_edge_length(verts: np.ndarray, h: float) -> float:
@@ -357,10 +355,10 @@ def _may_have_short_edge(verts: np.ndarray, faces: np.ndarray, min_edge: float) 
 
 def _short_edge_ends(verts: np.ndarray, faces: np.ndarray, min_edge: float) -> np.ndarray:
     """``(K, 2)`` vertex pairs of the triangle edges shorter than ``min_edge`` (NumPy,
-    in blocks of :data:`_EDGE_CHUNK` faces)."""
+    in blocks of :data:`_FACE_BLOCK` faces)."""
     ends = [np.zeros((0, 2), dtype=faces.dtype)]
-    for a in range(0, len(faces), _EDGE_CHUNK):
-        f = faces[a:a + _EDGE_CHUNK]
+    for a in range(0, len(faces), _FACE_BLOCK):
+        f = faces[a:a + _FACE_BLOCK]
         for i, j in ((0, 1), (1, 2), (2, 0)):
             d = verts[f[:, i]] - verts[f[:, j]]
             short = np.einsum("ij,ij->i", d, d) < min_edge * min_edge
@@ -393,7 +391,7 @@ class _Progress:
         self.bar.update(self.task, description="compiling kernels (first use only)")
 
     def stage(self, text: str) -> None:
-        """Show a stage before the octree (a check, a search)."""
+        """Show a stage outside the octree-samples-roots sequence (the thin-part check)."""
         self.bar.update(self.task, description=text)
 
     def update(self, stage: str, a: int, b: int) -> None:

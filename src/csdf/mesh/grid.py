@@ -61,10 +61,10 @@ def octree(grid: Grid, intervals: Callable, progress: Callable | None,
         hi_idx = np.minimum(cells + size, dims)
         lo, hi = intervals(grid.points(lo_idx), grid.points(hi_idx))
         touches = np.any(lo_idx == 0, axis=1) | np.any(hi_idx >= dims, axis=1)
-        keep = (lo <= 0) & ((hi >= 0) | touches)
-        keep &= np.all(lo_idx < dims, axis=1)
+        in_grid = np.all(lo_idx < dims, axis=1)
+        keep = (lo <= 0) & ((hi >= 0) | touches) & in_grid
         if inside is not None:
-            full = ~keep & (hi < 0) & np.all(lo_idx < dims, axis=1)
+            full = ~keep & (hi < 0) & in_grid
             inside[0] += float(np.prod(hi_idx[full] - lo_idx[full], axis=1).sum()) * grid.h**3
         cells = cells[keep]
         if progress:

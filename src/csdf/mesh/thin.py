@@ -161,7 +161,7 @@ class ThinScan:
         tk = _kernels()
         if tk is not None:
             ijk, neg, n_in = tk.scan_bricks(
-                np.ascontiguousarray(vals, dtype=np.float64), chunk, self.dims, self.h,
+                np.ascontiguousarray(vals, dtype=np.float64), chunk, self.dims,
                 math.inf if self.reach is None else self.reach, BRICK + 1)
         else:
             ijk, neg, n_in = _scan_numpy(vals, chunk, self.dims, self.reach)

@@ -12,9 +12,10 @@ __all__ = ["scan_bricks"]
 
 
 @njit(cache=True, nogil=True)
-def scan_bricks(v, bricks, dims, h, reach, n):  # pragma: no cover - compiled
-    """One pass over the voxels of bricks ``(K, 3)`` with samples ``v (K, n, n, n)``
-    (samples on the grid's boundary count as outside, at least ``h``).
+def scan_bricks(v, bricks, dims, reach, n):  # pragma: no cover - compiled
+    """One pass over the voxels of bricks ``(K, 3)`` with samples ``v (K, n, n, n)``,
+    closed on the grid box as the mesher samples them (:func:`.kernels.close_on_box`:
+    samples on the grid's boundary are outside, at least ``h``).
 
     Returns:
         ``(ijk (C, 3), neg (C,), inside)``: the candidate voxels (interior ones whose
@@ -42,15 +43,10 @@ def scan_bricks(v, bricks, dims, h, reach, n):  # pragma: no cover - compiled
                     for di in range(2):
                         for dj in range(2):
                             for dl in range(2):
-                                a, bb, cc = gi + di, gj + dj, gl + dl
                                 x = v[b, i + di, j + dj, l + dl]
-                                if (a <= 0 or bb <= 0 or cc <= 0 or a >= dims[0]
-                                        or bb >= dims[1] or cc >= dims[2]):
-                                    x = max(x, h)
                                 lo = min(lo, x)
                                 hi = max(hi, x)
-                    own = v[b, i, j, l]
-                    if own < 0 and gi > 0 and gj > 0 and gl > 0:
+                    if v[b, i, j, l] < 0:  # (boundary samples are outside)
                         inside += 1
                     if not (gi >= 1 and gj >= 1 and gl >= 1 and gi + 1 < dims[0]
                             and gj + 1 < dims[1] and gl + 1 < dims[2]):

@@ -60,8 +60,8 @@ def test_raster_uses_the_own_box_and_interp():
     ({"width": 0}, "width must be an integer"),
     ({"height": 10**6}, "height must be an integer"),
     ({"width": 2.5}, "width must be an integer"),
-    ({"leaf": 0}, "leaf must be a positive integer"),
-    ({"backend": "fast"}, "backend must be 'numpy' or 'interp'"),
+    ({"leaf": 0}, "leaf must be an integer in"),
+    ({"backend": "fast"}, "backend must be 'auto', 'numpy' or 'interp'"),
     ({"bounds": ((1, 1), (0, 0))}, "min < max"),
 ])
 def test_raster_bad_arguments(kw, match):

@@ -52,6 +52,7 @@ from .backends.glsl import glsl_float, glsl_params, shadertoy, to_glsl
 from .backends.interval_eval import evaluate_intervals
 from .compiler.program import Program, as_program
 from .errors import CsdfError
+from .interval import check_boxes
 from .pose import as_pose
 
 __all__ = [
@@ -62,6 +63,13 @@ __all__ = [
 
 #: point sets at least this large get the compiled backend under ``'auto'``
 AUTO_FAST_POINTS = 2000
+#: programs longer than this are not compiled into per-program kernels under ``'auto'``
+#: (the compile time grows with the length: ~4-8 s at 1,000-2,000 instructions on the
+#: 2-core machine of ``benchmarks/``); they are interpreted, with pruned tapes
+FAST_MAX_INSTRUCTIONS = 1500
+#: programs at least this long are evaluated with tapes shortened per spatial cell
+#: (:mod:`csdf.backends.pruned`) for values, gradients and intervals
+PRUNE_MIN_INSTRUCTIONS = 1500
 
 
 # ---------------------------------------------------------------------- backend policy
@@ -77,13 +85,16 @@ def kernel_cache_dir() -> Path:
     return _fast_backend.cache_dir()
 
 
-def choose_backend(backend: str = "auto", work: int | None = None) -> str:
+def choose_backend(backend: str = "auto", work: int | None = None,
+                   instructions: int = 0) -> str:
     """The evaluator for a job (see the module docs).
 
     Args:
         backend: ``'auto'`` or a backend name (:data:`csdf.backends.BACKENDS`).
         work: ``None`` for a sweep (many evaluations of one field, which must agree
             with each other), else the number of points of a point-set job.
+        instructions: the program's length; above :data:`FAST_MAX_INSTRUCTIONS`
+            ``'auto'`` gives ``'interp'`` (no per-program compilation).
 
     Returns:
         ``'fast'``, ``'numpy'``, or ``'auto'`` (per-call choice) for small point sets.
@@ -97,6 +108,8 @@ def choose_backend(backend: str = "auto", work: int | None = None) -> str:
         return backend
     if not numba_available():
         return "numpy"
+    if instructions > FAST_MAX_INSTRUCTIONS:
+        return "interp"
     if work is None or work >= AUTO_FAST_POINTS:
         return "fast"
     return "auto"
@@ -290,7 +303,9 @@ class Field:
         if self.program.dim != 3 and not self.pose.is_identity():
             raise CsdfError("a 2D program cannot be posed in 3D; extrude or revolve it")
         self._auto = backend == "auto"
-        self.backend = choose_backend(backend, work)
+        self.backend = choose_backend(backend, work, len(self.program.code))
+        self._cells: Any = None  # the CellTapes of pruned evaluation, made on first use
+        self._region: tuple[np.ndarray, int | None] | None = None
         self._bounds_given = None if bounds is None else check_bounds(bounds)
         self._model_bounds: np.ndarray | None = self._bounds_given
 
@@ -365,7 +380,55 @@ class Field:
                 f"backend={self.backend!r}, {self.pose!r}>")
 
     # ------------------------------------------------------------------ evaluation
+    def pruned(self) -> bool:
+        """True when this field evaluates values, gradients and intervals with tapes
+        shortened per spatial cell (:mod:`csdf.backends.pruned`): programs of at least
+        :data:`PRUNE_MIN_INSTRUCTIONS` on the Numba evaluators, with no NaN parameter.
+        Values are bit-identical to the ``'interp'`` backend's."""
+        return (len(self.program.code) >= PRUNE_MIN_INSTRUCTIONS
+                and self.backend in ("interp", "fast") and numba_available()
+                and not np.isnan(self.pvals).any())
+
+    def set_region(self, box: Any, depth: int | None = None) -> Field:
+        """Where pruned evaluation keeps its cells: the box ``(2, 3)`` (model units)
+        cut into ``2**depth`` cells per axis (default: the field's bounds, depth 5);
+        a mesher aligns it with its octree. Returns self."""
+        self._region = (np.asarray(box, dtype=np.float64).reshape(2, -1), depth)
+        self._cells = None
+        return self
+
+    def _cell_tapes(self):
+        if self._cells is None:
+            from .backends.pruned import cell_tapes
+
+            if self._region is not None:
+                box, depth = self._region
+            else:
+                box, depth = self.model_bounds, None
+                pad = 0.02 * (box[1] - box[0]) + 1e-9
+                box = np.array([box[0] - pad, box[1] + pad])
+            self._cells = cell_tapes(self.program, self.pvals, box, depth)
+        return self._cells
+
+    def _pruned_points(self, points: Any) -> np.ndarray | None:
+        """``(N, 3)`` float64 points for pruned evaluation, or None when it does not
+        apply (not pruned, another dtype or shape)."""
+        if not self.pruned() or not isinstance(points, np.ndarray) or \
+                points.dtype != np.float64 or points.ndim < 1 or points.shape[-1] != 3:
+            return None
+        return np.ascontiguousarray(points.reshape(-1, 3))
+
     def _call(self, method: str, p: np.ndarray):
+        q = self._pruned_points(p) if method in ("__call__", "gradient",
+                                                 "value_and_grad") else None
+        if q is not None:
+            shape = p.shape[:-1]
+            if method == "__call__":
+                return self._cell_tapes().evaluate(q).reshape(shape)
+            v, g = self._cell_tapes().evaluate(q, grad=True)
+            if method == "gradient":
+                return g.reshape(shape + (3,))
+            return v.reshape(shape), g.reshape(shape + (3,))
         fn = getattr(self.program, method)
         # the values were checked (or accepted) when the field was made
         try:
@@ -428,6 +491,10 @@ class Field:
         :func:`csdf.backends.interval_eval.evaluate_intervals`); with a pose, over the
         object-frame box around each world box, times the scale."""
         if self.pose.is_identity():
+            if param_intervals is None and self.pruned():
+                blo, bhi = check_boxes(self.program.dim, lo, hi)
+                if not (np.isnan(blo).any() or np.isnan(bhi).any()):
+                    return self._cell_tapes().intervals(blo, bhi)
             return evaluate_intervals(self.program, lo, hi, params=self.params,
                                       param_intervals=param_intervals)
         blo = np.asarray(lo, dtype=np.float64)
@@ -461,6 +528,19 @@ class Field:
         if self.backend != "fast":
             return True
         return all(_fast_backend.is_ready(self.program, m) for m in modes)
+
+    def raster(self, xs: np.ndarray, ys: np.ndarray, values: bool = False,
+               leaf: int = 16) -> np.ndarray | None:
+        """A 2D field's image at pixel centres ``xs`` (``(W,)``) by ``ys`` (``(H,)``,
+        decreasing) by the compiled quadtree of shortened tapes
+        (:func:`csdf.backends.pruned.raster_image`): ``(H, W)`` float64 values, or
+        bool ``value < 0``; bit-identical to the ``'interp'`` backend. None where Numba
+        is missing or a parameter is NaN."""
+        if not numba_available() or np.isnan(self.pvals).any():
+            return None
+        from .backends.pruned import raster_image
+
+        return raster_image(self.program, self.pvals, xs, ys, values, leaf)[0]
 
     def glsl(self, name: str = "sdf", gradient: bool = True) -> str:
         """This field's program as GLSL (:func:`csdf.to_glsl`; parameters as

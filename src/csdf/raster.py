@@ -16,10 +16,13 @@ has its centre at ``x = x0 + (col + 0.5) (x1 - x0) / width``, ``y = y1 - (row + 
 (y1 - y0) / height`` (row 0 at the top, ``y = y1``), the convention of the Prospero
 challenge.
 
-Measured on Prospero (``../shared/data/vm/prospero.vm``, 1024 x 1024, 2 cores): see
-``benchmarks/bench_prospero.py``. The tile programs are shortened one tile at a time
-in Python, which costs milliseconds per tile; this is the part a compiled simplifier
-will replace.
+The default (``backend='auto'``) runs the same algorithm compiled, level by level
+over all tiles at once (:func:`csdf.backends.pruned.raster_image`, reached through the
+field layer's :meth:`csdf.Field.raster`); this module's Python quadtree, which
+shortens programs one tile at a time with :func:`csdf.compiler.simplify.simplify`,
+remains as the reference (``backend='numpy'`` or ``'interp'``). Measured on Prospero
+(``../shared/data/vm/prospero.vm``, 1024 x 1024, 2 cores): see
+``benchmarks/bench_prospero.py``.
 """
 
 from __future__ import annotations
@@ -41,8 +44,8 @@ LEAF = 128
 
 
 def raster(shape: Any, width: int, height: int, bounds: Any = None, *,
-           values: bool = False, params: dict | None = None, backend: str = "numpy",
-           leaf: int = LEAF, check_ranges: bool = True) -> np.ndarray:
+           values: bool = False, params: dict | None = None, backend: str = "auto",
+           leaf: int | None = None, check_ranges: bool = True) -> np.ndarray:
     """The field of a 2D shape on a ``width x height`` image.
 
     Args:
@@ -56,9 +59,14 @@ def raster(shape: Any, width: int, height: int, bounds: Any = None, *,
             boolean image ``(height, width)``, True where the value is negative
             (inside).
         params: parameter values ``{name: value}``.
-        backend: the evaluator of the leaves (``'numpy'`` or ``'interp'``; both give
-            the same bits as evaluating the whole field on that backend).
-        leaf: tiles of at most ``leaf x leaf`` pixels are evaluated.
+        backend: ``'auto'``: the compiled quadtree
+            (:func:`csdf.backends.pruned.raster_image`, through
+            :meth:`csdf.Field.raster`; bit-identical to the ``'interp'`` backend on the
+            whole field), or this module's Python quadtree where Numba is missing;
+            ``'numpy'`` or ``'interp'``: the Python quadtree with that evaluator at the
+            leaves (the same bits as that backend on the whole field).
+        leaf: tiles of at most ``leaf x leaf`` pixels are evaluated (default 16
+            compiled, :data:`LEAF` in Python).
         check_ranges: refuse parameter values outside their declared ranges.
 
     Returns:
@@ -77,10 +85,12 @@ def raster(shape: Any, width: int, height: int, bounds: Any = None, *,
     w, h = _size(width, "width"), _size(height, "height")
     if w * h > MAX_RASTER_PIXELS:
         raise CsdfError(f"the image has {w * h:,} pixels; the limit is {MAX_RASTER_PIXELS:,}")
-    if isinstance(leaf, bool) or not isinstance(leaf, (int, np.integer)) or leaf < 1:
-        raise CsdfError(f"leaf must be a positive integer, got {leaf!r}")
-    if backend not in ("numpy", "interp"):
-        raise CsdfError(f"raster's backend must be 'numpy' or 'interp', got {backend!r}")
+    if leaf is not None and (isinstance(leaf, bool) or not isinstance(leaf, (int, np.integer))
+                             or not 1 <= leaf <= 256):
+        raise CsdfError(f"leaf must be an integer in [1, 256], got {leaf!r}")
+    if backend not in ("auto", "numpy", "interp"):
+        raise CsdfError(f"raster's backend must be 'auto', 'numpy' or 'interp', got "
+                        f"{backend!r}")
     if bounds is None:
         try:
             box = planar_bounds(prog, fld.params, shape=fld.shape)
@@ -91,6 +101,12 @@ def raster(shape: Any, width: int, height: int, bounds: Any = None, *,
         box = check_bounds(bounds, dim=2, what="bounds")
     xs = box[0, 0] + (np.arange(w) + 0.5) * ((box[1, 0] - box[0, 0]) / w)
     ys = box[1, 1] - (np.arange(h) + 0.5) * ((box[1, 1] - box[0, 1]) / h)
+    if backend == "auto":
+        img = fld.raster(xs, ys, values=values, leaf=16 if leaf is None else int(leaf))
+        if img is not None:
+            return img
+        backend = "numpy"
+    leaf = LEAF if leaf is None else int(leaf)
     out = np.empty((h, w), dtype=np.float64 if values else bool)
     pv = fld.params
     # tiles: (row0, row1, col0, col1, program shortened for the tile's parent box)

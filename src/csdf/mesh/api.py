@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import CsdfError, MeshWarning
 from ..field import Field, as_field, auto_bounds, check_bounds, kernel_cache_dir
-from .grid import Grid
+from .grid import BRICK, Grid
 from .reference import extract
 from .thin import MC_POINTS, ThinReport, ThinScan, thin_parts
 
@@ -162,7 +162,12 @@ def _extract(fld: Field, grid: Grid, method: str, reporter: Any, check_thin: boo
     mc = MC_POINTS if volume else 0
     serial = fld.serial_values()
     update = reporter.update if reporter else None
-    if serial is None:
+    if fld.pruned():  # cells of shortened tapes on the octree's own cells
+        size, depth = BRICK, 0
+        while size < max(grid.dims):
+            size, depth = 2 * size, depth + 1
+        fld.set_region([grid.origin, grid.origin + size * grid.h], min(depth + 2, 7))
+    if serial is None and not fld.pruned():
         verts, faces = extract(grid, fld.value, fld.gradient, fld.intervals, method, update)
         rep = thin_parts(grid, fld.value, fld.intervals, lip, min_cell=min_feature,
                          mc_points=mc) if check_thin else None

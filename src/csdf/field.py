@@ -410,6 +410,21 @@ class Field:
             self._cells = cell_tapes(self.program, self.pvals, box, depth)
         return self._cells
 
+    def empty_cells(self) -> tuple[np.ndarray, np.ndarray, int, np.ndarray] | None:
+        """The cells of pruned evaluation that interval arithmetic has proved empty, for
+        consumers that skip space (the sphere tracer): ``(lo (3,), span (3,), n,
+        empty (n**3,) uint8)``, an ``n x n x n`` grid of cells over the box ``lo + [0,
+        span]`` (model units, the field's frame; the cell ``(i, j, k)`` is entry
+        ``(i * n + j) * n + k``; one level finer than the cells of the tapes) with 1
+        where the field is positive throughout the cell. The flags are filled in as evaluation builds cells (0 means not empty
+        or not yet known) and stay valid for this field. None unless this field is
+        :meth:`pruned`, 3D and not posed."""
+        if not self.pruned() or self.dim != 3 or not self.pose.is_identity():
+            return None
+        ct = self._cell_tapes()
+        empty = ct.track_empty()
+        return ct.lo, ct.span, 1 << ct.empty_depth, empty
+
     def _pruned_points(self, points: Any) -> np.ndarray | None:
         """``(N, 3)`` float64 points for pruned evaluation, or None when it does not
         apply (not pruned, another dtype or shape)."""

@@ -301,6 +301,16 @@ class CellTapes:
         self.tables = [np.full((1 << l) ** self.axes, -1, np.int64)
                        for l in range(self.depth + 1)]
         self.lock = threading.Lock()
+        n_cells = len(self.tables[self.depth])
+        self.stamp = np.zeros(n_cells, np.int32)  # scratch of evaluate's cell numbering
+        self.slot = np.zeros(n_cells, np.int32)
+        self.epoch = 0
+        #: cells proved empty are kept one level finer than the tapes (``2**(depth +
+        #: 1)`` per axis) once :meth:`track_empty` is called, else at the tapes' level
+        self.empty_depth = self.depth
+        #: ``(n_empty_cells,)`` uint8 at ``empty_depth``: 1 where the cell's interval
+        #: proves the field positive (filled in as cells are built; 0: not, or unknown)
+        self.empty = np.zeros(n_cells, np.uint8)
         # level 0: the root tape shortened for the whole box
         self.tables[0][0] = -1
         self.tables[0][0] = self._root()
@@ -310,7 +320,8 @@ class CellTapes:
         lo, hi = self.lo - pad, self.lo + self.span + pad
         if self.axes == 2:
             lo[2] = hi[2] = 0.0
-        t, _, _ = self.pool.shorten(np.zeros(1, np.int64), lo[None], hi[None])
+        t, flo, _ = self.pool.shorten(np.zeros(1, np.int64), lo[None], hi[None])
+        self._mark_empty(0, np.zeros(1, np.int64), flo)
         return int(t[0])
 
     # cell ids at level l: linear index over (i, j[, k]) with 2**l per axis
@@ -365,9 +376,66 @@ class CellTapes:
             lo, hi = self._box_lo(level, missing) - pad, self._box_hi(level, missing) + pad
             if self.axes == 2:
                 lo[:, 2] = hi[:, 2] = 0.0
-            t, _, _ = self.pool.shorten(par, lo, hi)
+            t, flo, _ = self.pool.shorten(par, lo, hi)
             table[missing] = t
+            self._mark_empty(level, missing, flo)
+            if level == self.depth < self.empty_depth:
+                self._mark_children(missing, t, flo)
         return table[ids]
+
+    def track_empty(self) -> np.ndarray:
+        """Keep the cells proved empty one level finer than the tapes (each cell built
+        from now on also bounds its children: intervals only, no tapes); returns the
+        flags (see :attr:`empty`). Limited to ``2**21`` flags (depth 6 in 3D)."""
+        with self.lock:
+            fine = self.depth + 1
+            if self.empty_depth < fine and (1 << fine) ** self.axes <= 1 << 21:
+                old = self.empty.reshape((1 << self.depth,) * self.axes)
+                for ax in range(self.axes):
+                    old = np.repeat(old, 2, axis=ax)
+                self.empty = np.ascontiguousarray(old).reshape(-1)
+                self.empty_depth = fine
+            return self.empty
+
+    def _mark_children(self, ids: np.ndarray, tapes: np.ndarray, flo: np.ndarray) -> None:
+        """Bound the children of the new finest cells ``ids`` (tapes ``tapes``) that
+        are not proved empty themselves, and flag the empty ones."""
+        keep = ~(flo > 0)
+        ids, tapes = ids[keep], tapes[keep]
+        if not len(ids):
+            return
+        k = 1 << self.axes
+        ijk = self._ijk(self.depth, ids)[:, :self.axes] * 2
+        offs = np.array([[(c >> (self.axes - 1 - ax)) & 1 for ax in range(self.axes)]
+                         for c in range(k)])
+        kid = (ijk[:, None, :] + offs[None]).reshape(-1, self.axes)
+        n = 1 << (self.depth + 1)
+        kid_ids = np.zeros(len(kid), np.int64)
+        for ax in range(self.axes):
+            kid_ids = kid_ids * n + kid[:, ax]
+        level = self.depth + 1
+        pad = 1e-7 * self.span / (1 << level)
+        lo, hi = self._box_lo(level, kid_ids) - pad, self._box_hi(level, kid_ids) + pad
+        if self.axes == 2:
+            lo[:, 2] = hi[:, 2] = 0.0
+        _, klo, _ = self.pool.shorten(np.repeat(tapes, k), lo, hi, emit=False)
+        self.empty[kid_ids[klo > 0]] = 1
+
+    def _mark_empty(self, level: int, ids: np.ndarray, flo: np.ndarray) -> None:
+        """Flag the finest cells under cells ``ids`` of ``level`` whose interval lower
+        bound ``flo`` is positive (no surface and no inside there)."""
+        ids = ids[flo > 0]
+        if not len(ids):
+            return
+        m = self.empty_depth - level
+        if m == 0:
+            self.empty[ids] = 1
+            return
+        n = 1 << self.empty_depth
+        grid = self.empty.reshape((n,) * self.axes)
+        w = 1 << m
+        for ijk in self._ijk(level, ids)[:, :self.axes] * w:
+            grid[tuple(slice(int(a), int(a) + w) for a in ijk)] = 1
 
     def cells_of(self, pts: np.ndarray, level: int,
                  upper: bool = False) -> np.ndarray:
@@ -384,14 +452,18 @@ class CellTapes:
         (``(N, 3)`` float64 C-contiguous; 2D programs read x, y)."""
         K = _k()
         N = len(pts)
-        ids = self.cells_of(pts, self.depth)
-        n_cells = len(self.tables[self.depth])
-        counts = np.bincount(ids + 1, minlength=n_cells + 1)
-        occupied = np.flatnonzero(counts[1:])
-        cell_tape = np.concatenate([self.tapes(self.depth, occupied), [0]]).astype(np.int64)
-        gidx = np.full(n_cells + 1, len(occupied), np.int64)  # outside: the whole tape
-        gidx[occupied + 1] = np.arange(len(occupied))
-        order, bounds = K.group_by_cell(gidx[ids + 1], len(cell_tape))
+        group = self.cells_of(pts, self.depth)
+        occupied = np.empty(min(N, len(self.tables[self.depth])), np.int64)
+        with self.lock:  # number the occupied cells in O(N), then their tapes
+            self.epoch += 1
+            if self.epoch >= np.iinfo(np.int32).max:
+                self.stamp[:] = 0
+                self.epoch = 1
+            k = K.compact_cells(group, self.stamp, self.slot, self.epoch, occupied)
+            cell_tape = np.empty(k + 1, np.int64)
+            cell_tape[:k] = self._tapes(self.depth, occupied[:k])
+        cell_tape[k] = 0  # points outside the region: the whole tape
+        order, bounds = K.group_by_cell(group, k + 1)
         out = np.empty(N)
         g = np.empty((N, 3)) if grad else np.empty((1, 3))
         pool = self.pool

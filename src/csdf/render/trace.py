@@ -30,6 +30,13 @@ bound, ``r = f / L`` a radius that holds no surface):
 * After ``max_iter`` iterations a ray that is within ``16 eps`` of the surface counts as
   a hit there, any other as a miss.
 
+* **Empty space** (fields evaluated with tapes pruned per spatial cell, see
+  :meth:`csdf.field.Field.empty_cells`): where a sample lies in a cell whose interval
+  proves the field positive, the ray steps to where the run of such cells ends along
+  it (a 3D DDA over the cells) when that is further than its sphere step. Only cells
+  already built are known (they are kept between calls), so the first image of a
+  program skips less than the next.
+
 A ray whose first sample is already inside (``f <= 0``; a camera inside the solid)
 reports a hit at its start. NaN values end a ray as a miss.
 
@@ -215,12 +222,65 @@ def _start(origins, shared, dirs, box, t_near, idx, o, d, t, tmax, pts):  # prag
 
 
 @njit(**_JIT)
+def _cell_exit(o, d, c, lo, h, ax):  # pragma: no cover
+    """Where the ray ``o + t d`` leaves cell index ``c`` (cells of size ``h`` from
+    ``lo``) along axis ``ax``: inf for a ray parallel to it."""
+    if d[ax] > 0.0:
+        return (lo[ax] + (c + 1) * h - o[ax]) / d[ax]
+    if d[ax] < 0.0:
+        return (lo[ax] + c * h - o[ax]) / d[ax]
+    return np.inf
+
+
+@njit(**_JIT)
+def _empty_run(o, d, t, tmax, lo, span, n, empty):  # pragma: no cover
+    """Where the run of cells proved empty that holds the point ``o + t d`` ends along
+    the ray (``o``, ``d``: ``(3,)``; cells: the ``n**3`` grid ``empty`` over ``lo +
+    [0, span]``, see :meth:`csdf.field.Field.empty_cells`): ``t`` itself when that
+    cell is not known to be empty, at most ``tmax``. A 3D digital differential
+    analyser steps from cell to cell through the face the ray leaves by."""
+    u0 = (o[0] + t * d[0] - lo[0]) / span[0]
+    u1 = (o[1] + t * d[1] - lo[1]) / span[1]
+    u2 = (o[2] + t * d[2] - lo[2]) / span[2]
+    if not (0.0 <= u0 <= 1.0 and 0.0 <= u1 <= 1.0 and 0.0 <= u2 <= 1.0):
+        return t
+    c0 = min(int(math.floor(u0 * n)), n - 1)
+    c1 = min(int(math.floor(u1 * n)), n - 1)
+    c2 = min(int(math.floor(u2 * n)), n - 1)
+    h0, h1, h2 = span[0] / n, span[1] / n, span[2] / n
+    te = t
+    for _ in range(3 * n):
+        if empty[(c0 * n + c1) * n + c2] == 0:
+            return te
+        e0 = _cell_exit(o, d, c0, lo, h0, 0)
+        e1 = _cell_exit(o, d, c1, lo, h1, 1)
+        e2 = _cell_exit(o, d, c2, lo, h2, 2)
+        best = min(e0, e1, e2)
+        if best >= tmax:
+            return tmax
+        if best > te:
+            te = best
+        if best == e0:
+            c0 += 1 if d[0] > 0.0 else -1
+        elif best == e1:
+            c1 += 1 if d[1] > 0.0 else -1
+        else:
+            c2 += 1 if d[2] > 0.0 else -1
+        if not (0 <= c0 < n and 0 <= c1 < n and 0 <= c2 < n):
+            return te
+    return te
+
+
+@njit(**_JIT)
 def _march(n, f, shared, idx, o, d, t, tmax, ts, rs, step, rel, om, inv_L, L, eps,
-           t_out, br, br_ta, br_tb, br_fa, br_fb, pts):  # pragma: no cover
+           t_out, br, br_ta, br_tb, br_fa, br_fb, pts, skip, c_lo, c_span, c_n,
+           c_empty):  # pragma: no cover
     """One sphere-tracing update of the ``n`` active rays given their field values
     ``f`` (``(n,)``). Finished rays are recorded (``t_out`` for hits at the start,
     ``br*`` for crossings, indexed by global ray) and dropped; the others are compacted
-    to the front with their next sample points in ``pts``. Returns the new count."""
+    to the front with their next sample points in ``pts``. With ``skip``, a ray whose
+    sample lies in cells proved empty (``c_*``, see :func:`_empty_run`) steps to
+    where they end when that is further than its sphere step. Returns the new count."""
     j = 0
     for i in range(n):
         fi = f[i]
@@ -256,12 +316,21 @@ def _march(n, f, shared, idx, o, d, t, tmax, ts, rs, step, rel, om, inv_L, L, ep
             else:
                 s = omi * ri
                 safe = ri
+            if skip:
+                te = _empty_run(o[0 if shared else i], d[i], tsi, tmax[i], c_lo, c_span,
+                                c_n, c_empty)
+                jumped = te - tsi > s
+                if jumped:  # certified by intervals: no relaxation to check
+                    s = te - tsi
+                    safe = s
+            else:
+                jumped = False
             if tsi + safe >= tmax[i]:  # the safe region reaches the exit: a miss
                 continue
             rem = tmax[i] - tsi
             if s > rem:
                 s = rem
-            reli = ri >= eps and s > ri
+            reli = ri >= eps and s > ri and not jumped
         idx[j] = idx[i]
         tmax[j] = tmax[i]
         ts[j] = tsi
@@ -378,7 +447,7 @@ def _refine(field: Field, scale: float, o: np.ndarray, d: np.ndarray, ta: np.nda
 
 def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
                  t_near: float = 0.0, max_iter: int = MAX_ITER,
-                 omega: float = OMEGA) -> TraceResult:
+                 omega: float = OMEGA, skip_empty: bool = True) -> TraceResult:
     """First hits of rays with the zero set of ``field`` (see the module docs).
 
     Args:
@@ -389,6 +458,8 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
         t_near: rays start no closer than this to their origin.
         max_iter: sphere-tracing iterations per ray.
         omega: over-relaxation factor (1 disables it).
+        skip_empty: step over the cells that pruned evaluation has proved empty
+            (:meth:`csdf.field.Field.empty_cells`; fields of long programs only).
 
     Returns:
         :class:`TraceResult` with ``t`` the distance to the first hit along each ray.
@@ -430,6 +501,13 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
     om = np.full(n, omega if finite_L else 1.0)
     inv_L = 1.0 / L if finite_L else 1.0
     L_fa = L if finite_L else 1.0
+    cells = field.empty_cells() if skip_empty else None
+    skip = cells is not None
+    if skip:
+        c_lo, c_span, c_n, c_empty = cells
+    else:
+        c_lo = c_span = np.zeros(3)
+        c_n, c_empty = 1, np.zeros(1, np.uint8)
     evals = 0
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported
@@ -438,7 +516,8 @@ def sphere_trace(field: Field, origins: np.ndarray, dirs: np.ndarray, *,
         f = field.value(pts[:m])
         evals += m
         m = _march(m, f, shared, idx, o, d, t, tmax, ts, rs, step, rel, om, inv_L, L_fa,
-                   eps, t_out, br, br_ta, br_tb, br_fa, br_fb, pts)
+                   eps, t_out, br, br_ta, br_tb, br_fa, br_fb, pts, skip, c_lo, c_span,
+                   c_n, c_empty)
         if not finite_L and m:
             far = np.flatnonzero(step[:m] > eps)
             if far.size:

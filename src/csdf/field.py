@@ -416,8 +416,9 @@ class Field:
         empty (n**3,) uint8)``, an ``n x n x n`` grid of cells over the box ``lo + [0,
         span]`` (model units, the field's frame; the cell ``(i, j, k)`` is entry
         ``(i * n + j) * n + k``; one level finer than the cells of the tapes) with 1
-        where the field is positive throughout the cell. The flags are filled in as evaluation builds cells (0 means not empty
-        or not yet known) and stay valid for this field. None unless this field is
+        where the field is positive throughout the cell. The flags are filled in as
+        evaluation builds cells (0 means not empty or not yet known) and stay valid
+        for this field. None unless this field is
         :meth:`pruned`, 3D and not posed."""
         if not self.pruned() or self.dim != 3 or not self.pose.is_identity():
             return None

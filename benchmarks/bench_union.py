@@ -33,17 +33,10 @@ from common import machine_info, md_table  # noqa: E402
 
 
 def union(n: int, seed: int = 0):
-    """A union of ``n`` random primitives (spheres, boxes, tori)."""
+    """A union of ``n`` random primitives (:func:`csdf.zoo.clutter`)."""
     import csdf
 
-    rng = np.random.default_rng(seed)
-    parts = []
-    for i in range(n):
-        c = rng.uniform(-1, 1, 3) * n ** (1 / 3) * 0.5
-        s = (csdf.sphere(rng.uniform(0.15, 0.3)), csdf.box(rng.uniform(0.15, 0.4, 3)),
-             csdf.torus(0.25, 0.08))[i % 3]
-        parts.append(s.translate(c))
-    return csdf.union(*parts)
+    return csdf.zoo.clutter(n, seed)
 
 
 def _time(fn, runs: int):

@@ -19,21 +19,10 @@ from csdf.render.trace import _empty_run, sphere_trace, trace_frame
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
 
-def _union(n: int, seed: int = 0):
-    rng = np.random.default_rng(seed)
-    parts = []
-    for i in range(n):
-        c = rng.uniform(-1, 1, 3) * n ** (1 / 3) * 0.5
-        s = (csdf.sphere(rng.uniform(0.15, 0.3)), csdf.box(rng.uniform(0.15, 0.4, 3)),
-             csdf.torus(0.25, 0.08))[i % 3]
-        parts.append(s.translate(c))
-    return csdf.union(*parts)
-
-
 @pytest.fixture
 def pruned_field(monkeypatch):
     monkeypatch.setattr(F, "PRUNE_MIN_INSTRUCTIONS", 100)
-    prog = _union(30, seed=4).compile()
+    prog = csdf.zoo.clutter(30, seed=4).compile()
     fld = csdf.as_field(prog)
     assert fld.pruned()
     return prog, fld

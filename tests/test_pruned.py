@@ -134,22 +134,11 @@ def test_shortened_tapes_of_shapes_are_bit_identical(s, seed):
     _check(prog, lo, hi, seed)
 
 
-def _union(n: int, seed: int = 0):
-    rng = np.random.default_rng(seed)
-    parts = []
-    for i in range(n):
-        c = rng.uniform(-1, 1, 3) * n ** (1 / 3) * 0.5
-        s = (csdf.sphere(rng.uniform(0.15, 0.3)), csdf.box(rng.uniform(0.15, 0.4, 3)),
-             csdf.torus(0.25, 0.08))[i % 3]
-        parts.append(s.translate(c))
-    return csdf.union(*parts)
-
-
 def test_long_programs_are_pruned_and_agree_with_the_interpreter(monkeypatch):
     import csdf.field as F
 
     monkeypatch.setattr(F, "PRUNE_MIN_INSTRUCTIONS", 100)
-    prog = _union(12).compile()
+    prog = csdf.zoo.clutter(12).compile()
     fld = csdf.as_field(prog)
     assert fld.pruned()
     rng = np.random.default_rng(3)

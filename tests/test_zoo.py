@@ -176,3 +176,18 @@ def test_cli_zoo_list_and_show():
     assert r.exit_code == 0 and r.output == zoo.source("cross_shaft")
     r = runner.invoke(app, ["zoo", "show", "chiar"])
     assert r.exit_code == 2 and "did you mean 'chair'" in r.output
+
+
+def test_clutter_is_seeded_and_checks_its_arguments():
+    a, b = csdf.zoo.clutter(9, seed=3).compile(), csdf.zoo.clutter(9, seed=3).compile()
+    assert np.array_equal(a.code, b.code) and np.array_equal(a.consts, b.consts)
+    c = csdf.zoo.clutter(9, seed=4).compile()
+    assert not np.array_equal(a.consts, c.consts)
+    lo, hi = a.bounds
+    assert np.all(hi - lo < 9 ** (1 / 3) + 1.0)  # a cube of side n**(1/3) plus a part
+    assert csdf.zoo.clutter(1).compile().bounds is not None
+    for bad in (0, 100_001):
+        with pytest.raises(ValueError, match="n must be"):
+            csdf.zoo.clutter(bad)
+    with pytest.raises(ValueError, match="spacing"):
+        csdf.zoo.clutter(3, spacing=float("nan"))

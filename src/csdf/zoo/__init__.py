@@ -11,6 +11,9 @@ documented parameters and ranges::
     [(p.name, p.default, p.lo, p.hi, doc) for p, doc in zoo.info("chair").params]
     csdf.mesh(armchair, resolution=128)
 
+``clutter(n, seed=0)`` is a union of ``n`` random spheres, boxes and tori, the test
+scene of long programs (pruned evaluation, scenes).
+
 ``load(name, **params)`` gives a shape whose parameter *defaults* are the values given
 (the declarations keep their ranges, so the shape still takes any value at evaluation
 time: ``shape(points, seat_height=0.5)``).
@@ -29,8 +32,9 @@ from pathlib import Path
 from ..errors import CsdfError, ParamError
 from ..expr import Param
 from ..shapes.base import Shape
+from .clutter import clutter
 
-__all__ = ["names", "path", "source", "load", "info", "ModelInfo", "ZOO_DIR"]
+__all__ = ["names", "path", "source", "load", "info", "ModelInfo", "ZOO_DIR", "clutter"]
 
 ZOO_DIR = Path(__file__).resolve().parent
 _SUFFIX = ".csdf"

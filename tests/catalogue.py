@@ -57,6 +57,10 @@ def operators() -> dict:
         "round": lambda: csdf.box(0.6).round(0.1),
         "shell": lambda: csdf.sphere(0.6).shell(0.05),
         "offset": lambda: csdf.sphere(0.6).offset(-0.1),
+        "rename": lambda: csdf.sphere(r()).rename(prefix="left_")
+        | csdf.sphere(r()).translate((0.7, 0, 0)).rename(suffix="_b"),
+        "bind": lambda: csdf.union(csdf.sphere(r()), csdf.box(0.5).translate((0.5, 0, 0)),
+                                   k=k()).bind(k=0.1),
         "rotate_2d": lambda: csdf.extrude(csdf.rectangle((1, 0.4)).rotate(0.3), 0.5),
         "polar_2d": lambda: csdf.extrude(
             csdf.circle(0.1).translate((0.5, 0)).repeat_polar(5), 0.3),

@@ -36,6 +36,12 @@ CASES = {
     "round": ("box(1).round(0.1)", lambda: C.box(1).round(0.1)),
     "offset": ("sphere(1).offset(0.1)", lambda: C.sphere(1).offset(0.1)),
     "shell": ("sphere(1).shell(0.05)", lambda: C.sphere(1).shell(0.05)),
+    "bind": ("param r = 1 in [0.5, 2]\nsphere(r).bind(r=0.7) | sphere(r)",
+             lambda: C.sphere(C.param("r", 1, 0.5, 2)).bind(r=0.7)
+             | C.sphere(C.param("r", 1, 0.5, 2))),
+    "rename": ('param param_r = 1 in [0.5, 2]\nsphere(param_r).rename(prefix="a_", suffix="_1")',
+               lambda: C.sphere(C.param("param_r", 1, 0.5, 2)).rename(prefix="a_",
+                                                                      suffix="_1")),
     "union": ('union(sphere(1), box(1), k=0.2, blend="round")',
               lambda: C.union(C.sphere(1), C.box(1), k=0.2, blend="round")),
     "intersection": ("intersection(sphere(1), box(1), k=0.1)",
@@ -60,8 +66,9 @@ def test_every_api_name_has_a_case():
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_every_api_name_is_reachable_from_a_model_file(name, tmp_path):
     text, make = CASES[name]
+    decls, _, text = text.rpartition("\n")  # a case may declare parameters first
     path = tmp_path / f"{name}.csdf"
-    path.write_text(f"# {name}\nexport {text}\n")
+    path.write_text(f"# {name}\n{decls}\nexport {text}\n")
     loaded = csdf.load(path)
     assert loaded.compile().to_bytes() == make().compile().to_bytes()
 

@@ -24,7 +24,7 @@ import re
 import struct
 import threading
 import weakref
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,7 +37,7 @@ __all__ = [
     "sqrt", "square", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "exp", "log",
     "floor", "step", "sign", "minimum", "maximum", "mod", "clamp", "mix", "select_ge",
     "walk", "expr_params", "is_const", "const_value", "to_float", "describe_number",
-    "NodeBudget", "node_budget",
+    "NodeBudget", "node_budget", "substitute",
 ]
 
 Number = int | float
@@ -591,6 +591,26 @@ def walk(root: Expr) -> Iterator[Expr]:
         for a in reversed(node.args):
             if id(a) not in seen:
                 stack.append((a, False))
+
+
+def substitute(roots: Sequence[Expr], leaf: Callable[[Expr], Expr | None]) -> list[Expr]:
+    """``roots`` rebuilt with each leaf (``x``, ``y``, ``z``, ``const`` or ``param``
+    node) replaced by ``leaf(node)`` where that is not None; shared nodes stay shared
+    (also between the roots) and rebuilt nodes are folded and simplified as by
+    :func:`make`. Linear in the number of distinct nodes."""
+    new: dict[int, Expr] = {}
+    for root in roots:
+        for n in walk(root):
+            if id(n) in new:
+                continue
+            if not n.args:
+                r = leaf(n)
+                new[id(n)] = n if r is None else r
+                continue
+            args = tuple(new[id(a)] for a in n.args)
+            same = all(a is b for a, b in zip(args, n.args))
+            new[id(n)] = n if same else make(n.op, *args)
+    return [new[id(r)] for r in roots]
 
 
 def expr_params(root: Expr) -> list[Param]:

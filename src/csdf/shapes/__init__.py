@@ -1,6 +1,7 @@
 """The modelling API: primitives, CSG, domain operations and deformations."""
 
 from . import deform as _deform  # noqa: F401  (registers shape methods)
+from . import params as _params  # noqa: F401  (registers bind and rename)
 from .base import REGISTRY, ApiEntry, Shape
 from .csg import BLENDS, complement, difference, intersection, union
 from .domain import (

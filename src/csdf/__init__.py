@@ -43,6 +43,7 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
     from .render import Camera, Render, render
     from .sample import sample_surface, sample_volume
     from .scan import scan
+    from .scene import Scene, SceneQuery
     from .slicing import save_slice
     from .slicing import slice as slice  # noqa: A004 - public name csdf.slice
 
@@ -69,6 +70,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "sample_surface": (".sample", "sample_surface"),
     "sample_volume": (".sample", "sample_volume"),
     "scan": (".scan", "scan"),
+    "Scene": (".scene", "Scene"),
+    "SceneQuery": (".scene", "SceneQuery"),
     "raster": (".raster", "raster"),
     "save_slice": (".slicing", "save_slice"),
     "slice": (".slicing", "slice"),  # public name csdf.slice (not in __all__)
@@ -128,5 +131,6 @@ __all__ = [
     "REGISTRY", "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
     "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
-    "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", *_shape_names,
+    "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", "Scene",
+    "SceneQuery", *_shape_names,
 ]

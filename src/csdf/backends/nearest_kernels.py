@@ -1,0 +1,179 @@
+"""Numba kernels of batched queries over many posed instances (a scene): the nearest
+instance of each point, its signed distance and gradient, and collision tests of
+spheres, with a bounding volume hierarchy over the instances' world boxes.
+
+Compiled once for all programs: each instance runs a register tape
+(:class:`csdf.backends.pruned.RegTape`) with the lane interpreter of
+:mod:`csdf.backends.tape_kernels` on one lane, so values are bit-identical to the
+``'interp'`` backend's in the instance's frame.
+
+Data (packed to keep the call cheap):
+
+* ``inst_f`` ``(K, 19)`` float64 per instance: the rotation ``R`` row by row (9), the
+  translation ``t`` (3), the scale ``s`` (1), the world box ``lo`` (3) and ``hi`` (3);
+  the instance's field at a world point ``p`` is ``s f(R^T (p - t) / s)``.
+* ``inst_i`` ``(K, 2)`` int64: the instance's tape and its contract (0 exact, 1 bound,
+  2 neither).
+* ``tape_i`` ``(T, 4)`` int64 per tape: first row in ``code``/``imm``, row count, output
+  register, registers used.
+* ``node_f`` ``(M, 6)`` float64 per BVH node: its box ``lo``, ``hi``; ``node_i`` ``(M,
+  2)`` int64: the two children, or ``(-1 - first, count)`` for a leaf holding
+  ``order[first:first + count]``.
+
+Pruning by boxes is sound for every contract whose sign is right: outside an
+instance's box its true distance is at least the distance to the box, so an instance
+whose box is farther than the best value so far cannot hold the nearest surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .tape_kernels import run_lanes, run_lanes_grad
+
+_OPTS = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+#: BVH traversal stack depth (the tree is built balanced: depth ~ log2(instances) + 1)
+STACK = 64
+
+
+@njit(**_OPTS)
+def _box_distance(p0, p1, p2, f, off):
+    """Distance from a point to the box ``f[off:off+3]`` (lo), ``f[off+3:off+6]`` (hi);
+    0 inside."""
+    s = 0.0
+    for ax in range(3):
+        v = p0 if ax == 0 else (p1 if ax == 1 else p2)
+        lo = f[off + ax]
+        hi = f[off + 3 + ax]
+        if v < lo:
+            s += (lo - v) * (lo - v)
+        elif v > hi:
+            s += (v - hi) * (v - hi)
+    return np.sqrt(s)
+
+
+@njit(**_OPTS)
+def _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, R, D, tmp, grad,
+                   g_out):
+    """The value ``s f(q)`` of instance ``k`` at world point ``p``; with ``grad`` also
+    the world gradient ``R grad f(q)`` into ``g_out`` (3,)."""
+    f = inst_f[k]
+    d0, d1, d2 = p0 - f[9], p1 - f[10], p2 - f[11]
+    s = f[12]
+    # q = R^T d / s
+    R[0, 0] = (f[0] * d0 + f[3] * d1 + f[6] * d2) / s
+    R[1, 0] = (f[1] * d0 + f[4] * d1 + f[7] * d2) / s
+    R[2, 0] = (f[2] * d0 + f[5] * d1 + f[8] * d2) / s
+    t = inst_i[k, 0]
+    start = tape_i[t, 0]
+    n = tape_i[t, 1]
+    o = tape_i[t, 2]
+    if grad:
+        for r in range(3):
+            for c in range(3):
+                D[r, c, 0] = 1.0 if r == c else 0.0
+        run_lanes_grad(code, imm, start, n, R, D, tmp, 1)
+        a, b, c = D[o, 0, 0], D[o, 1, 0], D[o, 2, 0]
+        g_out[0] = f[0] * a + f[1] * b + f[2] * c
+        g_out[1] = f[3] * a + f[4] * b + f[5] * c
+        g_out[2] = f[6] * a + f[7] * b + f[8] * c
+    else:
+        run_lanes(code, imm, start, n, R, 1)
+    return s * R[o, 0]
+
+
+@njit(**_OPTS)
+def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, node_f,
+            node_i, order, max_regs, dist, grad, inst, exact, part, n_parts):
+    """For points ``pts`` ``(N, 3)`` (the ``part``-th of ``n_parts`` slices): the
+    smallest instance value ``dist`` ``(N,)``, its instance ``inst`` ``(N,)`` (-1: no
+    instance holds a value below the start), its world gradient ``grad`` ``(N, 3)``
+    (with ``want_grad``) and whether the value is the exact distance ``exact`` ``(N,)``
+    (the winner is exact and no instance of contract 'neither' could be nearer).
+
+    ``below`` ``(N,)``: the search starts with this value as the best (inf for a plain
+    nearest query; a sphere's radius for a collision test: only instances nearer than it
+    are evaluated). ``stop``: end a point's search at the first value below ``below``
+    (a collision test). Points with a NaN coordinate get NaN and -1.
+    """
+    N = pts.shape[0]
+    R = np.empty((max(max_regs, 3), 1))
+    D = np.empty((max(max_regs, 3), 3, 1))
+    tmp = np.empty((1, 1))
+    g = np.zeros(3)
+    stack = np.empty(STACK, np.int64)
+    a = (N * part) // n_parts
+    b = (N * (part + 1)) // n_parts
+    for i in range(a, b):
+        p0, p1, p2 = pts[i, 0], pts[i, 1], pts[i, 2]
+        if p0 != p0 or p1 != p1 or p2 != p2:
+            dist[i] = np.nan
+            inst[i] = -1
+            exact[i] = False
+            if want_grad:
+                grad[i, 0] = np.nan
+                grad[i, 1] = np.nan
+                grad[i, 2] = np.nan
+            continue
+        best = below[i]
+        win = -1
+        nmin = np.inf  # the nearest box of an evaluated instance of contract 'neither'
+        top = 0
+        stack[0] = 0
+        top = 1
+        done = False
+        while top > 0 and not done:
+            top -= 1
+            node = stack[top]
+            bd = _box_distance(p0, p1, p2, node_f[node], 0)
+            if bd > 0.0 and bd >= best:
+                continue
+            c0 = node_i[node, 0]
+            c1 = node_i[node, 1]
+            if c0 < 0:  # a leaf
+                first = -1 - c0
+                for j in range(first, first + c1):
+                    k = order[j]
+                    bk = _box_distance(p0, p1, p2, inst_f[k], 13)
+                    if bk > 0.0 and bk >= best:
+                        continue
+                    v = _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i,
+                                       R, D, tmp, False, g)
+                    if inst_i[k, 1] == 2 and bk < nmin:
+                        nmin = bk
+                    if v < best:
+                        best = v
+                        win = k
+                        if stop:
+                            done = True
+                            break
+            else:
+                # the nearer child is searched first
+                d0 = _box_distance(p0, p1, p2, node_f[c0], 0)
+                d1 = _box_distance(p0, p1, p2, node_f[c1], 0)
+                if top + 2 > STACK:  # pragma: no cover - a balanced tree is shallow
+                    raise RuntimeError("BVH too deep")
+                if d0 <= d1:
+                    stack[top] = c1
+                    stack[top + 1] = c0
+                else:
+                    stack[top] = c0
+                    stack[top + 1] = c1
+                top += 2
+        dist[i] = best
+        inst[i] = win
+        if win >= 0:
+            exact[i] = inst_i[win, 1] == 0 and not (nmin < best)
+            if want_grad:
+                _eval_instance(win, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, R, D,
+                               tmp, True, g)
+                grad[i, 0] = g[0]
+                grad[i, 1] = g[1]
+                grad[i, 2] = g[2]
+        else:
+            exact[i] = False
+            if want_grad:
+                grad[i, 0] = 0.0
+                grad[i, 1] = 0.0
+                grad[i, 2] = 0.0

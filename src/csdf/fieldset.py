@@ -1,0 +1,166 @@
+"""Many posed fields queried at once: the field layer of scenes.
+
+A :class:`FieldSet` holds posed :class:`csdf.field.Field` objects (instances) and
+answers batched queries with one compiled call: for each point the smallest instance
+value (the union's field), which instance gave it, its gradient and whether it is the
+exact distance, and collision tests of spheres. A bounding volume hierarchy over the
+instances' world boxes (:func:`build_bvh`) keeps the cost of a query close to that of
+the few instances near it (:mod:`csdf.backends.nearest_kernels`). Each distinct
+(program, parameter values) pair becomes one register tape, shared by its instances.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .errors import CsdfError
+from .field import Field, numba_available
+from .parallel import N_THREADS, executor
+
+__all__ = ["FieldSet", "build_bvh", "LEAF_SIZE"]
+
+#: instances per BVH leaf
+LEAF_SIZE = 2
+#: below this many points a query runs on the calling thread alone
+SERIAL_BELOW = 4096
+_CONTRACT = {"exact": 0, "bound": 1, "neither": 2}
+
+
+def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A bounding volume hierarchy over boxes ``[lo[k], hi[k]]`` (``(K, 3)`` each): split
+    at the median of the box centres along the longest axis of their spread, down to
+    ``leaf_size`` boxes per leaf (balanced, depth ``~log2(K / leaf_size) + 1``).
+
+    Returns:
+        ``(node_f (M, 6) [lo, hi], node_i (M, 2), order (K,))``: node 0 is the root;
+        an inner node's ``node_i`` row holds its children, a leaf's ``(-1 - first,
+        count)`` of the boxes ``order[first:first + count]``.
+    """
+    K = len(lo)
+    if K == 0:
+        raise CsdfError("a bounding volume hierarchy needs at least one box")
+    centre = 0.5 * (lo + hi)
+    order = np.arange(K)
+    node_f: list[np.ndarray] = []
+    node_i: list[list[int]] = []
+    stack = [(0, K, -1, 0)]  # (first, end, parent, which child)
+    while stack:
+        a, b, parent, side = stack.pop()
+        idx = order[a:b]
+        me = len(node_f)
+        node_f.append(np.concatenate([lo[idx].min(axis=0), hi[idx].max(axis=0)]))
+        node_i.append([-1 - a, b - a])
+        if parent >= 0:
+            node_i[parent][side] = me
+        if b - a <= leaf_size:
+            continue
+        c = centre[idx]
+        ax = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+        mid = (b - a) // 2
+        part = np.argpartition(c[:, ax], mid)
+        order[a:b] = idx[part]
+        stack.append((a + mid, b, me, 1))
+        stack.append((a, a + mid, me, 0))
+    return (np.array(node_f, dtype=np.float64).reshape(-1, 6),
+            np.array(node_i, dtype=np.int64).reshape(-1, 2), order.astype(np.int64))
+
+
+class FieldSet:
+    """Posed 3D fields (instances) with batched nearest and collision queries.
+
+    Args:
+        fields: the instances, each a bounded 3D :class:`csdf.field.Field` (its pose
+            places it; its parameter values are fixed here).
+
+    Attributes:
+        fields: the instances; boxes: ``(K, 2, 3)`` their world boxes.
+
+    Raises:
+        CsdfError: no fields, a 2D field, a field without bounds, or no Numba.
+    """
+
+    def __init__(self, fields: Sequence[Field]):
+        from .backends.pruned import reg_tape
+
+        if not numba_available():
+            raise CsdfError("scene queries need Numba (pip install numba)")
+        self.fields = list(fields)
+        if not self.fields:
+            raise CsdfError("a field set needs at least one field")
+        K = len(self.fields)
+        tapes: dict[int, int] = {}
+        codes, imms, tape_i = [], [], []
+        rows = 0
+        inst_f = np.empty((K, 19))
+        inst_i = np.empty((K, 2), np.int64)
+        for k, fld in enumerate(self.fields):
+            if fld.dim != 3:
+                raise CsdfError(f"instance {k}: a scene holds 3D fields; extrude or revolve "
+                                "a 2D shape first")
+            tape = reg_tape(fld.program, fld.pvals)
+            t = tapes.get(id(tape))
+            if t is None:
+                t = tapes[id(tape)] = len(tape_i)
+                codes.append(tape.code)
+                imms.append(tape.imm)
+                tape_i.append([rows, len(tape.code), tape.out, tape.n_regs])
+                rows += len(tape.code)
+            pose = fld.pose
+            box = fld.bounds
+            inst_f[k, :9] = pose.rotation.reshape(-1)
+            inst_f[k, 9:12] = pose.translation
+            inst_f[k, 12] = pose.scale
+            inst_f[k, 13:16] = box[0]
+            inst_f[k, 16:19] = box[1]
+            inst_i[k] = (t, _CONTRACT[fld.exactness])
+        self.code = np.ascontiguousarray(np.concatenate(codes), np.int32)
+        self.imm = np.ascontiguousarray(np.concatenate(imms), np.float64)
+        self.tape_i = np.array(tape_i, dtype=np.int64).reshape(-1, 4)
+        self.max_regs = int(self.tape_i[:, 3].max())
+        self.inst_f = inst_f
+        self.inst_i = inst_i
+        self.boxes = np.stack([inst_f[:, 13:16], inst_f[:, 16:19]], axis=1)
+        self.node_f, self.node_i, self.order = build_bvh(inst_f[:, 13:16], inst_f[:, 16:19])
+
+    def __len__(self) -> int:
+        return len(self.fields)
+
+    def nearest(self, points: np.ndarray, *, grad: bool = False,
+                below: np.ndarray | None = None, stop: bool = False
+                ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+        """The smallest instance value at each point (see
+        :func:`csdf.backends.nearest_kernels.nearest`).
+
+        Args:
+            points: ``(N, 3)`` float64 world points.
+            grad: also the world gradient of the winning instance.
+            below: ``(N,)`` start values of the search (default inf): only instances
+                with a value below them count.
+            stop: end each search at the first value below ``below`` (collisions).
+
+        Returns:
+            ``(value (N,), gradient (N, 3) or None, instance (N,) int64 (-1: none),
+            exact (N,) bool)``.
+        """
+        from .backends import nearest_kernels as NK
+
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        N = len(pts)
+        start = np.full(N, np.inf) if below is None else \
+            np.ascontiguousarray(below, dtype=np.float64).reshape(N)
+        dist = np.empty(N)
+        g = np.empty((N, 3)) if grad else np.empty((1, 3))
+        inst = np.empty(N, np.int64)
+        exact = np.empty(N, np.bool_)
+        args = (pts, start, bool(stop), bool(grad), self.inst_f, self.inst_i, self.code,
+                self.imm, self.tape_i, self.node_f, self.node_i, self.order,
+                self.max_regs, dist, g, inst, exact)
+        n = 1 if N < SERIAL_BELOW else N_THREADS
+        if n == 1:
+            NK.nearest(*args, 0, 1)
+        else:
+            list(executor().map(lambda c: NK.nearest(*args, c, n), range(n)))
+        return dist, (g if grad else None), inst, exact

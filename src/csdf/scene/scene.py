@@ -1,0 +1,364 @@
+"""``csdf.Scene``: many posed instances of models, queried together.
+
+A scene holds instances: a model (a shape, a program, a zoo name or a model file) with
+a pose (``csdf.Pose`` or a ``(4, 4)`` similarity matrix), a scale and parameter
+values. One model used by many instances is compiled once (programs are kept per
+model; a zoo name or file is loaded once per scene). Queries are batched, NumPy in and
+out, and run in compiled kernels over a bounding volume hierarchy of the instances'
+world boxes (:class:`csdf.fieldset.FieldSet`): the distance to the nearest surface, its
+gradient and instance, the signed clearance of spheres and collision tests.
+
+The scene's field is the union (the minimum) of its instances' fields. Where the
+winning instance's model is an exact distance and no instance of contract 'neither'
+could be nearer, the value is the exact Euclidean distance to the scene's nearest
+surface (outside every instance; inside one it is that instance's signed distance);
+:attr:`SceneQuery.exact` says so per point.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import CsdfError
+from ..field import Field, as_field
+from ..fieldset import FieldSet
+from ..pose import Pose, as_pose
+from . import fileformat
+
+__all__ = ["Scene", "Instance", "SceneQuery", "MAX_INSTANCES", "MAX_QUERY_POINTS"]
+
+#: the most instances a scene holds
+MAX_INSTANCES = 1_000_000
+#: the most points (or spheres, rays) one query takes
+MAX_QUERY_POINTS = 50_000_000
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One instance of a scene.
+
+    Attributes:
+        id: its id in the scene (never reused); name: its name (unique in the scene).
+        model: the shape or program it places; source: how the scene file names the
+            model (``{'zoo': name}``, ``{'file': path}``, ``{'csdf': text}`` or
+            ``{'program': text}``).
+        pose: the :class:`csdf.Pose` (the scale included) from the model's frame to the
+            world; params: its parameter values ``{name: value}`` (the others at their
+            defaults).
+    """
+
+    id: int
+    name: str
+    model: Any
+    source: dict
+    pose: Pose
+    params: dict = field(default_factory=dict)
+
+
+@dataclass
+class SceneQuery:
+    """What :meth:`Scene.query` finds at each point.
+
+    Attributes:
+        distance: ``(N,)`` the scene's signed distance (inf where the scene is empty,
+            NaN for a NaN point).
+        gradient: ``(N, 3)`` its gradient (the winning instance's, in the world frame).
+        instance: ``(N,)`` int64 the id of the instance nearest the point (-1: none).
+        exact: ``(N,)`` bool: ``distance`` is the exact Euclidean distance (the
+            instance's model is exact and no model of contract 'neither' could be
+            nearer); elsewhere it is a bound (never more than the true distance) for
+            models that are bounds, and a plain field value for models that are
+            neither.
+    """
+
+    distance: np.ndarray
+    gradient: np.ndarray
+    instance: np.ndarray
+    exact: np.ndarray
+
+
+def _points(points: Any, what: str) -> np.ndarray:
+    try:
+        p = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CsdfError(f"{what} must be numbers of shape (N, 3)") from None
+    if p.ndim == 1 and p.shape == (3,):
+        p = p[None]
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise CsdfError(f"{what} must have shape (N, 3), got {p.shape}")
+    if len(p) > MAX_QUERY_POINTS:
+        raise CsdfError(f"{what}: at most {MAX_QUERY_POINTS} per call, got {len(p)}")
+    return np.ascontiguousarray(p)
+
+
+def _radii(radii: Any, n: int) -> np.ndarray:
+    try:
+        r = np.asarray(radii, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CsdfError("radii must be numbers") from None
+    if r.ndim == 0:
+        r = np.full(n, float(r))
+    if r.shape != (n,):
+        raise CsdfError(f"radii must be one number or shape ({n},), got {r.shape}")
+    if not np.all(np.isfinite(r)) or np.any(r < 0):
+        raise CsdfError("radii must be finite and not negative")
+    return np.ascontiguousarray(r)
+
+
+def _load_file(path: Path) -> Any:
+    """A model file: ``.csdfb``/``.csdft`` bytecode as a program, ``.csdf``/``.vm`` as a
+    shape."""
+    from ..compiler.program import Program
+    from ..lang import load
+
+    suffix = path.suffix.lower()
+    if suffix in (".csdfb", ".csdft"):
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise CsdfError(f"cannot read {path}: {exc.strerror or exc}") from None
+        try:
+            return Program.from_bytes(data) if suffix == ".csdfb" else \
+                Program.from_text(data.decode("utf-8"))
+        except (CsdfError, UnicodeDecodeError) as exc:
+            raise CsdfError(f"{path}: {exc}") from None
+    return load(path)
+
+
+class Scene:
+    """Posed instances of models, queried together (see the module docs).
+
+    Instances are added with :meth:`add` (which returns their id), changed with
+    :meth:`update` and removed with :meth:`remove`; ``len(scene)`` counts them,
+    iterating yields :class:`Instance` records in id order and ``scene[id]`` gives one.
+    """
+
+    def __init__(self) -> None:
+        self._inst: dict[int, Instance] = {}
+        self._fields: dict[int, Field] = {}
+        self._next = 0
+        self._models: dict[tuple, Any] = {}  # zoo names and files, loaded once
+        self._set: FieldSet | None = None
+        self._ids: np.ndarray = np.zeros(0, np.int64)
+
+    # ------------------------------------------------------------------ instances
+    def __len__(self) -> int:
+        return len(self._inst)
+
+    def __iter__(self) -> Iterator[Instance]:
+        return iter([self._inst[k] for k in sorted(self._inst)])
+
+    def __getitem__(self, id: int) -> Instance:
+        try:
+            return self._inst[int(id)]
+        except (KeyError, TypeError, ValueError):
+            raise CsdfError(f"no instance {id!r} in this scene") from None
+
+    def __repr__(self) -> str:
+        return f"<Scene of {len(self)} instances>"
+
+    def _model(self, model: Any, base: Path | None = None) -> tuple[Any, dict]:
+        """``(shape or program, source)`` of a model given as a shape, a program, a zoo
+        name or a model file path (``.csdf``, ``.vm``, ``.csdfb``, ``.csdft``)."""
+        from ..compiler.program import Program
+        from ..shapes.base import Shape
+
+        if isinstance(model, (Shape, Program)):
+            return model, {}
+        if isinstance(model, os.PathLike) or (isinstance(model, str) and (
+                os.sep in model or "/" in model or Path(model).suffix)):
+            path = Path(model)
+            if base is not None and not path.is_absolute():
+                path = base / path
+            key = ("file", str(path.resolve()))
+            if key not in self._models:
+                self._models[key] = _load_file(path)
+            return self._models[key], {"file": str(model)}
+        if isinstance(model, str):
+            from .. import zoo
+
+            key = ("zoo", model)
+            if key not in self._models:
+                self._models[key] = zoo.load(model)
+            return self._models[key], {"zoo": model}
+        raise CsdfError(f"a scene's model must be a shape, a program, a zoo name or a "
+                        f"model file, got {type(model).__name__}")
+
+    def add(self, model: Any, pose: Any = None, scale: float = 1.0,
+            params: Mapping[str, float] | None = None, name: str | None = None) -> int:
+        """Add an instance; returns its id.
+
+        Args:
+            model: a :class:`csdf.Shape`, a :class:`csdf.Program`, a zoo name
+                (``'chair'``) or a model file (``'part.csdf'``, ``.vm``, ``.csdfb``).
+            pose: a :class:`csdf.Pose` or ``(4, 4)`` similarity matrix (model frame to
+                world); default identity.
+            scale: multiplies the pose's scale (> 0).
+            params: parameter values (checked against the model's ranges).
+            name: unique name (default ``'{model}_{id}'``).
+
+        Raises:
+            CsdfError: a bad model, pose, scale or name, a 2D or unbounded model;
+                ParamError: an unknown parameter or a value outside its range.
+        """
+        if len(self._inst) >= MAX_INSTANCES:
+            raise CsdfError(f"a scene holds at most {MAX_INSTANCES} instances")
+        shape, source = self._model(model)
+        return self._put(self._next, shape, source, pose, scale, params, name)
+
+    def _put(self, id: int, model: Any, source: dict, pose: Any, scale: float,
+             params: Mapping[str, float] | None, name: str | None) -> int:
+        p = as_pose(pose, "pose")
+        try:
+            s = float(scale)
+        except (TypeError, ValueError):
+            raise CsdfError(f"scale must be a positive number, got {scale!r}") from None
+        if not (np.isfinite(s) and s > 0):
+            raise CsdfError(f"scale must be a positive finite number, got {scale!r}")
+        p = Pose(p.rotation, p.translation, p.scale * s)
+        fld = as_field(model, params, pose=p, what="Scene.add")
+        if fld.dim != 3:
+            raise CsdfError("a scene holds 3D models; extrude or revolve a 2D shape first")
+        fld.bounds  # noqa: B018 - an unbounded model fails here, not in a query
+        if not source:
+            source = self._embedded(model)
+        if name is None:
+            if "zoo" in source:
+                label = source["zoo"]
+            elif "file" in source:
+                label = Path(source["file"]).stem or "model"
+            else:
+                label = getattr(model, "name", None) or "program"
+            name = f"{label}_{id}"
+        if not isinstance(name, str) or not name:
+            raise CsdfError(f"an instance name must be a non-empty string, got {name!r}")
+        if any(i.name == name and i.id != id for i in self._inst.values()):
+            raise CsdfError(f"the scene already has an instance named {name!r}")
+        self._inst[id] = Instance(id, name, model, source, p, dict(params or {}))
+        self._fields[id] = fld
+        self._next = max(self._next, id + 1)
+        self._set = None
+        return id
+
+    @staticmethod
+    def _embedded(model: Any) -> dict:
+        """The scene file's text of an in-memory model: ``.csdf`` text for a shape
+        (printed by :func:`csdf.dumps`), the bytecode text for a program."""
+        from ..shapes.base import Shape
+
+        if isinstance(model, Shape):
+            return {"csdf": None}  # printed when saved (a shape may not print: said then)
+        return {"program": None}
+
+    def update(self, id: int, *, pose: Any = None, scale: float | None = None,
+               params: Mapping[str, float] | None = None) -> None:
+        """Change an instance's pose (and scale), or parameter values (merged with its
+        current ones).
+
+        Raises:
+            CsdfError: an unknown id or a bad pose or scale; ParamError: as for
+                :meth:`add`.
+        """
+        old = self[id]
+        if pose is None:
+            new_pose, new_scale = old.pose, 1.0 if scale is None else scale
+        else:
+            new_pose, new_scale = as_pose(pose, "pose"), 1.0 if scale is None else scale
+        merged = dict(old.params)
+        merged.update(params or {})
+        self._put(old.id, old.model, old.source, new_pose, new_scale, merged, old.name)
+
+    def remove(self, id: int) -> None:
+        """Remove an instance (its id is not reused).
+
+        Raises:
+            CsdfError: an unknown id.
+        """
+        inst = self[id]
+        del self._inst[inst.id]
+        del self._fields[inst.id]
+        self._set = None
+
+    def field(self, id: int) -> Field:
+        """The posed :class:`csdf.field.Field` of an instance."""
+        return self._fields[self[id].id]
+
+    # ------------------------------------------------------------------ queries
+    def _fieldset(self) -> FieldSet | None:
+        if self._set is None and self._inst:
+            ids = sorted(self._inst)
+            self._set = FieldSet([self._fields[k] for k in ids])
+            self._ids = np.array(ids, dtype=np.int64)
+        return self._set
+
+    def _nearest(self, pts: np.ndarray, grad: bool, below: np.ndarray | None = None,
+                 stop: bool = False):
+        fs = self._fieldset()
+        n = len(pts)
+        if fs is None:  # an empty scene: nothing anywhere
+            d = np.where(np.isnan(pts).any(axis=1), np.nan, np.inf)
+            return d, np.zeros((n, 3)) if grad else None, np.full(n, -1), np.zeros(n, bool)
+        d, g, k, ex = fs.nearest(pts, grad=grad, below=below, stop=stop)
+        ids = np.where(k >= 0, self._ids[np.maximum(k, 0)], -1)
+        return d, g, ids, ex
+
+    def distance(self, points: Any) -> np.ndarray:
+        """``(N,)`` the scene's signed distance at world points ``(N, 3)`` (inf for an
+        empty scene)."""
+        return self._nearest(_points(points, "points"), False)[0]
+
+    def query(self, points: Any) -> SceneQuery:
+        """Distance, gradient, nearest instance and exactness at points ``(N, 3)``."""
+        d, g, k, ex = self._nearest(_points(points, "points"), True)
+        return SceneQuery(distance=d, gradient=g, instance=k, exact=ex)
+
+    def sphere_distance(self, centers: Any, radii: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Signed clearance of spheres: ``(distance(centre) - radius (N,), its gradient by
+        the centre (N, 3))``; negative where a sphere penetrates the scene (a bound of
+        the penetration where the model is a bound)."""
+        c = _points(centers, "centers")
+        r = _radii(radii, len(c))
+        d, g, _, _ = self._nearest(c, True)
+        return d - r, g
+
+    def collide(self, centers: Any, radii: Any) -> np.ndarray:
+        """``(N,)`` bool: the sphere reaches inside the scene (``distance(centre) <
+        radius``). Only instances whose boxes come within the radius are evaluated,
+        and each search stops at the first hit."""
+        c = _points(centers, "centers")
+        r = _radii(radii, len(c))
+        _, _, k, _ = self._nearest(c, False, below=r, stop=True)
+        return k >= 0
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the scene as a readable JSON text file (written to a temporary file
+        and renamed); see :mod:`csdf.scene.fileformat`."""
+        fileformat.save(self, path)
+
+    def dumps(self) -> str:
+        """The scene file's text (see :mod:`csdf.scene.fileformat`)."""
+        return fileformat.dumps(self)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Scene:
+        """Read a scene file written by :meth:`save` (or by hand); model files are
+        found relative to the scene file.
+
+        Raises:
+            CsdfError: naming the file and the line and column or the record.
+        """
+        return fileformat.load(path, cls())
+
+    @classmethod
+    def loads(cls, text: str, source: str = "<string>",
+              base: str | os.PathLike | None = None) -> Scene:
+        """A scene from the file's text; ``base``: the folder model files are
+        relative to."""
+        return fileformat.loads(text, cls(), source, None if base is None else Path(base))

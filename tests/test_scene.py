@@ -1,0 +1,224 @@
+"""``csdf.Scene`` (issue 17): instances, batched queries over a bounding volume
+hierarchy, and the scene file.
+
+Queries are checked against brute force over the instances' own fields (the minimum,
+which instance gives it, the gradient), against closed-form distances for exact
+models, and for what the contract flags say; the file round-trips and its errors
+name where they are.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import csdf
+from csdf.errors import CsdfError, ParamError
+from csdf.fieldset import SERIAL_BELOW, FieldSet, build_bvh
+
+RNG = np.random.default_rng(7)
+
+
+def _scene(n: int = 24, seed: int = 0) -> csdf.Scene:
+    rng = np.random.default_rng(seed)
+    shapes = [csdf.sphere(0.3), csdf.box((0.3, 0.2, 0.4)), csdf.torus(0.3, 0.08),
+              csdf.capsule((0, 0, -0.3), (0, 0, 0.3), 0.1)]
+    sc = csdf.Scene()
+    sc.add("stool", pose=csdf.Pose(translation=[0.0, 0.0, -0.5]), params={"height": 0.5})
+    for k in range(n):
+        pose = csdf.Pose.from_rotvec(rng.normal(size=3), rng.uniform(-2, 2, 3))
+        sc.add(shapes[k % len(shapes)], pose=pose, scale=rng.uniform(0.5, 1.5))
+    return sc
+
+
+def _brute(sc: csdf.Scene, pts: np.ndarray):
+    ids = [inst.id for inst in sc]
+    vals = np.stack([sc.field(k).value(pts) for k in ids], axis=1)
+    return vals, np.array(ids)
+
+
+def test_queries_match_brute_force_over_the_instances():
+    sc = _scene()
+    pts = RNG.uniform(-3, 3, (3000, 3))
+    q = sc.query(pts)
+    vals, ids = _brute(sc, pts)
+    np.testing.assert_allclose(q.distance, vals.min(axis=1), rtol=0, atol=1e-12)
+    # the instance reported gives the minimum (up to rounding of the pose transform)
+    got = vals[np.arange(len(pts)), np.searchsorted(ids, q.instance)]
+    np.testing.assert_allclose(got, q.distance, rtol=0, atol=1e-12)
+    for i in range(0, len(pts), 97):
+        g = sc.field(int(q.instance[i])).gradient(pts[i:i + 1])[0]
+        np.testing.assert_allclose(q.gradient[i], g, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(sc.distance(pts), q.distance)
+    # a large batch (threaded) agrees with small ones
+    big = RNG.uniform(-3, 3, (SERIAL_BELOW + 777, 3))
+    d = sc.distance(big)
+    np.testing.assert_array_equal(d[:500], sc.distance(big[:500]))
+
+
+def test_exact_models_give_euclidean_distances_and_say_so():
+    sc = csdf.Scene()
+    centres = RNG.uniform(-2, 2, (40, 3))
+    radii = RNG.uniform(0.1, 0.4, 40)
+    for c, r in zip(centres, radii):
+        sc.add(csdf.sphere(1.0), pose=csdf.Pose(translation=c), scale=r)
+    pts = RNG.uniform(-3, 3, (4000, 3))
+    q = sc.query(pts)
+    true = (np.linalg.norm(pts[:, None] - centres[None], axis=2) - radii).min(axis=1)
+    np.testing.assert_allclose(q.distance, true, rtol=0, atol=1e-12)
+    assert q.exact.all()
+    np.testing.assert_allclose(np.linalg.norm(q.gradient, axis=1), 1.0, atol=1e-12)
+    # a model that is neither a distance nor a bound, near some points: not exact there
+    tw = sc.add(csdf.box((0.5, 0.5, 1.0)).twist(1.0), pose=csdf.Pose(translation=[4, 0, 0]))
+    assert sc[tw].model.exactness == "neither"
+    q2 = sc.query(pts + [2.5, 0, 0])
+    near_tw = q2.instance == tw
+    assert near_tw.any() and not q2.exact[near_tw].any()
+    far = np.linalg.norm(pts + [2.5, 0, 0] - [4, 0, 0], axis=1) > 4.0
+    assert q2.exact[far & ~near_tw].all()
+
+
+def test_spheres_clearance_and_collisions():
+    sc = _scene()
+    c = RNG.uniform(-3, 3, (2000, 3))
+    r = RNG.uniform(0.0, 0.5, 2000)
+    clear, g = sc.sphere_distance(c, r)
+    d = sc.distance(c)
+    np.testing.assert_array_equal(clear, d - r)
+    np.testing.assert_array_equal(g, sc.query(c).gradient)
+    hit = sc.collide(c, r)
+    np.testing.assert_array_equal(hit, d < r)
+    assert 0.05 < hit.mean() < 0.95
+    assert not sc.collide(c, 0.0)[d > 0].any()
+    np.testing.assert_array_equal(sc.collide(c[:3], 0.2), d[:3] < 0.2)  # one radius
+
+
+def test_nan_points_empty_scenes_and_bad_arguments():
+    sc = _scene(4)
+    q = sc.query([[np.nan, 0, 0], [0, 0, 5]])
+    assert np.isnan(q.distance[0]) and q.instance[0] == -1 and not q.exact[0]
+    assert np.isfinite(q.distance[1]) and q.instance[1] >= 0
+    empty = csdf.Scene()
+    assert np.all(np.isinf(empty.distance(np.zeros((3, 3)))))
+    assert not empty.collide(np.zeros((2, 3)), 1.0).any()
+    assert (empty.query(np.zeros((2, 3))).instance == -1).all()
+    with pytest.raises(CsdfError, match=r"shape \(N, 3\)"):
+        sc.distance(np.zeros((4, 2)))
+    with pytest.raises(CsdfError, match="radii must be finite"):
+        sc.collide(np.zeros((2, 3)), [-1.0, 0.5])
+    with pytest.raises(CsdfError, match=r"shape \(2,\)"):
+        sc.sphere_distance(np.zeros((2, 3)), [0.1, 0.2, 0.3])
+
+
+def test_instances_are_added_updated_removed_and_named():
+    sc = csdf.Scene()
+    a = sc.add("chair", name="left")
+    b = sc.add("chair", pose=csdf.Pose(translation=[1, 0, 0]), params={"seat_height": 0.5})
+    assert (a, b) == (0, 1) and len(sc) == 2
+    assert sc[a].model is sc[b].model  # loaded once, compiled once
+    assert [i.name for i in sc] == ["left", "chair_1"]
+    fs = sc._fieldset()
+    assert len(fs.tape_i) == 2  # two parameter values: two tapes of one program
+    sc.update(b, params={"leg": 0.03})
+    assert sc[b].params == {"seat_height": 0.5, "leg": 0.03}
+    p = np.array([[1.0, 0.0, 0.45]])
+    want = csdf.zoo.load("chair")(p - [1, 0, 0], {"seat_height": 0.5, "leg": 0.03})
+    np.testing.assert_allclose(sc.field(b).value(p), want, atol=1e-15)
+    sc.update(b, pose=csdf.Pose(translation=[5, 0, 0]), scale=2.0)
+    assert sc[b].pose.scale == 2.0 and sc[b].params["leg"] == 0.03
+    sc.remove(a)
+    assert len(sc) == 1 and sc.add(csdf.sphere(1)) == 2  # ids are not reused
+    assert sc.query([[0, 0, 0]]).instance[0] == 2
+    with pytest.raises(CsdfError, match="no instance 0"):
+        sc.remove(a)
+    with pytest.raises(CsdfError, match="already has an instance named"):
+        sc.add(csdf.sphere(1), name="chair_1")
+    with pytest.raises(ParamError, match="outside its range"):
+        sc.add("chair", params={"seat_height": 3.0})
+    with pytest.raises(CsdfError, match="unknown zoo model 'chiar'"):
+        sc.add("chiar")
+    with pytest.raises(CsdfError, match="3D models"):
+        sc.add(csdf.circle(1.0))
+    with pytest.raises(CsdfError, match="scale must be a positive"):
+        sc.add(csdf.sphere(1), scale=0)
+    with pytest.raises(CsdfError, match="model must be a shape"):
+        sc.add(42)
+    with pytest.raises(CsdfError):
+        sc.add(csdf.plane((0, 0, 1)))  # unbounded: no box for the hierarchy
+
+
+def test_scene_files_round_trip(tmp_path):
+    sc = _scene(6)
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / "peg.csdf").write_text("param r = 0.1 in [0.05, 0.2]\n"
+                                                 "export cylinder(r, 0.5)\n")
+    sc.add(tmp_path / "parts" / "peg.csdf", params={"r": 0.15}, name="peg")
+    sc.add(csdf.box(0.4).compile(), pose=csdf.Pose(translation=[0, 3, 0]))
+    path = tmp_path / "scene.json"
+    sc.save(path)
+    text = path.read_text()
+    assert text.count('"ref": "m0"') == 2  # the sphere model is stored once
+    back = csdf.Scene.load(path)
+    assert [(i.id, i.name, i.params) for i in back] == [(i.id, i.name, i.params) for i in sc]
+    pts = RNG.uniform(-3, 3, (2000, 3))
+    np.testing.assert_array_equal(back.distance(pts), sc.distance(pts))
+    # files are found relative to the scene file; a hand-written file may omit pose
+    doc = json.loads(text)
+    doc["instances"] = [{"model": {"file": "parts/peg.csdf"}}]
+    (tmp_path / "small.json").write_text(json.dumps(doc))
+    small = csdf.Scene.load(tmp_path / "small.json")
+    assert len(small) == 1 and small[0].pose.is_identity()
+    assert not list(tmp_path.glob(".scene.json.*"))  # no temporary file left
+
+
+@pytest.mark.parametrize("text, match", [
+    ('{"format": "csdf-scene", "version": 1,\n "instances": [}', r"<string>:2:16: bad JSON"),
+    ('{"format": "csdf-scene", "version": 2, "instances": []}', "version: must be 1"),
+    ('{"format": "x", "version": 1, "instances": []}', "format: must be 'csdf-scene'"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"model": {"zoo": "chair"}, '
+     '"pose": {"rotation": [[1, 0, 0], [0, 1, 0]]}}]}',
+     r"instances\[0\].pose.rotation: must be 3 lists of 3 numbers"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"model": {"zoo": "chair"}, '
+     '"pose": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 2]]}}]}', r"instances\[0\]: .*rotation"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"model": {"zoo": "chair"}}, '
+     '{"model": {"ref": "m9"}}]}', r"instances\[1\].model.ref: no model 'm9'"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"model": {"zoo": "chair"}, '
+     '"params": {"seat_height": NaN}}]}', "NaN is not a number"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"model": {"zoo": "chair"}, '
+     '"colour": 1}]}', r"instances\[0\]: unknown field\(s\) colour"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"id": 3, "model": {"zoo": '
+     '"chair"}}, {"id": 3, "model": {"zoo": "chair"}}]}', r"instances\[1\].id: 3 is used twice"),
+    ('{"format": "csdf-scene", "version": 1, "instances": [{"model": {"file": "nope.csdf"}}]}',
+     r"instances\[0\]: .*nope.csdf"),
+    ('{"format": "csdf-scene", "version": 1, "models": {"m0": {"csdf": "export sphere("}}, '
+     '"instances": []}', r"<string> \(models.m0\):1:14: '\(' was never closed"),
+])
+def test_bad_scene_files_say_where(text, match):
+    with pytest.raises(CsdfError, match=match):
+        csdf.Scene.loads(text)
+
+
+def test_the_hierarchy_covers_every_box_once():
+    lo = RNG.uniform(-5, 5, (101, 3))
+    hi = lo + RNG.uniform(0, 1, (101, 3))
+    node_f, node_i, order = build_bvh(lo, hi)
+    assert sorted(order) == list(range(101))
+    seen = []
+    stack = [0]
+    while stack:
+        n = stack.pop()
+        a, b = node_i[n]
+        if a < 0:
+            idx = order[-1 - a:-1 - a + b]
+            seen += list(idx)
+            assert np.all(node_f[n, :3] <= lo[idx]) and np.all(node_f[n, 3:] >= hi[idx])
+        else:
+            for c in (a, b):
+                assert np.all(node_f[n, :3] <= node_f[c, :3])
+                assert np.all(node_f[n, 3:] >= node_f[c, 3:])
+                stack.append(c)
+    assert sorted(seen) == list(range(101))
+    with pytest.raises(CsdfError, match="at least one"):
+        FieldSet([])

@@ -1,10 +1,13 @@
 """Scene queries (issue 17, the part that exists): sphere queries against scenes of
-about 20, 200 and 1,000 primitives (zoo furniture plus random clutter), beside a dense
-ESDF made with ``scipy.ndimage.distance_transform_edt``.
+20, 200 and 1,000 primitives (rooms of zoo furniture plus random clutter, 20
+primitives a room), beside a dense ESDF made with
+``scipy.ndimage.distance_transform_edt`` (of one room).
 
-For each scene: throughput of ``collide`` and ``sphere_distance`` (1,000,000 spheres of
-radius 5 cm spread over the scene's box, median of runs), the latency of a call of 100
-spheres (median of 2,000 calls), and the per-query cost against the smallest scene.
+For each scene: throughput of ``collide``, of ``sphere_distance`` with a margin of 10 cm
+(``max_distance``: a planner's cost ignores farther obstacles) and without one
+(1,000,000 spheres of radius 5 cm spread over the scene's box, median of runs), the
+latency of a call of 100 spheres (median of 2,000 calls), and the per-query cost
+against the smallest scene.
 For the ESDF (voxel sizes 1, 2 and 5 cm over the same box): the time to build it from
 csdf occupancy, its memory, the time of trilinear queries
 (``scipy.ndimage.map_coordinates``) and the largest error against csdf's exact
@@ -30,32 +33,47 @@ from common import machine_info, md_table  # noqa: E402
 FURNITURE = [("table", (0.0, 0.0, 0.0), 0.0), ("chair", (0.0, -0.7, 0.0), 0.0),
              ("chair", (0.0, 0.7, 0.0), np.pi), ("stool", (1.2, 0.8, 0.0), 0.0),
              ("bookshelf", (-1.6, 0.0, 0.0), np.pi / 2), ("lamp", (1.4, -1.2, 0.0), 0.0)]
+#: one room: 4 x 4 m, 2.5 m high
+ROOM = np.array([4.0, 4.0, 2.5])
+#: primitives per room (furniture, then clutter up to this)
+PER_ROOM = 20
+#: the planner's margin of the capped clearance query (m)
+MARGIN = 0.1
 
 
 def make_scene(n_primitives: int, seed: int = 0):
-    """Zoo furniture (as many pieces as fit) plus random spheres and boxes on the floor
-    and shelves of a 4 x 4 x 2.5 m room, up to about ``n_primitives`` primitives."""
+    """Rooms of ``ROOM`` size side by side, each with zoo furniture (as many pieces as
+    fit in ``PER_ROOM`` primitives) and random spheres and boxes up to ``PER_ROOM``: the
+    density stays the same as the scene grows. Returns ``(scene, primitives, box)``."""
     import csdf
 
     rng = np.random.default_rng(seed)
     scene = csdf.Scene()
-    count = 0
-    for name, at, yaw in FURNITURE:
-        prims = len(csdf.zoo.load(name).compile().calls)
-        if count + prims > n_primitives:
-            continue
-        scene.add(name, pose=csdf.Pose.from_rotvec([0, 0, yaw], at))
-        count += prims
+    rooms = max(1, round(n_primitives / PER_ROOM))
+    side = int(np.ceil(np.sqrt(rooms)))
     ball, crate = csdf.sphere(1.0), csdf.box(1.0)
-    while count < n_primitives:
-        at = rng.uniform([-2, -2, 0], [2, 2, 2.2])
-        if count % 2:
-            scene.add(ball, pose=csdf.Pose(translation=at), scale=rng.uniform(0.03, 0.1))
-        else:
-            scene.add(crate, pose=csdf.Pose.from_rotvec(rng.normal(size=3), at),
-                      scale=rng.uniform(0.05, 0.2))
-        count += 1
-    return scene, count
+    count = 0
+    for r in range(rooms):
+        origin = np.array([r % side, r // side, 0]) * ROOM
+        centre = origin + ROOM * [0.5, 0.5, 0]
+        here = 0
+        for name, at, yaw in FURNITURE:
+            prims = len(csdf.zoo.load(name).compile().calls)
+            if here + prims > PER_ROOM:
+                continue
+            scene.add(name, pose=csdf.Pose.from_rotvec([0, 0, yaw], centre + at))
+            here += prims
+        while here < PER_ROOM:
+            at = origin + rng.uniform([0.1, 0.1, 0.0], ROOM - 0.1)
+            if here % 2:
+                scene.add(ball, pose=csdf.Pose(translation=at), scale=rng.uniform(0.03, 0.1))
+            else:
+                scene.add(crate, pose=csdf.Pose.from_rotvec(rng.normal(size=3), at),
+                          scale=rng.uniform(0.05, 0.2))
+            here += 1
+        count += here
+    box = np.array([[0.0, 0.0, 0.0], [side * ROOM[0], side * ROOM[1], ROOM[2]]])
+    return scene, count, box
 
 
 def _median(fn, runs: int) -> float:
@@ -71,19 +89,22 @@ def _median(fn, runs: int) -> float:
 def _measure(scene, c: np.ndarray, r: np.ndarray, runs: int):
     """Seconds of ``collide`` and ``sphere_distance`` on all spheres (medians), and per
     call of the first 100 (medians over 2,000 calls)."""
+    def margin(c, r):
+        return scene.sphere_distance(c, r, max_distance=MARGIN)
+
     scene.collide(c[:10], r[:10])  # builds the hierarchy, loads the kernels
-    t_col = _median(lambda: scene.collide(c, r), runs)
-    t_dist = _median(lambda: scene.sphere_distance(c, r), runs)
+    fns = (scene.collide, margin, scene.sphere_distance)
+    total = [_median(lambda f=f: f(c, r), runs) for f in fns]
     sc, sr = c[:100], r[:100]
     lat = []
-    for fn in (scene.collide, scene.sphere_distance):
+    for fn in fns:
         times = []
         for _ in range(2000):
             t0 = time.perf_counter()
             fn(sc, sr)
             times.append(time.perf_counter() - t0)
         lat.append(statistics.median(times))
-    return t_col, t_dist, lat[0], lat[1]
+    return total, lat
 
 
 def _esdf(scene, box: np.ndarray, h: float):
@@ -119,35 +140,33 @@ def main(argv: list[str] | None = None) -> int:
     base = None
     scenes = {}
     for n in (20, 200, 1000):
-        scene, count = make_scene(n)
-        scenes[n] = scene
-        box = np.array([[-2.0, -2.0, 0.0], [2.0, 2.0, 2.5]])
+        scene, count, box = make_scene(n)
+        scenes[n] = (scene, box)
         c = rng.uniform(box[0], box[1], (1_000_000, 3))
         r = np.full(len(c), 0.05)
-        t_col, t_dist, lat_col, lat_dist = _measure(scene, c, r, args.runs)
-        per = (t_col / len(c), t_dist / len(c))
+        total, lat = _measure(scene, c, r, args.runs)
         if base is None:
-            base = per
+            base = total
         hit = float(np.mean(scene.collide(c, r)))
-        rows.append([f"{count} ({len(scene)} instances)", f"{len(c) / t_col / 1e6:.1f}",
-                     f"{len(c) / t_dist / 1e6:.2f}", f"{lat_col * 1e6:.1f}",
-                     f"{lat_dist * 1e6:.1f}", f"{per[0] / base[0]:.2f}x",
-                     f"{per[1] / base[1]:.2f}x", f"{hit:.3f}"])
+        row = [f"{count} ({len(scene)} instances)", f"{hit:.3f}"]
+        for t, t0, call in zip(total, base, lat):
+            row += [f"{len(c) / t / 1e6:.2f}", f"{call * 1e6:.1f}", f"{t / t0:.2f}x"]
+        rows.append(row)
     print()
-    print(md_table(["scene (primitives)", "collide M spheres/s", "sphere_distance M/s",
-                    "collide us per 100-sphere call", "sphere_distance us per call",
-                    "collide cost / 20", "distance cost / 20", "fraction colliding"], rows))
+    head = ["scene (primitives)", "fraction colliding"]
+    for what in ("collide", f"clearance, margin {MARGIN} m", "clearance"):
+        head += [f"{what}: M spheres/s", "us per 100-sphere call", "cost / 20"]
+    print(md_table(head, rows))
     voxels = [float(v) for v in args.esdf_voxels.split(",") if v.strip()]
     if voxels:
-        scene = scenes[200]
-        box = np.array([[-2.0, -2.0, 0.0], [2.0, 2.0, 2.5]])
+        scene, box = scenes[20]
         q = rng.uniform(box[0] + 0.1, box[1] - 0.1, (200_000, 3))
         want = scene.query(q)
         t_csdf = _median(lambda: scene.distance(q), args.runs)
         size = sum(len(inst.model.compile().to_bytes()) if hasattr(inst.model, "compile")
                    else len(inst.model.to_bytes()) for inst in
                    {id(i.model): i for i in scene}.values()) + 19 * 8 * len(scene)
-        erows = [["csdf scene (200 primitives)", "-", f"{size / 1e3:.1f} kB",
+        erows = [["csdf scene (one room, 20 primitives)", "-", f"{size / 1e3:.1f} kB",
                   f"{t_csdf / len(q) * 1e9:.0f}", "0 (exact where flagged)"]]
         from scipy.ndimage import map_coordinates
 

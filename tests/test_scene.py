@@ -120,7 +120,7 @@ def test_instances_are_added_updated_removed_and_named():
     assert sc[a].model is sc[b].model  # loaded once, compiled once
     assert [i.name for i in sc] == ["left", "chair_1"]
     fs = sc._fieldset()
-    assert len(fs.tape_i) == 2  # two parameter values: two tapes of one program
+    assert len(np.unique(fs.inst_i[:, 0])) == 2  # two parameter values: two tapes
     sc.update(b, params={"leg": 0.03})
     assert sc[b].params == {"seat_height": 0.5, "leg": 0.03}
     p = np.array([[1.0, 0.0, 0.45]])
@@ -222,3 +222,43 @@ def test_the_hierarchy_covers_every_box_once():
     assert sorted(seen) == list(range(101))
     with pytest.raises(CsdfError, match="at least one"):
         FieldSet([])
+
+
+def test_long_models_run_their_cells_tapes_with_the_same_values(monkeypatch):
+    import csdf.fieldset as FS
+
+    chair = csdf.zoo.load("chair")
+    assert FS.cell_depth(len(chair.compile().code)) > 0
+    fields = [csdf.as_field(chair, pose=csdf.Pose.from_rotvec([0, 0, 0.3], [0.5, 0, 0]))]
+    celled = FieldSet(fields)
+    assert celled.tape_i[0, 4] > 0 and len(celled.tape_i) > 1
+    monkeypatch.setattr(FS, "CELL_MIN_INSTRUCTIONS", 10**9)
+    whole = FieldSet(fields)
+    assert len(whole.tape_i) == 1
+    pts = RNG.uniform(-2, 2.5, (20000, 3))  # inside the cells' region and beyond
+    a = celled.nearest(pts, grad=True)
+    b = whole.nearest(pts, grad=True)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    assert celled.tape_i[1:, 1].mean() < 0.5 * celled.tape_i[0, 1]  # and shorter
+
+
+def test_a_margin_caps_distances_and_skips_far_surfaces():
+    sc = _scene()
+    pts = RNG.uniform(-3, 3, (3000, 3))
+    full = sc.query(pts)
+    q = sc.query(pts, max_distance=0.5)
+    near = full.distance < 0.5
+    assert 0.05 < near.mean() < 0.95
+    np.testing.assert_array_equal(q.distance[near], full.distance[near])
+    np.testing.assert_array_equal(q.gradient[near], full.gradient[near])
+    np.testing.assert_array_equal(q.instance[near], full.instance[near])
+    assert np.all(q.distance[~near] == 0.5) and np.all(q.gradient[~near] == 0)
+    assert np.all(q.instance[~near] == -1) and not q.exact[~near].any()
+    np.testing.assert_array_equal(sc.distance(pts, max_distance=0.5), q.distance)
+    c, g = sc.sphere_distance(pts, 0.1, max_distance=0.5)
+    ref = np.minimum(full.distance - 0.1, 0.5)
+    np.testing.assert_allclose(c, ref, rtol=0, atol=1e-15)
+    assert np.all(g[full.distance - 0.1 >= 0.5] == 0)
+    with pytest.raises(CsdfError, match="max_distance must not be NaN"):
+        sc.distance(pts, max_distance=float("nan"))

@@ -19,12 +19,14 @@ from .errors import CsdfError
 from .field import Field, numba_available
 from .parallel import N_THREADS, executor
 
-__all__ = ["FieldSet", "build_bvh", "LEAF_SIZE"]
+__all__ = ["FieldSet", "build_bvh", "cell_depth", "LEAF_SIZE", "CELL_MIN_INSTRUCTIONS"]
 
 #: instances per BVH leaf
 LEAF_SIZE = 2
 #: below this many points a query runs on the calling thread alone
 SERIAL_BELOW = 4096
+#: models of at least this many instructions keep tapes per cell of a grid
+CELL_MIN_INSTRUCTIONS = 64
 _CONTRACT = {"exact": 0, "bound": 1, "neither": 2}
 
 
@@ -68,6 +70,71 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE
             np.array(node_i, dtype=np.int64).reshape(-1, 2), order.astype(np.int64))
 
 
+def cell_depth(n_instructions: int) -> int:
+    """Depth of the grid of cell tapes kept for a model of this many instructions (0:
+    none): short tapes gain little from pruning, long ones a finer grid."""
+    if n_instructions < CELL_MIN_INSTRUCTIONS:
+        return 0
+    return 3 if n_instructions < 1000 else 4
+
+
+class _Pool:
+    """Register tapes gathered into one array of rows, with the cell grids of long ones
+    (see :mod:`csdf.backends.nearest_kernels` for the layout)."""
+
+    def __init__(self) -> None:
+        self.code: list[np.ndarray] = []
+        self.imm: list[np.ndarray] = []
+        self.tape_i: list[list[int]] = []
+        self.tape_f: list[np.ndarray] = []
+        self.cells: list[np.ndarray] = []
+        self.rows = 0
+        self.n_cells = 0
+
+    def add(self, code: np.ndarray, imm: np.ndarray, out: int, regs: int) -> int:
+        self.code.append(code)
+        self.imm.append(imm)
+        self.tape_i.append([self.rows, len(code), int(out), int(regs), 0, 0])
+        self.tape_f.append(np.ones(6))
+        self.rows += len(code)
+        return len(self.tape_i) - 1
+
+    def add_cells(self, t: int, fld: Field, depth: int) -> None:
+        """Tapes for every cell of a ``2**depth`` grid over the field's box grown by its
+        size on each side (points farther out run the whole tape)."""
+        from .backends.pruned import CellTapes
+
+        box = fld.model_bounds
+        size = np.maximum(box[1] - box[0], 1e-6)
+        region = np.array([box[0] - size, box[1] + size])
+        ct = CellTapes(fld.program, fld.pvals, region, depth)
+        n = 1 << depth
+        leaves = ct.tapes(depth, np.arange(n ** 3))
+        pool = ct.pool
+        ids = np.empty(len(leaves), np.int64)
+        first: dict[int, int] = {}
+        for c, lt in enumerate(leaves.tolist()):
+            got = first.get(lt)
+            if got is None:
+                a = int(pool.start[lt])
+                b = a + int(pool.length[lt])
+                got = first[lt] = self.add(pool.code[a:b], pool.imm[a:b], pool.out[lt],
+                                           pool.regs[lt])
+            ids[c] = got
+        self.tape_i[t][4:6] = [n, self.n_cells]
+        self.tape_f[t] = np.concatenate([ct.lo, ct.span])
+        self.cells.append(ids)
+        self.n_cells += len(ids)
+
+    def arrays(self):
+        code = np.ascontiguousarray(np.concatenate(self.code), np.int32)
+        imm = np.ascontiguousarray(np.concatenate(self.imm), np.float64)
+        tape_i = np.array(self.tape_i, dtype=np.int64).reshape(-1, 6)
+        tape_f = np.array(self.tape_f, dtype=np.float64).reshape(-1, 6)
+        cells = np.concatenate(self.cells) if self.cells else np.zeros(1, np.int64)
+        return code, imm, tape_i, tape_f, cells
+
+
 class FieldSet:
     """Posed 3D fields (instances) with batched nearest and collision queries.
 
@@ -92,8 +159,7 @@ class FieldSet:
             raise CsdfError("a field set needs at least one field")
         K = len(self.fields)
         tapes: dict[int, int] = {}
-        codes, imms, tape_i = [], [], []
-        rows = 0
+        pool = _Pool()
         inst_f = np.empty((K, 19))
         inst_i = np.empty((K, 2), np.int64)
         for k, fld in enumerate(self.fields):
@@ -103,11 +169,10 @@ class FieldSet:
             tape = reg_tape(fld.program, fld.pvals)
             t = tapes.get(id(tape))
             if t is None:
-                t = tapes[id(tape)] = len(tape_i)
-                codes.append(tape.code)
-                imms.append(tape.imm)
-                tape_i.append([rows, len(tape.code), tape.out, tape.n_regs])
-                rows += len(tape.code)
+                t = tapes[id(tape)] = pool.add(tape.code, tape.imm, tape.out, tape.n_regs)
+                depth = cell_depth(len(tape.code))
+                if depth:
+                    pool.add_cells(t, fld, depth)
             pose = fld.pose
             box = fld.bounds
             inst_f[k, :9] = pose.rotation.reshape(-1)
@@ -116,9 +181,7 @@ class FieldSet:
             inst_f[k, 13:16] = box[0]
             inst_f[k, 16:19] = box[1]
             inst_i[k] = (t, _CONTRACT[fld.exactness])
-        self.code = np.ascontiguousarray(np.concatenate(codes), np.int32)
-        self.imm = np.ascontiguousarray(np.concatenate(imms), np.float64)
-        self.tape_i = np.array(tape_i, dtype=np.int64).reshape(-1, 4)
+        self.code, self.imm, self.tape_i, self.tape_f, self.cell_tab = pool.arrays()
         self.max_regs = int(self.tape_i[:, 3].max())
         self.inst_f = inst_f
         self.inst_i = inst_i
@@ -156,8 +219,8 @@ class FieldSet:
         inst = np.empty(N, np.int64)
         exact = np.empty(N, np.bool_)
         args = (pts, start, bool(stop), bool(grad), self.inst_f, self.inst_i, self.code,
-                self.imm, self.tape_i, self.node_f, self.node_i, self.order,
-                self.max_regs, dist, g, inst, exact)
+                self.imm, self.tape_i, self.tape_f, self.cell_tab, self.node_f,
+                self.node_i, self.order, self.max_regs, dist, g, inst, exact)
         n = 1 if N < SERIAL_BELOW else N_THREADS
         if n == 1:
             NK.nearest(*args, 0, 1)

@@ -14,8 +14,12 @@ Data (packed to keep the call cheap):
   the instance's field at a world point ``p`` is ``s f(R^T (p - t) / s)``.
 * ``inst_i`` ``(K, 2)`` int64: the instance's tape and its contract (0 exact, 1 bound,
   2 neither).
-* ``tape_i`` ``(T, 4)`` int64 per tape: first row in ``code``/``imm``, row count, output
-  register, registers used.
+* ``tape_i`` ``(T, 6)`` int64 per tape: first row in ``code``/``imm``, row count, output
+  register, registers used, and for a tape kept per cell of a grid over the model's
+  region (long models) the cells per axis ``n`` (0: none) and the first entry of its
+  ``n**3`` cells in ``cell_tab`` (``(C,)`` int64: the cell's tape); ``tape_f`` ``(T,
+  6)`` float64: that region's ``lo`` and ``span`` (object frame). A point of the region
+  runs its cell's tape (bit-identical there), any other the whole tape.
 * ``node_f`` ``(M, 6)`` float64 per BVH node: its box ``lo``, ``hi``; ``node_i`` ``(M,
   2)`` int64: the two children, or ``(-1 - first, count)`` for a leaf holding
   ``order[first:first + count]``.
@@ -54,8 +58,26 @@ def _box_distance(p0, p1, p2, f, off):
 
 
 @njit(**_OPTS)
-def _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, R, D, tmp, grad,
-                   g_out):
+def _cell_tape(t, q0, q1, q2, tape_i, tape_f, cell_tab):
+    """The tape to run at object point ``q`` for tape ``t``: its cell's, or itself."""
+    n = tape_i[t, 4]
+    if n == 0:
+        return t
+    f = tape_f[t]
+    u0 = (q0 - f[0]) / f[3]
+    u1 = (q1 - f[1]) / f[4]
+    u2 = (q2 - f[2]) / f[5]
+    if not (0.0 <= u0 <= 1.0 and 0.0 <= u1 <= 1.0 and 0.0 <= u2 <= 1.0):
+        return t
+    c0 = min(int(np.floor(u0 * n)), n - 1)
+    c1 = min(int(np.floor(u1 * n)), n - 1)
+    c2 = min(int(np.floor(u2 * n)), n - 1)
+    return cell_tab[tape_i[t, 5] + (c0 * n + c1) * n + c2]
+
+
+@njit(**_OPTS)
+def _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, tape_f, cell_tab, R,
+                   D, tmp, grad, g_out):
     """The value ``s f(q)`` of instance ``k`` at world point ``p``; with ``grad`` also
     the world gradient ``R grad f(q)`` into ``g_out`` (3,)."""
     f = inst_f[k]
@@ -65,7 +87,7 @@ def _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, R, D, tmp, 
     R[0, 0] = (f[0] * d0 + f[3] * d1 + f[6] * d2) / s
     R[1, 0] = (f[1] * d0 + f[4] * d1 + f[7] * d2) / s
     R[2, 0] = (f[2] * d0 + f[5] * d1 + f[8] * d2) / s
-    t = inst_i[k, 0]
+    t = _cell_tape(inst_i[k, 0], R[0, 0], R[1, 0], R[2, 0], tape_i, tape_f, cell_tab)
     start = tape_i[t, 0]
     n = tape_i[t, 1]
     o = tape_i[t, 2]
@@ -84,8 +106,9 @@ def _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, R, D, tmp, 
 
 
 @njit(**_OPTS)
-def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, node_f,
-            node_i, order, max_regs, dist, grad, inst, exact, part, n_parts):
+def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, tape_f,
+            cell_tab, node_f, node_i, order, max_regs, dist, grad, inst, exact, part,
+            n_parts):
     """For points ``pts`` ``(N, 3)`` (the ``part``-th of ``n_parts`` slices): the
     smallest instance value ``dist`` ``(N,)``, its instance ``inst`` ``(N,)`` (-1: no
     instance holds a value below the start), its world gradient ``grad`` ``(N, 3)``
@@ -139,7 +162,7 @@ def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, node
                     if bk > 0.0 and bk >= best:
                         continue
                     v = _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i,
-                                       R, D, tmp, False, g)
+                                       tape_f, cell_tab, R, D, tmp, False, g)
                     if inst_i[k, 1] == 2 and bk < nmin:
                         nmin = bk
                     if v < best:
@@ -166,8 +189,8 @@ def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, node
         if win >= 0:
             exact[i] = inst_i[win, 1] == 0 and not (nmin < best)
             if want_grad:
-                _eval_instance(win, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, R, D,
-                               tmp, True, g)
+                _eval_instance(win, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, tape_f,
+                               cell_tab, R, D, tmp, True, g)
                 grad[i, 0] = g[0]
                 grad[i, 1] = g[1]
                 grad[i, 2] = g[2]

@@ -97,6 +97,17 @@ def _points(points: Any, what: str) -> np.ndarray:
     return np.ascontiguousarray(p)
 
 
+def _cap(max_distance: Any, n: int) -> np.ndarray | None:
+    """The search's start values for ``max_distance`` (None: no cap)."""
+    try:
+        m = float(max_distance)
+    except (TypeError, ValueError):
+        raise CsdfError(f"max_distance must be a number, got {max_distance!r}") from None
+    if m != m:
+        raise CsdfError("max_distance must not be NaN")
+    return None if m == np.inf else np.full(n, m)
+
+
 def _radii(radii: Any, n: int) -> np.ndarray:
     try:
         r = np.asarray(radii, dtype=np.float64)
@@ -106,7 +117,7 @@ def _radii(radii: Any, n: int) -> np.ndarray:
         r = np.full(n, float(r))
     if r.shape != (n,):
         raise CsdfError(f"radii must be one number or shape ({n},), got {r.shape}")
-    if not np.all(np.isfinite(r)) or np.any(r < 0):
+    if n and not (r.min() >= 0.0 and r.max() < np.inf):  # (NaN fails both)
         raise CsdfError("radii must be finite and not negative")
     return np.ascontiguousarray(r)
 
@@ -298,33 +309,47 @@ class Scene:
         return self._set
 
     def _nearest(self, pts: np.ndarray, grad: bool, below: np.ndarray | None = None,
-                 stop: bool = False):
+                 stop: bool = False, ids: bool = True):
         fs = self._fieldset()
         n = len(pts)
         if fs is None:  # an empty scene: nothing anywhere
             d = np.where(np.isnan(pts).any(axis=1), np.nan, np.inf)
             return d, np.zeros((n, 3)) if grad else None, np.full(n, -1), np.zeros(n, bool)
         d, g, k, ex = fs.nearest(pts, grad=grad, below=below, stop=stop)
-        ids = np.where(k >= 0, self._ids[np.maximum(k, 0)], -1)
-        return d, g, ids, ex
+        if ids:  # the FieldSet's indices as instance ids (-1 stays -1)
+            k = np.where(k >= 0, self._ids[k], -1)
+        return d, g, k, ex  # nothing below ``below``: d is ``below`` and k is -1
 
-    def distance(self, points: Any) -> np.ndarray:
+    def distance(self, points: Any, max_distance: float = np.inf) -> np.ndarray:
         """``(N,)`` the scene's signed distance at world points ``(N, 3)`` (inf for an
-        empty scene)."""
-        return self._nearest(_points(points, "points"), False)[0]
+        empty scene); see :meth:`query` for ``max_distance``."""
+        pts = _points(points, "points")
+        return self._nearest(pts, False, _cap(max_distance, len(pts)))[0]
 
-    def query(self, points: Any) -> SceneQuery:
-        """Distance, gradient, nearest instance and exactness at points ``(N, 3)``."""
-        d, g, k, ex = self._nearest(_points(points, "points"), True)
+    def query(self, points: Any, max_distance: float = np.inf) -> SceneQuery:
+        """Distance, gradient, nearest instance and exactness at points ``(N, 3)``.
+
+        Args:
+            max_distance: search only for surfaces nearer than this (a planner's
+                margin): a point farther from every surface gets exactly this value,
+                gradient 0, instance -1 and ``exact`` False, at the cost of the
+                hierarchy's boxes alone.
+        """
+        pts = _points(points, "points")
+        d, g, k, ex = self._nearest(pts, True, _cap(max_distance, len(pts)))
         return SceneQuery(distance=d, gradient=g, instance=k, exact=ex)
 
-    def sphere_distance(self, centers: Any, radii: Any) -> tuple[np.ndarray, np.ndarray]:
+    def sphere_distance(self, centers: Any, radii: Any, max_distance: float = np.inf
+                        ) -> tuple[np.ndarray, np.ndarray]:
         """Signed clearance of spheres: ``(distance(centre) - radius (N,), its gradient by
         the centre (N, 3))``; negative where a sphere penetrates the scene (a bound of
-        the penetration where the model is a bound)."""
+        the penetration where the model is a bound). With ``max_distance``, clearances
+        beyond it are reported as ``max_distance`` with gradient 0, and only surfaces
+        within it of a sphere are searched."""
         c = _points(centers, "centers")
         r = _radii(radii, len(c))
-        d, g, _, _ = self._nearest(c, True)
+        below = None if max_distance == np.inf else _cap(max_distance, len(c)) + r
+        d, g, _, _ = self._nearest(c, True, below, ids=False)
         return d - r, g
 
     def collide(self, centers: Any, radii: Any) -> np.ndarray:
@@ -333,7 +358,7 @@ class Scene:
         and each search stops at the first hit."""
         c = _points(centers, "centers")
         r = _radii(radii, len(c))
-        _, _, k, _ = self._nearest(c, False, below=r, stop=True)
+        _, _, k, _ = self._nearest(c, False, below=r, stop=True, ids=False)
         return k >= 0
 
     # ------------------------------------------------------------------ files

@@ -262,3 +262,62 @@ def test_a_margin_caps_distances_and_skips_far_surfaces():
     assert np.all(g[full.distance - 0.1 >= 0.5] == 0)
     with pytest.raises(CsdfError, match="max_distance must not be NaN"):
         sc.distance(pts, max_distance=float("nan"))
+
+
+def _sphere_hits(o, d, centres, radii):
+    """Analytic first hits of unit rays with spheres: (t, index), inf/-1 for misses."""
+    oc = o[:, None, :] - centres[None]
+    b = np.einsum("nkj,nj->nk", oc, d)
+    c = np.einsum("nkj,nkj->nk", oc, oc) - radii ** 2
+    disc = b * b - c
+    with np.errstate(invalid="ignore"):
+        t = -b - np.sqrt(disc)
+    t[(disc < 0) | (t < 0)] = np.inf
+    k = np.argmin(t, axis=1)
+    tk = t[np.arange(len(t)), k]
+    return tk, np.where(np.isfinite(tk), k, -1)
+
+
+def test_ray_casts_hit_where_rays_meet_the_spheres():
+    sc = csdf.Scene()
+    centres = RNG.uniform(-2, 2, (30, 3))
+    radii = RNG.uniform(0.1, 0.5, 30)
+    ids = [sc.add(csdf.sphere(1.0), pose=csdf.Pose(translation=c), scale=r)
+           for c, r in zip(centres, radii)]
+    o = np.tile([6.0, 0.5, 0.2], (4000, 1))
+    d = 0.3 * RNG.normal(size=(4000, 3)) - [1, 0, 0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    h = sc.raycast(o[0], d)
+    t, k = _sphere_hits(o, d, centres, radii)
+    assert 0.1 < h.hit.mean() < 0.9
+    np.testing.assert_array_equal(h.hit, np.isfinite(t))
+    np.testing.assert_allclose(h.distance[h.hit], t[h.hit], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(h.instance[h.hit], np.array(ids)[k[h.hit]])
+    p = o[h.hit] + h.distance[h.hit, None] * d[h.hit]
+    want = (p - centres[k[h.hit]]) / radii[k[h.hit], None]
+    np.testing.assert_allclose(h.normal[h.hit], want, atol=1e-7)
+    assert np.all(h.normal[~h.hit] == 0) and np.all(h.instance[~h.hit] == -1)
+    # one origin per ray, unnormalised directions, a farthest distance
+    h2 = sc.raycast(o, 3.0 * d, max_distance=6.0)
+    np.testing.assert_array_equal(h2.hit, h.hit & (h.distance <= 6.0))
+    # a ray starting inside a model hits at its start
+    inside = sc.raycast(centres[:3], d[:3])
+    assert inside.hit.all() and np.all(inside.distance == 0)
+
+
+def test_ray_casts_refuse_bad_rays_and_unbounded_steps():
+    sc = _scene(3)
+    with pytest.raises(CsdfError, match="must not be zero"):
+        sc.raycast([0, 0, 0], [[0, 0, 0]])
+    with pytest.raises(CsdfError, match=r"origins must have shape"):
+        sc.raycast(np.zeros((2, 3)), np.ones((3, 3)))
+    with pytest.raises(CsdfError, match="finite"):
+        sc.raycast([0, 0, np.inf], [[1, 0, 0]])
+    from csdf.expr import X, Y, Z
+    from csdf.shapes.exprfield import expr_shape
+
+    blob = expr_shape(X * X + Y * Y + Z * Z - 1.0, bounds=np.array([[-1.0] * 3, [1.0] * 3]))
+    sc.add(blob)
+    with pytest.raises(CsdfError, match="has none"):
+        sc.raycast([0, 0, 5], [[0, 0, -1]])
+    assert not csdf.Scene().raycast([0, 0, 0], [[1, 0, 0]]).hit.any()

@@ -185,6 +185,7 @@ class FieldSet:
         self.max_regs = int(self.tape_i[:, 3].max())
         self.inst_f = inst_f
         self.inst_i = inst_i
+        self.lipschitz = max(float(f.lipschitz) for f in self.fields)
         self.boxes = np.stack([inst_f[:, 13:16], inst_f[:, 16:19]], axis=1)
         self.node_f, self.node_i, self.order = build_bvh(inst_f[:, 13:16], inst_f[:, 16:19])
 
@@ -227,3 +228,48 @@ class FieldSet:
         else:
             list(executor().map(lambda c: NK.nearest(*args, c, n), range(n)))
         return dist, (g if grad else None), inst, exact
+
+    def raycast(self, origins: np.ndarray, dirs: np.ndarray, tmax: np.ndarray, *,
+                eps: float, tol: float, max_iter: int = 1024
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """First hits of rays with the instances' union (see
+        :func:`csdf.backends.nearest_kernels.raycast`).
+
+        Args:
+            origins: ``(N, 3)`` or ``(3,)`` (shared) world points; dirs: ``(N, 3)``
+                unit directions; tmax: ``(N,)`` the farthest hit distances.
+            eps: below this value rays step by it, looking for the sign change (world
+                units); tol: the precision of the crossing; max_iter: steps per ray.
+
+        Returns:
+            ``(t (N,) inf for a miss, instance (N,) -1 for a miss, normal (N, 3))``.
+
+        Raises:
+            CsdfError: an instance without a finite Lipschitz bound (no safe step).
+        """
+        from .backends import nearest_kernels as NK
+
+        if not np.isfinite(self.lipschitz):
+            bad = next(k for k, f in enumerate(self.fields) if not np.isfinite(f.lipschitz))
+            raise CsdfError(f"ray casts step by the field's value over its Lipschitz bound; "
+                            f"instance {bad} has none (its model is "
+                            "neither a distance nor a bound)")
+        o = np.ascontiguousarray(origins, dtype=np.float64)
+        shared = o.shape == (3,)
+        o = o.reshape(-1, 3)
+        d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
+        N = len(d)
+        t = np.empty(N)
+        inst = np.empty(N, np.int64)
+        nrm = np.empty((N, 3))
+        args = (o, shared, d, np.ascontiguousarray(tmax, dtype=np.float64),
+                1.0 / max(self.lipschitz, 1e-300), float(eps), float(tol), int(max_iter),
+                self.inst_f,
+                self.inst_i, self.code, self.imm, self.tape_i, self.tape_f, self.cell_tab,
+                self.node_f, self.node_i, self.order, self.max_regs, t, inst, nrm)
+        n = 1 if N < SERIAL_BELOW // 8 else N_THREADS
+        if n == 1:
+            NK.raycast(*args, 0, 1)
+        else:
+            list(executor().map(lambda c: NK.raycast(*args, c, n), range(n)))
+        return t, inst, nrm

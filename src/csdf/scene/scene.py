@@ -31,12 +31,18 @@ from ..fieldset import FieldSet
 from ..pose import Pose, as_pose
 from . import fileformat
 
-__all__ = ["Scene", "Instance", "SceneQuery", "MAX_INSTANCES", "MAX_QUERY_POINTS"]
+__all__ = ["Scene", "Instance", "SceneQuery", "SceneHits", "MAX_INSTANCES", "MAX_QUERY_POINTS",
+           "RAY_EPS_REL", "RAY_TOL_REL"]
 
 #: the most instances a scene holds
 MAX_INSTANCES = 1_000_000
 #: the most points (or spheres, rays) one query takes
 MAX_QUERY_POINTS = 50_000_000
+#: a ray cast's near-surface step (it looks for the sign change with steps of this),
+#: relative to the diagonal of the scene's box
+RAY_EPS_REL = 1e-5
+#: the precision of a ray cast's hits, relative to the diagonal of the scene's box
+RAY_TOL_REL = 1e-12
 
 
 @dataclass(frozen=True)
@@ -59,6 +65,23 @@ class Instance:
     source: dict
     pose: Pose
     params: dict = field(default_factory=dict)
+
+
+@dataclass
+class SceneHits:
+    """What :meth:`Scene.raycast` finds along each ray.
+
+    Attributes:
+        hit: ``(N,)`` bool; distance: ``(N,)`` along the (unit) ray to the first hit,
+            inf for a miss; instance: ``(N,)`` int64 the id hit (-1: none); normal:
+            ``(N, 3)`` the unit outward normal there (the hit instance's gradient; 0
+            for a miss).
+    """
+
+    hit: np.ndarray
+    distance: np.ndarray
+    instance: np.ndarray
+    normal: np.ndarray
 
 
 @dataclass
@@ -360,6 +383,52 @@ class Scene:
         r = _radii(radii, len(c))
         _, _, k, _ = self._nearest(c, False, below=r, stop=True, ids=False)
         return k >= 0
+
+    def raycast(self, origins: Any, directions: Any, max_distance: float = np.inf,
+                max_iter: int = 1024) -> SceneHits:
+        """First hits of rays with the scene, by sphere tracing: steps of the scene's
+        value over the largest Lipschitz bound of its models, steps of
+        :data:`RAY_EPS_REL` of the scene's diagonal where the value is smaller, and a
+        hit where the value changes sign, refined to :data:`RAY_TOL_REL` of the
+        diagonal (a ray that only grazes a surface goes on; one inside a sheet thinner
+        than the small step may pass it; a ray starting inside a model hits at 0).
+
+        Args:
+            origins: ``(N, 3)`` or one ``(3,)`` origin for all rays (world).
+            directions: ``(N, 3)`` ray directions (normalised here).
+            max_distance: the farthest hit reported; max_iter: steps per ray (a ray
+                running along a surface may use them up: then it reports no hit).
+
+        Raises:
+            CsdfError: bad shapes, a zero or non-finite direction or origin, or a model
+                without a Lipschitz bound.
+        """
+        d = _points(directions, "directions")
+        o = np.asarray(origins, dtype=np.float64)
+        if o.shape != (3,):
+            o = _points(origins, "origins")
+            if len(o) != len(d):
+                raise CsdfError(f"origins must have shape (3,) or {d.shape}, got {o.shape}")
+        if not (np.isfinite(d).all() and np.isfinite(o).all()):
+            raise CsdfError("ray origins and directions must be finite")
+        norm = np.linalg.norm(d, axis=1)
+        if len(d) and not norm.min() > 0:
+            raise CsdfError("ray directions must not be zero")
+        d = d / norm[:, None]
+        m = float(max_distance)
+        if not m >= 0:
+            raise CsdfError(f"max_distance must be >= 0, got {max_distance!r}")
+        n = len(d)
+        fs = self._fieldset()
+        if fs is None:
+            return SceneHits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1),
+                             np.zeros((n, 3)))
+        box = fs.node_f[0]
+        diag = float(np.linalg.norm(box[3:] - box[:3]))
+        t, k, nrm = fs.raycast(o, d, np.full(n, m), eps=RAY_EPS_REL * diag,
+                               tol=RAY_TOL_REL * diag, max_iter=max_iter)
+        hit = k >= 0
+        return SceneHits(hit, t, np.where(hit, self._ids[k], -1), nrm)
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike) -> None:

@@ -29,7 +29,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import ShapeError
-from ..expr import Expr, X, Y, Z, make, walk
+from ..expr import Expr, X, Y, Z, walk
+from ..expr import substitute as substitute_leaves
 from ..vec import Vec
 from .base import EXACTNESS, BuildContext, Shape
 
@@ -46,24 +47,13 @@ def expr_dim(e: Expr) -> int:
 
 def substitute(e: Expr, coords: Sequence[Expr]) -> Expr:
     """``e`` with ``x, y, z`` replaced by ``coords[0], coords[1], coords[2]`` (fewer
-    coordinates leave the remaining ones as they are).
-
-    Every distinct node is rebuilt once (children before parents, without recursion), so
-    shared subexpressions stay shared; the rebuilt nodes go through
-    :func:`csdf.expr.make` (folding, interning, the active node budget).
-    """
+    coordinates leave the remaining ones as they are), by :func:`csdf.expr.substitute`:
+    shared subexpressions stay shared and rebuilt nodes go through
+    :func:`csdf.expr.make` (folding, interning, the active node budget)."""
     subs = {id(c): v for c, v in zip(_COORDS, coords)}
     if all(subs[id(c)] is c for c in _COORDS[: len(coords)]):
         return e
-    out: dict[int, Expr] = {}
-    for n in walk(e):
-        if not n.args:
-            out[id(n)] = subs.get(id(n), n)
-        else:
-            args = tuple(out[id(a)] for a in n.args)
-            same = all(a is b for a, b in zip(args, n.args))
-            out[id(n)] = n if same else make(n.op, *args)
-    return out[id(e)]
+    return substitute_leaves([e], lambda n: subs.get(id(n)))[0]
 
 
 def expr_shape(

@@ -223,7 +223,9 @@ def sample_surface(
     that close a shape cut by its bounds) are not sampled.
 
     Args:
-        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program`.
+        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program`, or a
+            :class:`csdf.Scene` (:meth:`csdf.Scene.sample_surface`: then ``(points,
+            normals, instance (n,))``).
         n: number of points (``>= 0``).
         seed: ``None``, an integer, or a ``numpy.random.Generator`` (used and advanced).
         params: parameter values ``{name: value}`` (defaults otherwise).
@@ -245,6 +247,10 @@ def sample_surface(
             outside its range (with ``check_ranges``).
     """
     n = _count(n)
+    if getattr(shape, "__csdf_scene__", False):  # a csdf.Scene samples its instances
+        if params:
+            raise CsdfError("a scene's instances carry their own parameters")
+        return shape.sample_surface(n, _rng(seed), resolution=resolution)
     fld = _field(shape, "sample_surface", params, backend, n, check_ranges=check_ranges)
     rng = _rng(seed)
     if n == 0:

@@ -18,6 +18,7 @@ from .errors import CsdfError
 from .pose import as_pose
 from .render.camera import Camera
 from .render.trace import trace_field, trace_hits
+from .scene import Scene
 
 __all__ = ["scan", "MIN_COS"]
 
@@ -43,7 +44,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     """Simulate a depth sensor: the visible surface points of a shape as a point cloud.
 
     Args:
-        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program` (in its own frame).
+        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program` (in its own frame), or
+            a :class:`csdf.Scene`.
         camera: the sensor, a :class:`csdf.Camera` (pose in world coordinates).
         width, height: sensor resolution in pixels (default the camera's; another size
             scales the intrinsics). One ray per pixel centre.
@@ -71,7 +73,10 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     Returns:
         ``(points (M, 3), normals (M, 3))`` float64 in the **camera frame** (OpenCV),
         in row-major pixel order; normals are unit and face the camera
-        (``n . (0 - p) > 0``). ``M`` is 0 when nothing is seen.
+        (``n . (0 - p) > 0``). ``M`` is 0 when nothing is seen. For a
+        :class:`csdf.Scene` (traced by :meth:`csdf.Scene.raycast`, ``object_pose``
+        placing the whole scene): ``(points, normals, instance (M,))``, the id of the
+        instance each point lies on (-1 for outliers).
 
     Raises:
         CsdfError: bad resolution, non-finite or negative noise, an outlier fraction
@@ -87,17 +92,26 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     min_cos = _fraction(min_cos, "min_cos", 1.0)
     pose = as_pose(object_pose, "object_pose", rigid=True)
     rng = np.random.default_rng(seed)
-    fld = trace_field(shape, params, backend, bounds, what="scan", check_ranges=check_ranges)
+    scene = isinstance(shape, Scene)
+    if scene and (params or bounds is not None):
+        raise CsdfError("a scene's instances carry their own parameters and bounds")
 
     dcam = cam.pixel_directions()  # (N, 3) unit, camera frame
     M = pose.rotation.T @ cam.R  # camera frame -> object frame (rotation)
     d_obj = dcam @ M.T
     o_obj = pose.apply_inverse(cam.t)
-    t, n_obj, _ = trace_hits(fld, o_obj, d_obj)
+    if scene:
+        hits = shape.raycast(o_obj, d_obj)
+        t, n_obj, ids = hits.distance, hits.normal, hits.instance
+    else:
+        fld = trace_field(shape, params, backend, bounds, what="scan",
+                          check_ranges=check_ranges)
+        t, n_obj, _ = trace_hits(fld, o_obj, d_obj)
     with np.errstate(invalid="ignore"):
         facing = -(n_obj * d_obj).sum(1)
         keep = np.isfinite(t) & (facing >= min_cos)
     t, dk = t[keep], dcam[keep]
+    ids = ids[keep] if scene else None
     normals = n_obj[keep] @ M  # object frame -> camera frame: M^T n
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     m = len(t)
@@ -118,4 +132,6 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         towards = (rn * points[sel]).sum(1) > 0  # facing away from the camera: flip
         rn[towards] *= -1.0
         normals[sel] = rn
-    return points, normals
+        if scene:
+            ids[sel] = -1
+    return (points, normals, ids) if scene else (points, normals)

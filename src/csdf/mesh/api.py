@@ -45,7 +45,10 @@ def mesh(
     """Triangle mesh of the surface ``f = 0``.
 
     Args:
-        shape: a :class:`csdf.Shape` (or a compiled :class:`csdf.Program`).
+        shape: a :class:`csdf.Shape` (or a compiled :class:`csdf.Program`), or a
+            :class:`csdf.Scene` (:meth:`csdf.Scene.mesh`: each model meshed once and
+            placed per instance; the face's instance ids in
+            ``mesh.metadata['csdf']['instance']``).
         resolution: voxels along the longest side of the bounds. Default: chosen from
             the shape, 128 or finer where it has thin parts (see ``check_thin``).
         voxel_size: voxel edge length in model units (instead of ``resolution``).
@@ -86,6 +89,12 @@ def mesh(
     """
     import trimesh
 
+    if getattr(shape, "__csdf_scene__", False):  # a csdf.Scene meshes its instances
+        if bounds is not None or params:
+            raise CsdfError("a scene's instances carry their own parameters and bounds")
+        return shape.mesh(resolution, voxel_size, method, progress,
+                          max_resolution=max_resolution, min_feature=min_feature,
+                          check_thin=check_thin, check_ranges=check_ranges)
     if method not in ("mc", "dc"):
         raise CsdfError(f"method must be 'mc' or 'dc', got {method!r}")
     if resolution is not None and voxel_size is not None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..field import Field
+from ..scene import Scene
 from .camera import Camera
 from .trace import trace_field, trace_frame, trace_hits
 
@@ -52,6 +53,9 @@ class Render:
     mask: np.ndarray
     camera: Camera
     stats: dict = field(default_factory=dict)
+    #: ``(H, W)`` int64 the id of the scene instance each pixel sees (-1: background);
+    #: None for a shape
+    instance: np.ndarray | None = None
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write :attr:`color` as a PNG (Pillow), atomically.
@@ -183,7 +187,8 @@ def auto_camera(shape, width: int = 640, height: int = 480, fov: float = 40.0, *
     from .camera import _vector, check_resolution
 
     w, h = check_resolution(width, height)
-    b = trace_field(shape, params, "numpy", bounds, check_ranges=check_ranges).bounds
+    b = shape.bounds if isinstance(shape, Scene) else \
+        trace_field(shape, params, "numpy", bounds, check_ranges=check_ranges).bounds
     centre = 0.5 * (b[0] + b[1])
     tgt = centre if target is None else _vector(target, "target")
     if eye is None:
@@ -215,7 +220,9 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     (march towards the light) and ambient occlusion (field samples along the normal).
 
     Args:
-        shape: a 3D :class:`csdf.Shape` or a compiled :class:`csdf.Program`.
+        shape: a 3D :class:`csdf.Shape`, a compiled :class:`csdf.Program`, or a
+            :class:`csdf.Scene` (traced by :meth:`csdf.Scene.raycast`; the render's
+            ``instance`` then gives the instance id per pixel).
         camera: a :class:`csdf.Camera` (OpenCV frame: x right, y down, z forward).
         width, height: image size in pixels (default the camera's); a different size
             scales the camera's intrinsics (:meth:`Camera.scaled`).
@@ -244,10 +251,19 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     h = camera.height if height is None else height
     cam = camera.scaled(w, h)
     t_start = time.perf_counter()
-    fld = trace_field(shape, params, backend, bounds, check_ranges=check_ranges)
     dcam = cam.pixel_directions()
     dirs = dcam @ cam.R.T
-    t, normals, stats = trace_hits(fld, cam.t, dirs)
+    ids = None
+    if isinstance(shape, Scene):
+        if params or bounds is not None:
+            raise CsdfError("a scene's instances carry their own parameters and bounds")
+        fld = shape
+        hits = shape.raycast(cam.t, dirs)
+        t, normals, ids = hits.distance, hits.normal, hits.instance
+        stats = {"iterations": None, "evaluations": None}
+    else:
+        fld = trace_field(shape, params, backend, bounds, check_ranges=check_ranges)
+        t, normals, stats = trace_hits(fld, cam.t, dirs)
     hit = np.isfinite(t)
     depth = np.where(hit, t * dcam[:, 2], np.inf)
     color = _background(cam.height, cam.width).reshape(-1, 3).copy()
@@ -256,8 +272,9 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
         p = cam.t + t[hi, None] * dirs[hi]
         color[hi] = _srgb(_shade(fld, cam, p, normals[hi], dirs[hi], shadows, ao))
     rgb = np.round(np.clip(color, 0.0, 1.0) * 255.0).astype(np.uint8)
-    stats.update(seconds=time.perf_counter() - t_start, backend=fld.backend)
+    stats.update(seconds=time.perf_counter() - t_start,
+                 backend=getattr(fld, "backend", "scene"))
     H, W = cam.height, cam.width
     return Render(color=rgb.reshape(H, W, 3), depth=depth.reshape(H, W),
                   normals=normals.reshape(H, W, 3), mask=hit.reshape(H, W), camera=cam,
-                  stats=stats)
+                  stats=stats, instance=None if ids is None else ids.reshape(H, W))

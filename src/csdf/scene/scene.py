@@ -173,6 +173,9 @@ class Scene:
     iterating yields :class:`Instance` records in id order and ``scene[id]`` gives one.
     """
 
+    #: consumers that cannot import this module (it imports them) recognise a scene by it
+    __csdf_scene__ = True
+
     def __init__(self) -> None:
         self._inst: dict[int, Instance] = {}
         self._fields: dict[int, Field] = {}
@@ -319,6 +322,30 @@ class Scene:
         del self._fields[inst.id]
         self._set = None
 
+    @property
+    def bounds(self) -> np.ndarray:
+        """``(2, 3)`` the world box of all instances.
+
+        Raises:
+            CsdfError: an empty scene.
+        """
+        fs = self._fieldset()
+        if fs is None:
+            raise CsdfError("an empty scene has no bounds")
+        return fs.node_f[0].reshape(2, 3).copy()
+
+    @property
+    def lipschitz(self) -> float:
+        """The largest Lipschitz bound of the instances' models (inf: one has none)."""
+        fs = self._fieldset()
+        return 1.0 if fs is None else fs.lipschitz
+
+    def value(self, points: Any) -> np.ndarray:
+        """The scene's field at points ``(..., 3)`` (:meth:`distance`, any leading
+        shape): what shading and sampling evaluate."""
+        p = np.asarray(points, dtype=np.float64)
+        return self.distance(p.reshape(-1, 3)).reshape(p.shape[:-1])
+
     def field(self, id: int) -> Field:
         """The posed :class:`csdf.field.Field` of an instance."""
         return self._fields[self[id].id]
@@ -429,6 +456,111 @@ class Scene:
                                tol=RAY_TOL_REL * diag, max_iter=max_iter)
         hit = k >= 0
         return SceneHits(hit, t, np.where(hit, self._ids[k], -1), nrm)
+
+    # ------------------------------------------------------------------ consumers
+    def _groups(self) -> dict[tuple, list[Instance]]:
+        """Instances by (model, parameter values): each group is meshed or sampled once
+        in its model's frame."""
+        out: dict[tuple, list[Instance]] = {}
+        for inst in self:
+            fld = self._fields[inst.id]  # equal programs group together
+            key = (fld.program, tuple(sorted(fld.params.items())))
+            out.setdefault(key, []).append(inst)
+        return out
+
+    def mesh(self, resolution: int | None = None, voxel_size: float | None = None,
+             method: str = "mc", progress: bool = False, **kw: Any):
+        """One triangle mesh of all instances (what :func:`csdf.mesh` returns for a
+        scene): each model is meshed once per parameter values in its own frame
+        (``resolution`` as for the model alone, or ``voxel_size`` in world units,
+        divided by the group's largest scale) and placed by each instance's pose.
+        Overlapping instances are not merged. ``mesh.metadata['csdf']['instance']``
+        holds the instance id of every face. Other keywords go to :func:`csdf.mesh`.
+
+        Raises:
+            CsdfError: an empty scene, or as :func:`csdf.mesh`.
+        """
+        import trimesh
+
+        from ..mesh import mesh as mesh_model
+
+        if not self._inst:
+            raise CsdfError("an empty scene has no surface to mesh")
+        verts, faces, ids = [], [], []
+        n = 0
+        for group in self._groups().values():
+            first = group[0]
+            h = None if voxel_size is None else \
+                float(voxel_size) / max(i.pose.scale for i in group)
+            m = mesh_model(first.model, resolution=resolution, voxel_size=h, method=method,
+                           params=self._fields[first.id].params, progress=progress, **kw)
+            v = np.asarray(m.vertices)
+            f = np.asarray(m.faces)
+            for inst in group:
+                verts.append(inst.pose.apply(v))
+                faces.append(f + n)
+                ids.append(np.full(len(f), inst.id, np.int64))
+                n += len(v)
+        out = trimesh.Trimesh(vertices=np.concatenate(verts), faces=np.concatenate(faces),
+                              process=False, validate=False)
+        out.metadata["csdf"] = {"instance": np.concatenate(ids), "method": method}
+        return out
+
+    def sample_surface(self, n: int, seed: Any = None, *,
+                       resolution: int | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``n`` points uniform by area on the surface of the scene (the union of its
+        instances: points of one instance inside another are redrawn), with unit
+        normals and the id of the instance each lies on (what
+        :func:`csdf.sample_surface` returns for a scene). Each instance's share is
+        drawn from the surface areas of its model's mesh (times its scale squared).
+
+        Returns:
+            ``(points (n, 3), normals (n, 3), instance (n,))`` world frame.
+        """
+        from ..mesh import mesh as mesh_model
+        from ..sample import sample_surface as sample_model
+
+        n = int(n)
+        if n < 0:
+            raise CsdfError(f"n must be >= 0, got {n}")
+        if not self._inst:
+            raise CsdfError("an empty scene has no surface to sample")
+        rng = np.random.default_rng(seed)
+        insts: list[Instance] = []
+        area: list[float] = []
+        for g in self._groups().values():
+            m = mesh_model(g[0].model, resolution=resolution or 64, progress=False,
+                           params=self._fields[g[0].id].params, check_thin=False)
+            insts += g
+            area += [float(m.area) * i.pose.scale ** 2 for i in g]
+        w = np.array(area)
+        pts, nrm, ids = [], [], []
+        got = 0
+        diag = float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
+        for _ in range(20):
+            if got >= n:
+                break
+            need = n - got
+            counts = rng.multinomial(need + need // 4 + 8, w / w.sum())
+            for inst, k in zip(insts, counts):
+                if k == 0:
+                    continue
+                fld = self._fields[inst.id]
+                p, q = sample_model(inst.model, int(k), rng, fld.params,
+                                    resolution=resolution)
+                pw = inst.pose.apply(p)
+                keep = self.distance(pw) > -1e-9 * diag  # not inside another instance
+                pts.append(pw[keep])
+                nrm.append(inst.pose.apply_dirs(q)[keep])
+                ids.append(np.full(int(keep.sum()), inst.id, np.int64))
+                got += int(keep.sum())
+        if got < n:
+            raise CsdfError("could not draw enough points on the scene's surface (most of "
+                            "it lies inside other instances)")
+        P, Q, K = np.concatenate(pts), np.concatenate(nrm), np.concatenate(ids)
+        pick = np.sort(rng.choice(len(P), n, replace=False))
+        return P[pick], Q[pick] / np.linalg.norm(Q[pick], axis=1, keepdims=True), K[pick]
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike) -> None:

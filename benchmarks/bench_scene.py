@@ -119,7 +119,7 @@ def _esdf(scene, box: np.ndarray, h: float):
     gx, gy = np.meshgrid(axes[0], axes[1], indexing="ij")
     for k, z in enumerate(axes[2]):
         pts = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)], axis=1)
-        occ[:, :, k] = (scene.distance(pts) < 0).reshape(gx.shape)
+        occ[:, :, k] = scene.collide(pts, 0.0).reshape(gx.shape)  # distance < 0
     out = distance_transform_edt(~occ, sampling=h)
     inside = distance_transform_edt(occ, sampling=h)
     grid = np.where(occ, -inside, out).astype(np.float32)

@@ -98,10 +98,14 @@ def _fresh_first_call(n: int) -> str:
     import subprocess
 
     code = (
-        "import time; t0 = time.perf_counter(); import csdf; "
+        "import resource, time; t0 = time.perf_counter(); import csdf; "
         f"p = csdf.load({str(VM)!r}); t1 = time.perf_counter(); "
+        "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024; "
         f"csdf.raster(p, {n}, {n}, ((-1, -1), (1, 1))); t2 = time.perf_counter(); "
-        "print(f'{t2 - t1:.2f} s ({t2 - t0:.2f} s with import and load)')")
+        "peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024; "
+        "print(f'{t2 - t1:.2f} s ({t2 - t0:.2f} s with import and load); peak resident "
+        "memory {peak:.0f} MB, {base:.0f} MB before the call (Python, NumPy, csdf and the "
+        "program; the call loads Numba and its cached kernels)')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=600)
     return out.stdout.strip() or out.stderr.strip()[-200:]

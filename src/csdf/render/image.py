@@ -12,7 +12,6 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..field import Field
-from ..scene import Scene
 from .camera import Camera
 from .trace import trace_field, trace_frame, trace_hits
 
@@ -187,7 +186,7 @@ def auto_camera(shape, width: int = 640, height: int = 480, fov: float = 40.0, *
     from .camera import _vector, check_resolution
 
     w, h = check_resolution(width, height)
-    b = shape.bounds if isinstance(shape, Scene) else \
+    b = shape.bounds if getattr(shape, "__csdf_scene__", False) else \
         trace_field(shape, params, "numpy", bounds, check_ranges=check_ranges).bounds
     centre = 0.5 * (b[0] + b[1])
     tgt = centre if target is None else _vector(target, "target")
@@ -254,7 +253,7 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     dcam = cam.pixel_directions()
     dirs = dcam @ cam.R.T
     ids = None
-    if isinstance(shape, Scene):
+    if getattr(shape, "__csdf_scene__", False):
         if params or bounds is not None:
             raise CsdfError("a scene's instances carry their own parameters and bounds")
         fld = shape

@@ -31,18 +31,13 @@ from ..fieldset import FieldSet
 from ..pose import Pose, as_pose
 from . import fileformat
 
-__all__ = ["Scene", "Instance", "SceneQuery", "SceneHits", "MAX_INSTANCES", "MAX_QUERY_POINTS",
-           "RAY_EPS_REL", "RAY_TOL_REL"]
+__all__ = ["Scene", "Instance", "SceneQuery", "SceneHits", "MAX_INSTANCES",
+           "MAX_QUERY_POINTS"]
 
 #: the most instances a scene holds
 MAX_INSTANCES = 1_000_000
 #: the most points (or spheres, rays) one query takes
 MAX_QUERY_POINTS = 50_000_000
-#: a ray cast's near-surface step (it looks for the sign change with steps of this),
-#: relative to the diagonal of the scene's box
-RAY_EPS_REL = 1e-5
-#: the precision of a ray cast's hits, relative to the diagonal of the scene's box
-RAY_TOL_REL = 1e-12
 
 
 @dataclass(frozen=True)
@@ -165,6 +160,28 @@ def _load_file(path: Path) -> Any:
     return load(path)
 
 
+class _TracedScene:
+    """What the sphere tracer reads of a field, for a scene's :class:`FieldSet`:
+    values, values with gradients, the Lipschitz bound and the box (no cells proved
+    empty)."""
+
+    def __init__(self, fs: FieldSet):
+        self.fs = fs
+        self.lipschitz = fs.lipschitz
+        self.bounds = fs.node_f[0].reshape(2, 3).copy()
+        self.scale = float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
+
+    def value(self, points: np.ndarray) -> np.ndarray:
+        return self.fs.nearest(points)[0]
+
+    def value_and_grad(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d, g, _, _ = self.fs.nearest(points, grad=True)
+        return d, g
+
+    def empty_cells(self) -> None:
+        return None
+
+
 class Scene:
     """Posed instances of models, queried together (see the module docs).
 
@@ -253,12 +270,10 @@ class Scene:
              params: Mapping[str, float] | None, name: str | None) -> int:
         p = as_pose(pose, "pose")
         try:
-            s = float(scale)
+            s = p.scale * float(scale)
         except (TypeError, ValueError):
             raise CsdfError(f"scale must be a positive number, got {scale!r}") from None
-        if not (np.isfinite(s) and s > 0):
-            raise CsdfError(f"scale must be a positive finite number, got {scale!r}")
-        p = Pose(p.rotation, p.translation, p.scale * s)
+        p = Pose(p.rotation, p.translation, s)  # (which checks the scale)
         fld = as_field(model, params, pose=p, what="Scene.add")
         if fld.dim != 3:
             raise CsdfError("a scene holds 3D models; extrude or revolve a 2D shape first")
@@ -411,25 +426,27 @@ class Scene:
         _, _, k, _ = self._nearest(c, False, below=r, stop=True, ids=False)
         return k >= 0
 
-    def raycast(self, origins: Any, directions: Any, max_distance: float = np.inf,
-                max_iter: int = 1024) -> SceneHits:
-        """First hits of rays with the scene, by sphere tracing: steps of the scene's
-        value over the largest Lipschitz bound of its models, steps of
-        :data:`RAY_EPS_REL` of the scene's diagonal where the value is smaller, and a
-        hit where the value changes sign, refined to :data:`RAY_TOL_REL` of the
-        diagonal (a ray that only grazes a surface goes on; one inside a sheet thinner
-        than the small step may pass it; a ray starting inside a model hits at 0).
+    def raycast(self, origins: Any, directions: Any, max_distance: float = np.inf
+                ) -> SceneHits:
+        """First hits of rays with the scene, by csdf's sphere tracer
+        (:func:`csdf.render.trace.sphere_trace`, on the scene's values from the
+        hierarchy): steps of the value over the largest Lipschitz bound of the models,
+        over-relaxed; hits are sign changes refined to 1e-9 of the scene's size (a ray
+        that grazes a surface goes on; one that crosses a sliver thinner than 1e-4 of
+        the scene may pass it; a ray starting inside a model hits at 0). Normals are the
+        hit instance's exact gradient.
 
         Args:
             origins: ``(N, 3)`` or one ``(3,)`` origin for all rays (world).
             directions: ``(N, 3)`` ray directions (normalised here).
-            max_distance: the farthest hit reported; max_iter: steps per ray (a ray
-                running along a surface may use them up: then it reports no hit).
+            max_distance: the farthest hit reported.
 
         Raises:
             CsdfError: bad shapes, a zero or non-finite direction or origin, or a model
                 without a Lipschitz bound.
         """
+        from ..render.trace import trace_hits
+
         d = _points(directions, "directions")
         o = np.asarray(origins, dtype=np.float64)
         if o.shape != (3,):
@@ -450,12 +467,23 @@ class Scene:
         if fs is None:
             return SceneHits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1),
                              np.zeros((n, 3)))
-        box = fs.node_f[0]
-        diag = float(np.linalg.norm(box[3:] - box[:3]))
-        t, k, nrm = fs.raycast(o, d, np.full(n, m), eps=RAY_EPS_REL * diag,
-                               tol=RAY_TOL_REL * diag, max_iter=max_iter)
-        hit = k >= 0
-        return SceneHits(hit, t, np.where(hit, self._ids[k], -1), nrm)
+        if not np.isfinite(fs.lipschitz):
+            bad = next(f for f in self._inst.values()
+                       if not np.isfinite(self._fields[f.id].lipschitz))
+            raise CsdfError(f"ray casts step by the field's value over its Lipschitz bound; "
+                            f"instance {bad.name!r} has none (its model is neither a "
+                            "distance nor a bound)")
+        tracer = _TracedScene(fs)
+        t, nrm, _ = trace_hits(tracer, o, d)
+        t[t > m] = np.inf
+        hit = np.isfinite(t)
+        k = np.full(n, -1)
+        if hit.any():  # the instance nearest a point just before the hit
+            back = t[hit] - 1e-7 * tracer.scale
+            p = (o if o.ndim == 1 else o[hit]) + back[:, None] * d[hit]
+            k[hit] = self._ids[np.maximum(fs.nearest(p)[2], 0)]
+        nrm[~hit] = 0.0
+        return SceneHits(hit, t, k, nrm)
 
     # ------------------------------------------------------------------ consumers
     def _groups(self) -> dict[tuple, list[Instance]]:

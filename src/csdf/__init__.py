@@ -52,6 +52,7 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
 _LAZY: dict[str, tuple[str, str | None]] = {
     "io": (".io", None),
     "zoo": (".zoo", None),
+    "plan": (".plan", None),
     "Field": (".field", "Field"),
     "as_field": (".field", "as_field"),
     "glsl_params": (".field", "glsl_params"),

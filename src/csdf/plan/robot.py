@@ -1,0 +1,375 @@
+"""Robots: a kinematic tree read from a URDF, with two views of its collision geometry.
+
+* **The robot as one csdf model** (:meth:`Robot.shape`): every link's collision
+  primitives (boxes, cylinders, spheres) placed by the chain of joint transforms, with
+  the joint positions as parameters (named after the joints, ranges from their limits).
+  The distance from any point to the robot and its derivative by every joint then come
+  from :meth:`csdf.Program.param_jacobian`: exact, in one forward pass.
+* **Spheres on the links** (:meth:`Robot.spheres`): a cover of each primitive by
+  spheres, placed by forward kinematics (:meth:`Robot.fk`), for queries against a scene
+  (CHOMP's form). The spheres hold the primitive, so their clearance never exceeds the
+  true clearance.
+
+The URDF is parsed by ``yourdfpy`` (the ``plan`` extra: ``pip install csdf[plan]``).
+Joint types: revolute, continuous, prismatic and fixed (a floating or planar joint is
+refused); collision geometry: box, cylinder and sphere (a mesh is refused, naming the
+link, until meshes can be read as shapes).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import CsdfError
+from ..expr import param
+from ..shapes import box, cylinder, sphere, union
+
+__all__ = ["Robot", "Joint", "Primitive"]
+
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+#: the most spheres one primitive is covered by
+MAX_SPHERES_PER_PRIMITIVE = 64
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One joint of the tree.
+
+    Attributes:
+        name: the URDF name; param: the csdf parameter name of its position (None for a
+            fixed joint); type: ``'revolute' | 'continuous' | 'prismatic' | 'fixed'``.
+        parent, child: link names; origin: ``(4, 4)`` child frame in the parent's at
+            position 0; axis: ``(3,)`` unit axis (child frame).
+        lower, upper: position limits (radians or metres; +-inf for continuous).
+    """
+
+    name: str
+    param: str | None
+    type: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    axis: np.ndarray
+    lower: float
+    upper: float
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A collision primitive of a link, in the link's frame.
+
+    Attributes:
+        link: the link's name; kind: ``'box' | 'cylinder' | 'sphere'``; size: its
+            dimensions (box: full sizes (3,); cylinder: radius, length along z;
+            sphere: radius); origin: ``(4, 4)`` its pose in the link frame.
+    """
+
+    link: str
+    kind: str
+    size: tuple
+    origin: np.ndarray
+
+
+def _read_urdf(source: str | os.PathLike):
+    try:
+        import yourdfpy
+    except ImportError:  # pragma: no cover - the plan extra
+        raise CsdfError("reading URDF files needs yourdfpy: pip install 'csdf[plan]'") \
+            from None
+    opts = dict(build_scene_graph=False, build_collision_scene_graph=False,
+                load_meshes=False, load_collision_meshes=False)
+    text = str(source)
+    what = "the URDF text" if "<robot" in text else str(source)
+    try:
+        if "<robot" in text:
+            return yourdfpy.URDF.load(io.StringIO(text), **opts).robot, what
+        path = Path(source)
+        if not path.is_file():
+            raise CsdfError(f"cannot read {path}: no such file")
+        return yourdfpy.URDF.load(str(path), **opts).robot, what
+    except CsdfError:
+        raise
+    except Exception as exc:  # the parser's own errors (XML, missing attributes)
+        raise CsdfError(f"{what}: not a URDF csdf can read: {exc}") from None
+
+
+def _param_name(joint: str, taken: set[str]) -> str:
+    name = joint if _IDENT.match(joint) else re.sub(r"\W", "_", joint)
+    if not _IDENT.match(name):
+        name = "q_" + name
+    base, k = name, 2
+    while name in taken:
+        name, k = f"{base}_{k}", k + 1
+    taken.add(name)
+    return name
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` about unit ``axis``."""
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * (K @ K)
+
+
+class Robot:
+    """A robot read from a URDF (see the module docs).
+
+    Attributes:
+        name: the URDF's robot name; root: the base link; links: link names (the root
+            first, parents before children); joints: every :class:`Joint`, parents
+            before children; movable: the joints that move, in that order (``dof`` of
+            them); primitives: every :class:`Primitive`.
+    """
+
+    def __init__(self, name: str, root: str, links: list[str], joints: list[Joint],
+                 primitives: list[Primitive]):
+        self.name = name
+        self.root = root
+        self.links = links
+        self.joints = joints
+        self.movable = [j for j in joints if j.type != "fixed"]
+        self.primitives = primitives
+        self._shape = None
+
+    @property
+    def dof(self) -> int:
+        return len(self.movable)
+
+    @property
+    def joint_names(self) -> list[str]:
+        """The movable joints' URDF names, in the order of ``q``."""
+        return [j.name for j in self.movable]
+
+    @property
+    def limits(self) -> np.ndarray:
+        """``(dof, 2)`` lower and upper limits."""
+        return np.array([[j.lower, j.upper] for j in self.movable]).reshape(-1, 2)
+
+    def __repr__(self) -> str:
+        return (f"<Robot {self.name!r}: {len(self.links)} links, {self.dof} joints, "
+                f"{len(self.primitives)} collision primitives>")
+
+    # ------------------------------------------------------------------ reading
+    @classmethod
+    def from_urdf(cls, source: str | os.PathLike) -> Robot:
+        """Read a URDF file (or URDF text).
+
+        Raises:
+            CsdfError: an unreadable file, a malformed URDF, a joint type or geometry
+                csdf cannot model (naming the joint or link), or not one tree.
+        """
+        robot, what = _read_urdf(source)
+        links = {link.name: link for link in robot.links}
+        children: dict[str, list] = {}
+        has_parent: set[str] = set()
+        for j in robot.joints:
+            for end in (j.parent, j.child):
+                if end not in links:
+                    raise CsdfError(f"{what}: joint {j.name!r} names an unknown link {end!r}")
+            children.setdefault(j.parent, []).append(j)
+            if j.child in has_parent:
+                raise CsdfError(f"{what}: link {j.child!r} has two parent joints")
+            has_parent.add(j.child)
+        roots = [n for n in links if n not in has_parent]
+        if len(roots) != 1:
+            raise CsdfError(f"{what}: the links must form one tree (roots: {roots})")
+        order, joints, taken = [roots[0]], [], set()
+        stack = [roots[0]]
+        while stack:
+            parent = stack.pop()
+            for j in children.get(parent, []):
+                jtype = j.type
+                if jtype not in ("revolute", "continuous", "prismatic", "fixed"):
+                    raise CsdfError(f"{what}: joint {j.name!r} is {jtype!r}; csdf models "
+                                    "revolute, continuous, prismatic and fixed joints")
+                origin = np.eye(4) if j.origin is None else np.asarray(j.origin, float)
+                axis = np.array([1.0, 0.0, 0.0]) if j.axis is None else \
+                    np.asarray(j.axis, float)
+                if jtype != "fixed" and not np.linalg.norm(axis) > 0:
+                    raise CsdfError(f"{what}: joint {j.name!r} has a zero axis")
+                axis = axis / (np.linalg.norm(axis) or 1.0)
+                lo, hi = -math.inf, math.inf
+                if jtype in ("revolute", "prismatic"):
+                    lim = j.limit
+                    if lim is None or lim.lower is None or lim.upper is None:
+                        raise CsdfError(f"{what}: joint {j.name!r} ({jtype}) needs "
+                                        "<limit lower=... upper=...>")
+                    lo, hi = float(lim.lower), float(lim.upper)
+                    if not lo <= hi:
+                        raise CsdfError(f"{what}: joint {j.name!r} has limits {lo} > {hi}")
+                param = None if jtype == "fixed" else _param_name(j.name, taken)
+                joints.append(Joint(j.name, param, jtype, j.parent, j.child, origin, axis,
+                                    lo, hi))
+                order.append(j.child)
+                stack.append(j.child)
+        prims = []
+        for name in order:
+            for c in links[name].collisions:
+                g = c.geometry
+                origin = np.eye(4) if c.origin is None else np.asarray(c.origin, float)
+                if g.box is not None:
+                    prims.append(Primitive(name, "box", tuple(float(v) for v in g.box.size),
+                                           origin))
+                elif g.cylinder is not None:
+                    prims.append(Primitive(name, "cylinder", (float(g.cylinder.radius),
+                                                              float(g.cylinder.length)),
+                                           origin))
+                elif g.sphere is not None:
+                    prims.append(Primitive(name, "sphere", (float(g.sphere.radius),), origin))
+                else:
+                    raise CsdfError(f"{what}: link {name!r} has mesh collision geometry; "
+                                    "csdf models boxes, cylinders and spheres")
+        return cls(robot.name, roots[0], order, joints, prims)
+
+    # ------------------------------------------------------------------ kinematics
+    def _q(self, q: Any) -> np.ndarray:
+        arr = np.asarray(q, dtype=np.float64)
+        if arr.shape != (self.dof,):
+            raise CsdfError(f"q must have shape ({self.dof},) (joints "
+                            f"{', '.join(self.joint_names)}), got {arr.shape}")
+        if not np.isfinite(arr).all():
+            raise CsdfError("q must be finite")
+        return arr
+
+    def fk(self, q: Any) -> dict[str, np.ndarray]:
+        """Forward kinematics: ``{link: (4, 4) pose in the root's frame}`` at joint
+        positions ``q`` ``(dof,)``."""
+        q = self._q(q)
+        value = {j.name: float(v) for j, v in zip(self.movable, q)}
+        pose = {self.root: np.eye(4)}
+        for j in self.joints:
+            T = pose[j.parent] @ j.origin
+            if j.type in ("revolute", "continuous"):
+                M = np.eye(4)
+                M[:3, :3] = _axis_rotation(j.axis, value[j.name])
+                T = T @ M
+            elif j.type == "prismatic":
+                M = np.eye(4)
+                M[:3, 3] = j.axis * value[j.name]
+                T = T @ M
+            pose[j.child] = T
+        return pose
+
+    def in_limits(self, q: Any) -> bool:
+        """Whether ``q`` lies within every joint's limits."""
+        q = self._q(q)
+        lim = self.limits
+        return bool(np.all((q >= lim[:, 0]) & (q <= lim[:, 1])))
+
+    # ------------------------------------------------------------------ views
+    def _primitive_shape(self, p: Primitive):
+        if p.kind == "box":
+            s = box(tuple(0.5 * v for v in p.size))
+        elif p.kind == "cylinder":
+            s = cylinder(p.size[0], p.size[1])
+        else:
+            s = sphere(p.size[0])
+        return _placed(s, p.origin)
+
+    def shape(self):
+        """The robot as one csdf shape whose parameters are the joint positions
+        (:attr:`Joint.param`, defaults at the middle of the limits or 0, ranges from
+        the limits): ``robot.shape()(points, {'joint1': 0.3, ...})`` is the distance
+        from points (root frame) to the robot, and ``param_jacobian`` its derivative by
+        every joint. Cached."""
+        if self._shape is not None:
+            return self._shape
+        params = {}
+        for j in self.movable:
+            lo, hi = j.lower, j.upper
+            default = 0.0 if not (math.isfinite(lo) and math.isfinite(hi)) else \
+                min(max(0.0, lo), hi)
+            params[j.name] = param(j.param, default,
+                                        lo if math.isfinite(lo) else None,
+                                        hi if math.isfinite(hi) else None)
+        chain = {j.child: j for j in self.joints}
+        parts = []
+        for prim in self.primitives:
+            s = self._primitive_shape(prim)
+            link = prim.link
+            while link in chain:  # up the tree: each joint's motion, then its origin
+                j = chain[link]
+                if j.type in ("revolute", "continuous"):
+                    s = s.rotate(params[j.name], tuple(j.axis))
+                elif j.type == "prismatic":
+                    s = s.translate(tuple(params[j.name] * float(a) for a in j.axis))
+                s = _placed(s, j.origin)
+                link = j.parent
+            parts.append(s)
+        if not parts:
+            raise CsdfError(f"robot {self.name!r} has no collision geometry")
+        self._shape = union(*parts) if len(parts) > 1 else parts[0]
+        return self._shape
+
+    def params(self, q: Any) -> dict[str, float]:
+        """The parameter values of :meth:`shape` for joint positions ``q``."""
+        q = self._q(q)
+        return {j.param: float(v) for j, v in zip(self.movable, q)}
+
+    def sphere_cover(self, spacing: float | None = None) -> tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+        """Spheres covering every primitive, in the primitive's link frame:
+        ``(centers (S, 3), radii (S,), link index into links (S,))``. A box is cut into
+        near-cubic cells along its longer sides (at most ``spacing`` apart, default its
+        shortest side), each covered by its circumscribed sphere; a cylinder into
+        slices along its axis, each covered by the sphere through its rims."""
+        cs, rs, ls = [], [], []
+        for prim in self.primitives:
+            k = self.links.index(prim.link)
+            if prim.kind == "sphere":
+                c, r = np.zeros((1, 3)), np.array([prim.size[0]])
+            elif prim.kind == "box":
+                size = np.array(prim.size)
+                h = spacing or max(float(size.min()), 1e-9)
+                n = np.clip(np.ceil(size / h).astype(int), 1, None)
+                while np.prod(n) > MAX_SPHERES_PER_PRIMITIVE:
+                    n = np.maximum(1, (n + 1) // 2)
+                cell = size / n
+                grids = [(np.arange(n[a]) + 0.5) * cell[a] - size[a] / 2 for a in range(3)]
+                c = np.stack(np.meshgrid(*grids, indexing="ij"), -1).reshape(-1, 3)
+                r = np.full(len(c), 0.5 * float(np.linalg.norm(cell)))
+            else:
+                radius, length = prim.size
+                h = spacing or max(radius, 1e-9)
+                m = int(min(max(1, math.ceil(length / h)), MAX_SPHERES_PER_PRIMITIVE))
+                dz = length / m
+                z = (np.arange(m) + 0.5) * dz - length / 2
+                c = np.stack([np.zeros(m), np.zeros(m), z], 1)
+                r = np.full(m, math.hypot(radius, dz / 2))
+            T = prim.origin
+            cs.append(c @ T[:3, :3].T + T[:3, 3])
+            rs.append(r)
+            ls.append(np.full(len(r), k))
+        return np.concatenate(cs), np.concatenate(rs), np.concatenate(ls)
+
+    def spheres(self, q: Any, spacing: float | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The sphere cover (:meth:`sphere_cover`) placed at joint positions ``q``:
+        ``(centers (S, 3) root frame, radii (S,), link index (S,))``."""
+        c, r, link = self.sphere_cover(spacing)
+        poses = self.fk(q)
+        out = np.empty_like(c)
+        for k, name in enumerate(self.links):
+            sel = link == k
+            if sel.any():
+                T = poses[name]
+                out[sel] = c[sel] @ T[:3, :3].T + T[:3, 3]
+        return out, r, link
+
+
+def _placed(shape, T: np.ndarray):
+    """``shape`` moved by the rigid transform ``T`` ``(4, 4)`` (rotation, then
+    translation); identity parts are skipped."""
+    R, t = T[:3, :3], T[:3, 3]
+    if not np.allclose(R, np.eye(3), atol=1e-15):
+        shape = shape.rotate(R)
+    if np.any(t != 0):
+        shape = shape.translate(tuple(float(v) for v in t))
+    return shape

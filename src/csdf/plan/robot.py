@@ -32,7 +32,7 @@ from ..errors import CsdfError
 from ..expr import param
 from ..shapes import box, cylinder, sphere, union
 
-__all__ = ["Robot", "Joint", "Primitive"]
+__all__ = ["Robot", "Joint", "Primitive", "sphere_jacobian"]
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 #: the most spheres one primitive is covered by
@@ -137,6 +137,7 @@ class Robot:
         self.movable = [j for j in joints if j.type != "fixed"]
         self.primitives = primitives
         self._shape = None
+        self._covers: dict = {}  # sphere covers by spacing
 
     @property
     def dof(self) -> int:
@@ -320,6 +321,9 @@ class Robot:
         near-cubic cells along its longer sides (at most ``spacing`` apart, default its
         shortest side), each covered by its circumscribed sphere; a cylinder into
         slices along its axis, each covered by the sphere through its rims."""
+        hit = self._covers.get(spacing)
+        if hit is not None:
+            return hit
         cs, rs, ls = [], [], []
         for prim in self.primitives:
             k = self.links.index(prim.link)
@@ -347,7 +351,11 @@ class Robot:
             cs.append(c @ T[:3, :3].T + T[:3, 3])
             rs.append(r)
             ls.append(np.full(len(r), k))
-        return np.concatenate(cs), np.concatenate(rs), np.concatenate(ls)
+        out = (np.concatenate(cs), np.concatenate(rs), np.concatenate(ls))
+        for a in out:
+            a.setflags(write=False)
+        self._covers[spacing] = out
+        return out
 
     def spheres(self, q: Any, spacing: float | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -362,6 +370,47 @@ class Robot:
                 T = poses[name]
                 out[sel] = c[sel] @ T[:3, :3].T + T[:3, 3]
         return out, r, link
+
+
+def _ancestors(robot: Robot) -> dict[str, set[int]]:
+    """For each link, the indices (into ``movable``) of the joints that move it."""
+    index = {j.name: k for k, j in enumerate(robot.movable)}
+    up = {j.child: j for j in robot.joints}
+    out: dict[str, set[int]] = {}
+    for link in robot.links:
+        s: set[int] = set()
+        cur = link
+        while cur in up:
+            j = up[cur]
+            if j.name in index:
+                s.add(index[j.name])
+            cur = j.parent
+        out[link] = s
+    return out
+
+
+def sphere_jacobian(robot: Robot, q: Any, spacing: float | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The sphere cover at ``q`` and how its centres move: ``(centers (S, 3), radii
+    (S,), J (S, 3, dof))`` with ``J[s, :, j]`` the derivative of centre ``s`` by joint
+    ``j`` (``a x (c - o)`` for a revolute joint of world axis ``a`` through ``o``, ``a``
+    for a prismatic one, 0 for a joint that does not move the sphere)."""
+    q = robot._q(q)
+    c, r, link = robot.spheres(q, spacing)
+    poses = robot.fk(q)
+    anc = _ancestors(robot)
+    J = np.zeros((len(c), 3, robot.dof))
+    for k, j in enumerate(robot.movable):
+        T = poses[j.parent] @ j.origin
+        a = T[:3, :3] @ j.axis
+        moved = np.array([k in anc[robot.links[i]] for i in link])
+        if not moved.any():
+            continue
+        if j.type == "prismatic":
+            J[moved, :, k] = a
+        else:
+            J[moved, :, k] = np.cross(a, c[moved] - T[:3, 3])
+    return c, r, J
 
 
 def _placed(shape, T: np.ndarray):

@@ -75,3 +75,25 @@ def test_bad_requests(arm, wall):
         check(wall, arm, np.zeros((4, 2)))
     with pytest.raises(CsdfError, match="step must be positive"):
         check(wall, arm, np.zeros((4, 3)), step=0)
+
+
+def test_the_plan_command(wall, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from csdf.cli import app
+
+    wall.save(tmp_path / "wall.json")
+    out = tmp_path / "traj.json"
+    args = ["plan", str(tmp_path / "wall.json"), str(URDF), "-o", str(out)]
+    r = CliRunner().invoke(app, args + ["--start", "0,0,0", "--goal", "3.14159,0,0",
+                                        "--waypoints", "16"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    assert doc["success"] and len(doc["q"]) == 16 and doc["joints"][0] == "shoulder_yaw"
+    r = CliRunner().invoke(app, args + ["--start", "0,0", "--goal", "1,0,0"])
+    assert r.exit_code == 2 and "--start expects q1,q2,q3" in r.output
+    r = CliRunner().invoke(app, args[:-1] + [str(tmp_path / "t.txt"), "--start", "0,0,0",
+                                             "--goal", "1,0,0"])
+    assert r.exit_code == 2 and "must end in .json" in r.output

@@ -635,6 +635,49 @@ def raster(
     _run(go)
 
 
+@app.command()
+def plan(
+    scene: Path = typer.Argument(..., help="A scene file (.json, csdf.Scene.save)."),
+    robot: Path = typer.Argument(..., help="The robot: a URDF file."),
+    start: str = typer.Option(..., "--start", help="Joint positions q1,q2,... (rad, m)."),
+    goal: str = typer.Option(..., "--goal", help="Joint positions q1,q2,... (rad, m)."),
+    output: Path = typer.Option(..., "-o", "--output", help="The trajectory: .json"),
+    waypoints: int = typer.Option(32, "--waypoints", help="Waypoints, both ends included."),
+    margin: float = typer.Option(0.05, "--margin", help="Clearance asked of the robot (m)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the restarts' detours."),
+):
+    """Plan a robot's path between two joint positions among a scene's objects
+    (csdf.plan.optimize) and write it as JSON: waypoints, success, clearance, time."""
+
+    def go():
+        import json
+
+        from .io import atomic_path
+        from .plan import Robot, optimize
+        from .scene import Scene
+
+        if output.suffix.lower() != ".json":
+            raise CsdfError(f"{output}: the output must end in .json")
+        sc = Scene.load(scene)
+        bot = Robot.from_urdf(robot)
+        names = ",".join(f"q{k + 1}" for k in range(bot.dof))
+        qs = _numbers(start, "--start", names)
+        qg = _numbers(goal, "--goal", names)
+        tr = optimize(sc, bot, qs, qg, n_waypoints=waypoints, margin=margin, seed=seed)
+        doc = {"robot": bot.name, "joints": bot.joint_names, "success": tr.success,
+               "min_clearance": tr.min_clearance, "seconds": tr.seconds,
+               "attempts": tr.attempts, "length": tr.length, "q": tr.q.tolist()}
+        with atomic_path(output) as tmp:
+            tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        verdict = "clear" if tr.success else "NOT clear (best attempt written)"
+        out.print(f"{output}: {len(tr.q)} waypoints, {verdict}, min clearance "
+                  f"{tr.min_clearance:.4f} m, {tr.seconds:.2f} s", soft_wrap=True)
+        if not tr.success:
+            raise typer.Exit(1)
+
+    _run(go)
+
+
 def _size(text: str) -> tuple[int, int]:
     w, sep, h = text.lower().partition("x")
     try:

@@ -32,7 +32,7 @@ from ..errors import CsdfError
 from ..expr import param
 from ..shapes import box, cylinder, sphere, union
 
-__all__ = ["Robot", "Joint", "Primitive", "sphere_jacobian"]
+__all__ = ["Robot", "Joint", "Primitive", "sphere_jacobian", "sphere_jacobian_many"]
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 #: the most spheres one primitive is covered by
@@ -258,6 +258,45 @@ class Robot:
             pose[j.child] = T
         return pose
 
+    def fk_many(self, Q: Any) -> dict[str, np.ndarray]:
+        """Forward kinematics of many joint positions at once: ``Q`` ``(B, dof)`` ->
+        ``{link: (B, 4, 4)}`` (the same poses as :meth:`fk`, vectorised)."""
+        Q = np.asarray(Q, dtype=np.float64)
+        if Q.ndim != 2 or Q.shape[1] != self.dof:
+            raise CsdfError(f"Q must have shape (B, {self.dof}), got {Q.shape}")
+        B = len(Q)
+        col = {j.name: k for k, j in enumerate(self.movable)}
+        pose = {self.root: np.broadcast_to(np.eye(4), (B, 4, 4))}
+        for j in self.joints:
+            T = pose[j.parent] @ j.origin
+            if j.type in ("revolute", "continuous"):
+                th = Q[:, col[j.name]]
+                a = j.axis
+                K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+                M = np.broadcast_to(np.eye(4), (B, 4, 4)).copy()
+                M[:, :3, :3] = (np.eye(3) + np.sin(th)[:, None, None] * K
+                                + (1 - np.cos(th))[:, None, None] * (K @ K))
+                T = T @ M
+            elif j.type == "prismatic":
+                M = np.broadcast_to(np.eye(4), (B, 4, 4)).copy()
+                M[:, :3, 3] = Q[:, col[j.name], None] * j.axis
+                T = T @ M
+            pose[j.child] = T
+        return pose
+
+    def spheres_many(self, Q: Any, spacing: float | None = None) -> np.ndarray:
+        """Sphere centres at many joint positions: ``(B, S, 3)`` (radii and links as in
+        :meth:`sphere_cover`)."""
+        c, _, link = self.sphere_cover(spacing)
+        poses = self.fk_many(Q)
+        out = np.empty((len(next(iter(poses.values()))), len(c), 3))
+        for k, name in enumerate(self.links):
+            sel = link == k
+            if sel.any():
+                T = poses[name]
+                out[:, sel] = np.einsum("bij,sj->bsi", T[:, :3, :3], c[sel]) + T[:, None, :3, 3]
+        return out
+
     def in_limits(self, q: Any) -> bool:
         """Whether ``q`` lies within every joint's limits."""
         q = self._q(q)
@@ -387,6 +426,30 @@ def _ancestors(robot: Robot) -> dict[str, set[int]]:
             cur = j.parent
         out[link] = s
     return out
+
+
+def sphere_jacobian_many(robot: Robot, Q: Any, spacing: float | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sphere_jacobian` at many joint positions ``Q`` ``(B, dof)``: ``(centers
+    (B, S, 3), J (B, S, 3, dof))``."""
+    Q = np.asarray(Q, dtype=np.float64)
+    _, _, link = robot.sphere_cover(spacing)
+    c = robot.spheres_many(Q, spacing)
+    poses = robot.fk_many(Q)
+    anc = _ancestors(robot)
+    J = np.zeros(c.shape + (robot.dof,))
+    for k, j in enumerate(robot.movable):
+        moved = np.array([k in anc[robot.links[i]] for i in link])
+        if not moved.any():
+            continue
+        T = poses[j.parent] @ j.origin
+        a = T[:, :3, :3] @ j.axis  # (B, 3)
+        Jk = J[..., k]  # (B, S, 3), a view
+        if j.type == "prismatic":
+            Jk[:, moved] = a[:, None, :]
+        else:
+            Jk[:, moved] = np.cross(a[:, None, :], c[:, moved] - T[:, None, :3, 3])
+    return c, J
 
 
 def sphere_jacobian(robot: Robot, q: Any, spacing: float | None = None

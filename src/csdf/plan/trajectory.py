@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import CsdfError
-from .robot import Robot, sphere_jacobian
+from .robot import Robot, sphere_jacobian_many
 
 __all__ = ["Trajectory", "Check", "optimize", "check"]
 
@@ -96,7 +96,7 @@ def check(scene, robot: Robot, q, step: float = 0.01, spacing: float | None = No
     dense = _dense(q, float(step))
     cover = robot.sphere_cover(spacing)
     S = len(cover[1])
-    centers = np.concatenate([robot.spheres(p, spacing)[0] for p in dense])
+    centers = robot.spheres_many(dense, spacing).reshape(-1, 3)
     radii = np.tile(cover[1], len(dense))
     clear, _ = scene.sphere_distance(centers, radii, max_distance=1.0)
     per = clear.reshape(len(dense), S).min(axis=1)
@@ -133,6 +133,7 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
         CsdfError: bad shapes, ends outside the limits, or fewer than 3 waypoints.
     """
     from scipy.optimize import least_squares
+    from scipy.sparse import csr_matrix
 
     t0 = time.perf_counter()
     a, b = robot._q(q_start), robot._q(q_goal)
@@ -160,15 +161,11 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
         if key not in cache:
             cache.clear()
             q = unpack(x)
-            cs, js = [], []
-            for p in q[1:-1]:
-                c, _, J = sphere_jacobian(robot, p, spacing)
-                cs.append(c)
-                js.append(J)
+            c, J = sphere_jacobian_many(robot, q[1:-1], spacing)
             radii = np.tile(robot.sphere_cover(spacing)[1], T - 2)
-            clear, grad = scene.sphere_distance(np.concatenate(cs), radii,
+            clear, grad = scene.sphere_distance(c.reshape(-1, 3), radii,
                                                 max_distance=margin)
-            cache[key] = (q, clear, grad, np.stack(js))
+            cache[key] = (q, clear, grad, J)
         return cache[key]
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -193,7 +190,7 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
         dcl[~active.reshape(T - 2, S)] = 0.0
         for t in range(T - 2):
             out[n + t * S:n + (t + 1) * S, t * dof:(t + 1) * dof] = -wo * dcl[t]
-        return out
+        return csr_matrix(out)  # mostly zeros: the iterative solver's products are cheap
 
     rng = np.random.default_rng(seed)
     best = None
@@ -208,6 +205,7 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
             start = start + w * (mid - line[T // 2])
         x0 = np.clip(start[1:-1].ravel(), lo, hi)
         sol = least_squares(residuals, x0, jac=jacobian, bounds=(lo, hi), method="trf",
+                            tr_solver="lsmr",
                             max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
         q = unpack(sol.x)
         chk = check(scene, robot, q, step=step, spacing=spacing)

@@ -3,10 +3,11 @@ furniture, seeded start/goal pairs, planned with ``csdf.plan.optimize``.
 
 The arm is ``benchmarks/data/panda_like.urdf``: the Franka Emika Panda's kinematics and
 joint limits (its published DH parameters) with capsule-like collision geometry written
-for csdf (cylinders and spheres), not the manufacturer's collision model; self-collision
-is not modelled yet. The scene: a table in front of the arm, a chair beside it and a
+for csdf (cylinders and spheres), not the manufacturer's collision model; the robot's
+own sphere pairs (``Robot.self_pairs``: not adjacent, not always touching) are kept
+apart too. The scene: a table in front of the arm, a chair beside it and a
 bookshelf behind. Start and goal are uniform in the joint limits, redrawn until the
-robot's sphere cover is clear of the scene at both. For every problem: success (the
+robot's sphere cover is clear of the scene and of itself at both. For every problem: success (the
 dense check, 0.01 rad steps, finds no collision), planning time, path length in joint
 space; and the straight line's verdict for comparison.
 
@@ -48,7 +49,7 @@ def problems(robot, scene, n: int, seed: int) -> list[tuple[np.ndarray, np.ndarr
     while len(out) < 2 * n:
         q = rng.uniform(lim[:, 0], lim[:, 1])
         c, r, _ = robot.spheres(q)
-        if not scene.collide(c, r + 0.01).any():
+        if not scene.collide(c, r + 0.01).any() and robot.self_clearance(q[None])[0] > 0.01:
             out.append(q)
     return [(out[2 * k], out[2 * k + 1]) for k in range(n)]
 

@@ -97,3 +97,26 @@ def test_the_plan_command(wall, tmp_path):
     r = CliRunner().invoke(app, args[:-1] + [str(tmp_path / "t.txt"), "--start", "0,0,0",
                                              "--goal", "1,0,0"])
     assert r.exit_code == 2 and "must end in .json" in r.output
+
+
+def test_self_collision_pairs_and_clearance(arm):
+    _, r, link = arm.sphere_cover()
+    pairs = arm.self_pairs()
+    got = {(arm.links[link[i]], arm.links[link[j]]) for i, j in pairs}
+    # adjacent links and links glued by the fixed joint (hand, tool) are not tested
+    assert got == {("base", "fore"), ("base", "hand"), ("base", "tool"), ("upper", "hand"),
+                   ("upper", "tool")}
+    fewer = arm.self_pairs(ignore=[("base", "tool")])
+    assert ("base", "tool") not in {(arm.links[link[i]], arm.links[link[j]]) for i, j in fewer}
+    with pytest.raises(CsdfError, match="unknown link 'gripper'"):
+        arm.self_pairs(ignore=[("base", "gripper")])
+    rng = np.random.default_rng(4)
+    Q = rng.uniform([-3, -2, 0], [3, 2, 0.1], (20, 3))
+    got = arm.self_clearance(Q)
+    for q, g in zip(Q, got):
+        c, _, _ = arm.spheres(q)
+        i, j = pairs[:, 0], pairs[:, 1]
+        want = (np.linalg.norm(c[i] - c[j], axis=1) - r[i] - r[j]).min()
+        assert g == pytest.approx(want, abs=1e-12)
+    folded = np.array([[0.0, 2.0, 0.1]])  # the forearm bent down beside the upper arm
+    assert arm.self_clearance(folded)[0] < arm.self_clearance([[0.0, 0.0, 0.0]])[0]

@@ -396,6 +396,69 @@ class Robot:
         self._covers[spacing] = out
         return out
 
+    def self_pairs(self, spacing: float | None = None, samples: int = 1000, seed: int = 0,
+                   ignore: Any = ()) -> np.ndarray:
+        """The sphere pairs of the cover that self-collision checks test: ``(P, 2)``
+        indices into the cover, one sphere of each of two links. Link pairs are left out
+        when a joint joins them (adjacent), when ``ignore`` names them (pairs of link
+        names, like an SRDF's disabled collisions), and when their spheres overlap in
+        every one of ``samples`` seeded random positions within the limits (always
+        touching, as at a wrist: the cover is coarser than the links). Cached per
+        arguments."""
+        key = ("pairs", spacing, samples, seed, tuple(sorted(tuple(sorted(p))
+                                                               for p in ignore)))
+        if key in self._covers:
+            return self._covers[key]
+        _, r, link = self.sphere_cover(spacing)
+        # links joined by fixed joints are one body; bodies joined by a joint are adjacent
+        body = {name: name for name in self.links}
+        for jt in self.joints:  # parents come before children
+            if jt.type == "fixed":
+                body[jt.child] = body[jt.parent]
+        skip = {tuple(sorted((body[jt.parent], body[jt.child]))) for jt in self.joints}
+        for a, b in ignore:
+            for name in (a, b):
+                if name not in self.links:
+                    raise CsdfError(f"ignore: unknown link {name!r}")
+            skip.add(tuple(sorted((body[a], body[b]))))
+        i, j = np.triu_indices(len(r), 1)
+        la, lb = link[i], link[j]
+        names = self.links
+        keep = np.array([body[names[a]] != body[names[b]]
+                         and tuple(sorted((body[names[a]], body[names[b]]))) not in skip
+                         for a, b in zip(la, lb)], dtype=bool)
+        i, j = i[keep], j[keep]
+        if len(i) and samples > 0:
+            rng = np.random.default_rng(seed)
+            lim = np.clip(self.limits, -np.pi, np.pi)
+            Q = rng.uniform(lim[:, 0], lim[:, 1], (int(samples), self.dof))
+            always = np.ones(len(i), bool)
+            for part in np.array_split(np.arange(len(Q)), max(1, len(Q) // 100)):
+                c = self.spheres_many(Q[part], spacing)
+                gap = np.linalg.norm(c[:, i] - c[:, j], axis=2) - (r[i] + r[j])
+                always &= (gap < 0).all(axis=0)
+            pair_link = la[keep] * len(self.links) + lb[keep]
+            bad_links = np.unique(pair_link[always])
+            drop = np.isin(pair_link, bad_links)
+            i, j = i[~drop], j[~drop]
+        out = np.stack([i, j], axis=1).astype(np.int64)
+        out.setflags(write=False)
+        self._covers[key] = out
+        return out
+
+    def self_clearance(self, Q: Any, spacing: float | None = None) -> np.ndarray:
+        """The smallest gap between the spheres of :meth:`self_pairs` at joint positions
+        ``Q`` ``(B, dof)``: ``(B,)``, negative where the robot may touch itself (inf
+        without pairs)."""
+        pairs = self.self_pairs(spacing)
+        Q = np.asarray(Q, dtype=np.float64)
+        if not len(pairs):
+            return np.full(len(Q), np.inf)
+        _, r, _ = self.sphere_cover(spacing)
+        c = self.spheres_many(Q, spacing)
+        i, j = pairs[:, 0], pairs[:, 1]
+        return (np.linalg.norm(c[:, i] - c[:, j], axis=2) - (r[i] + r[j])).min(axis=1)
+
     def spheres(self, q: Any, spacing: float | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The sphere cover (:meth:`sphere_cover`) placed at joint positions ``q``:

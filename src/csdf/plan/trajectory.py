@@ -7,7 +7,9 @@ The path is ``n_waypoints`` joint positions from ``q_start`` to ``q_goal`` (both
 fixed). The residuals are the steps between consecutive waypoints (smoothness: their
 sum of squares is the path's squared length over the waypoints) and, for every
 interior waypoint and every sphere of the robot's cover, how far the sphere's
-clearance falls short of a margin (``max(0, margin - clearance)``, weighted). Their
+clearance falls short of a margin (``max(0, margin - clearance)``, weighted), and how
+far the gaps between the robot's own spheres (:meth:`Robot.self_pairs`) fall short of
+a smaller one. Their
 Jacobian is exact: the scene's gradient at the sphere times the sphere's motion by
 each joint (:func:`csdf.plan.robot.sphere_jacobian`). Joint limits are the problem's
 bounds. ``scipy.optimize.least_squares`` solves it from the straight line in joint
@@ -78,12 +80,13 @@ def _dense(q: np.ndarray, step: float) -> np.ndarray:
 
 
 def check(scene, robot: Robot, q, step: float = 0.01, spacing: float | None = None,
-          margin: float = 0.0) -> Check:
+          margin: float = 0.0, self_collision: bool = True) -> Check:
     """Check a path densely: positions along the waypoints ``q`` ``(T, dof)`` at most
     ``step`` apart in every joint (radians or metres), each tested by the robot's sphere
     cover against the scene (a sphere reaching within ``margin`` of a surface counts as a
-    collision). The cover holds the robot, so a path that passes is clear of the scene
-    at every checked position.
+    collision) and, with ``self_collision``, against itself (:meth:`Robot.self_pairs`).
+    The cover holds the robot, so a path that passes is clear of the scene at every
+    checked position.
 
     Raises:
         CsdfError: a bad shape of ``q`` or a step that is not positive.
@@ -100,6 +103,8 @@ def check(scene, robot: Robot, q, step: float = 0.01, spacing: float | None = No
     radii = np.tile(cover[1], len(dense))
     clear, _ = scene.sphere_distance(centers, radii, max_distance=1.0)
     per = clear.reshape(len(dense), S).min(axis=1)
+    if self_collision:  # the robot's own spheres (Robot.self_pairs) count too
+        per = np.minimum(per, robot.self_clearance(dense, spacing))
     bad = np.flatnonzero(per < margin)
     first = int(bad[0]) if len(bad) else -1
     return Check(ok=first < 0, min_clearance=float(per.min()), first_collision=first,
@@ -109,7 +114,8 @@ def check(scene, robot: Robot, q, step: float = 0.01, spacing: float | None = No
 def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
              margin: float = 0.05, smooth: float = 1.0, obstacle: float = 10.0,
              restarts: int = 4, seed: int = 0, step: float = 0.02,
-             spacing: float | None = None, max_nfev: int = 200) -> Trajectory:
+             spacing: float | None = None, max_nfev: int = 200,
+             self_collision: bool = True, self_margin: float = 0.01) -> Trajectory:
     """Plan a path from ``q_start`` to ``q_goal`` (see the module docs).
 
     Args:
@@ -124,6 +130,8 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
         seed: their seed; step: the dense check's step (:func:`check`).
         spacing: the sphere cover's spacing (:meth:`Robot.sphere_cover`).
         max_nfev: solver evaluations per attempt.
+        self_collision: keep the robot's own spheres apart too (the pairs of
+            :meth:`Robot.self_pairs`), by ``self_margin`` (m).
 
     Returns:
         :class:`Trajectory`; ``success`` False (with the best attempt) when no
@@ -133,7 +141,7 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
         CsdfError: bad shapes, ends outside the limits, or fewer than 3 waypoints.
     """
     from scipy.optimize import least_squares
-    from scipy.sparse import csr_matrix
+    from scipy.sparse import coo_matrix
 
     t0 = time.perf_counter()
     a, b = robot._q(q_start), robot._q(q_goal)
@@ -154,6 +162,10 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
     def unpack(x: np.ndarray) -> np.ndarray:
         return np.vstack([a, x.reshape(T - 2, dof), b])
 
+    pairs = robot.self_pairs(spacing) if self_collision else np.zeros((0, 2), np.int64)
+    P = len(pairs)
+    pi, pj = pairs[:, 0], pairs[:, 1]
+    radii1 = robot.sphere_cover(spacing)[1]
     cache: dict = {}
 
     def terms(x: np.ndarray):
@@ -162,35 +174,51 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
             cache.clear()
             q = unpack(x)
             c, J = sphere_jacobian_many(robot, q[1:-1], spacing)
-            radii = np.tile(robot.sphere_cover(spacing)[1], T - 2)
-            clear, grad = scene.sphere_distance(c.reshape(-1, 3), radii,
+            clear, grad = scene.sphere_distance(c.reshape(-1, 3), np.tile(radii1, T - 2),
                                                 max_distance=margin)
-            cache[key] = (q, clear, grad, J)
+            d = c[:, pi] - c[:, pj]  # (T-2, P, 3)
+            dist = np.linalg.norm(d, axis=2)
+            gap = dist - (radii1[pi] + radii1[pj])
+            cache[key] = (q, clear, grad, J, d, dist, gap)
         return cache[key]
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        q, clear, _, _ = terms(x)
+        q, clear, _, _, _, _, gap = terms(x)
         return np.concatenate([ws * np.diff(q, axis=0).ravel(),
-                               wo * np.maximum(0.0, margin - clear)])
+                               wo * np.maximum(0.0, margin - clear),
+                               wo * np.maximum(0.0, self_margin - gap).ravel()])
 
-    def jacobian(x: np.ndarray) -> np.ndarray:
-        _, clear, grad, J = terms(x)
-        n = (T - 1) * dof
-        out = np.zeros((n + (T - 2) * S, (T - 2) * dof))
-        for t in range(T - 1):  # step t: q[t+1] - q[t]
-            for k in range(dof):
-                row = t * dof + k
-                if t < T - 2:
-                    out[row, t * dof + k] += ws  # q[t+1] is variable t
-                if t > 0:
-                    out[row, (t - 1) * dof + k] -= ws  # q[t] is variable t-1
-        active = clear < margin
-        g = grad.reshape(T - 2, S, 3)
-        dcl = np.einsum("tsi,tsij->tsj", g, J)  # d clearance / d q_t
-        dcl[~active.reshape(T - 2, S)] = 0.0
-        for t in range(T - 2):
-            out[n + t * S:n + (t + 1) * S, t * dof:(t + 1) * dof] = -wo * dcl[t]
-        return csr_matrix(out)  # mostly zeros: the iterative solver's products are cheap
+    # the steps' rows: q[t+1] - q[t], variable t holds waypoint t + 1
+    st = np.repeat(np.arange(T - 1), dof)
+    sk = np.tile(np.arange(dof), T - 1)
+    up, down = st < T - 2, st > 0
+    step_rows = np.concatenate([(st * dof + sk)[up], (st * dof + sk)[down]])
+    step_cols = np.concatenate([(st * dof + sk)[up], ((st - 1) * dof + sk)[down]])
+    step_vals = np.concatenate([np.full(up.sum(), ws), np.full(down.sum(), -ws)])
+    n_step = (T - 1) * dof
+    n_rows = n_step + (T - 2) * S + (T - 2) * P
+
+    def jacobian(x: np.ndarray):
+        _, clear, grad, J, d, dist, gap = terms(x)
+        rows, cols, vals = [step_rows], [step_cols], [step_vals]
+        # the scene: d clearance / d q_t = grad . J for the spheres within the margin
+        t, sph = np.nonzero((clear < margin).reshape(T - 2, S))
+        if len(t):
+            dcl = np.einsum("ni,nij->nj", grad.reshape(T - 2, S, 3)[t, sph], J[t, sph])
+            rows.append(np.repeat(n_step + t * S + sph, dof))
+            cols.append((t[:, None] * dof + np.arange(dof)).ravel())
+            vals.append((-wo * dcl).ravel())
+        # the robot itself: d gap / d q_t = u . (J_i - J_j) for pairs within the margin
+        t, pr = np.nonzero(gap < self_margin)
+        if len(t):
+            u = d[t, pr] / np.maximum(dist[t, pr], 1e-12)[:, None]
+            dg = np.einsum("ni,nij->nj", u, J[t, pi[pr]] - J[t, pj[pr]])
+            rows.append(np.repeat(n_step + (T - 2) * S + t * P + pr, dof))
+            cols.append((t[:, None] * dof + np.arange(dof)).ravel())
+            vals.append((-wo * dg).ravel())
+        return coo_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                  np.concatenate(cols))),
+                          shape=(n_rows, (T - 2) * dof)).tocsr()
 
     rng = np.random.default_rng(seed)
     best = None
@@ -208,7 +236,8 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
                             tr_solver="lsmr",
                             max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
         q = unpack(sol.x)
-        chk = check(scene, robot, q, step=step, spacing=spacing)
+        chk = check(scene, robot, q, step=step, spacing=spacing,
+                    self_collision=self_collision)
         length = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum())
         cand = (chk.ok, chk.min_clearance, q, length, chk)
         if best is None or (cand[0], cand[1]) > (best[0], best[1]):

@@ -49,7 +49,7 @@ def problems(robot, scene, n: int, seed: int) -> list[tuple[np.ndarray, np.ndarr
     while len(out) < 2 * n:
         q = rng.uniform(lim[:, 0], lim[:, 1])
         c, r, _ = robot.spheres(q)
-        if not scene.collide(c, r + 0.01).any() and robot.self_clearance(q[None])[0] > 0.01:
+        if not scene.collide(c, r + 0.01).any() and robot.self_clearance(q[None])[0] > 0:
             out.append(q)
     return [(out[2 * k], out[2 * k + 1]) for k in range(n)]
 

@@ -397,16 +397,17 @@ class Robot:
         return out
 
     def self_pairs(self, spacing: float | None = None, samples: int = 1000, seed: int = 0,
-                   ignore: Any = ()) -> np.ndarray:
+                   ignore: Any = (), touch: float = 0.01) -> np.ndarray:
         """The sphere pairs of the cover that self-collision checks test: ``(P, 2)``
         indices into the cover, one sphere of each of two links. Link pairs are left out
         when a joint joins them (adjacent), when ``ignore`` names them (pairs of link
-        names, like an SRDF's disabled collisions), and when their spheres overlap in
-        every one of ``samples`` seeded random positions within the limits (always
-        touching, as at a wrist: the cover is coarser than the links). Cached per
+        names, like an SRDF's disabled collisions), and when their spheres come within
+        ``touch`` (m) of each other in every one of ``samples`` seeded random positions
+        within the limits (always touching, as at a wrist: the cover is coarser than the
+        links). Cached per
         arguments."""
-        key = ("pairs", spacing, samples, seed, tuple(sorted(tuple(sorted(p))
-                                                               for p in ignore)))
+        key = ("pairs", spacing, samples, seed, float(touch),
+               tuple(sorted(tuple(sorted(p)) for p in ignore)))
         if key in self._covers:
             return self._covers[key]
         _, r, link = self.sphere_cover(spacing)
@@ -436,7 +437,7 @@ class Robot:
             for part in np.array_split(np.arange(len(Q)), max(1, len(Q) // 100)):
                 c = self.spheres_many(Q[part], spacing)
                 gap = np.linalg.norm(c[:, i] - c[:, j], axis=2) - (r[i] + r[j])
-                always &= (gap < 0).all(axis=0)
+                always &= (gap < touch).all(axis=0)
             pair_link = la[keep] * len(self.links) + lb[keep]
             bad_links = np.unique(pair_link[always])
             drop = np.isin(pair_link, bad_links)

@@ -233,7 +233,7 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
             start = start + w * (mid - line[T // 2])
         x0 = np.clip(start[1:-1].ravel(), lo, hi)
         sol = least_squares(residuals, x0, jac=jacobian, bounds=(lo, hi), method="trf",
-                            tr_solver="lsmr",
+                            tr_solver="lsmr", tr_options={"maxiter": 40},
                             max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
         q = unpack(sol.x)
         chk = check(scene, robot, q, step=step, spacing=spacing,

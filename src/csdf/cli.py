@@ -43,35 +43,9 @@ err = Console(stderr=True)
 
 def _load(path: Path):
     """A Shape (from .csdf or Fidget's .vm) or a Program (from .csdfb/.csdft)."""
-    from . import load
-    from .compiler.program import Program
+    from .io.model import load_model
 
-    suffix = path.suffix.lower()
-    if suffix in (".csdf", ".vm"):
-        return load(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise CsdfError(f"cannot read {path}: {exc.strerror}") from None
-    try:
-        if suffix == ".csdfb":
-            return Program.from_bytes(data)
-        if suffix == ".csdft":
-            try:
-                text = data.decode("utf-8")
-            except UnicodeDecodeError:
-                raise CsdfError(f"{path} is not UTF-8 text") from None
-            return Program.from_text(text)
-    except CsdfError as exc:
-        if str(exc).startswith(str(path)):
-            raise
-        # the same error class ("byte 826: checksum mismatch"), naming the file
-        try:
-            named = type(exc)(f"{path}: {exc}")
-        except TypeError:  # (an error class with another constructor)
-            named = CsdfError(f"{path}: {exc}")
-        raise named from None
-    raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .vm, .csdfb or .csdft")
+    return load_model(path)
 
 
 def _field(model):

@@ -140,26 +140,6 @@ def _radii(radii: Any, n: int) -> np.ndarray:
     return np.ascontiguousarray(r)
 
 
-def _load_file(path: Path) -> Any:
-    """A model file: ``.csdfb``/``.csdft`` bytecode as a program, ``.csdf``/``.vm`` as a
-    shape."""
-    from ..compiler.program import Program
-    from ..lang import load
-
-    suffix = path.suffix.lower()
-    if suffix in (".csdfb", ".csdft"):
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise CsdfError(f"cannot read {path}: {exc.strerror or exc}") from None
-        try:
-            return Program.from_bytes(data) if suffix == ".csdfb" else \
-                Program.from_text(data.decode("utf-8"))
-        except (CsdfError, UnicodeDecodeError) as exc:
-            raise CsdfError(f"{path}: {exc}") from None
-    return load(path)
-
-
 class _TracedScene:
     """What the sphere tracer reads of a field, for a scene's :class:`FieldSet`:
     values, values with gradients, the Lipschitz bound and the box (no cells proved
@@ -232,7 +212,9 @@ class Scene:
                 path = base / path
             key = ("file", str(path.resolve()))
             if key not in self._models:
-                self._models[key] = _load_file(path)
+                from ..io.model import load_model
+
+                self._models[key] = load_model(path)
             return self._models[key], {"file": str(model)}
         if isinstance(model, str):
             from .. import zoo

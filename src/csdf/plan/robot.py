@@ -32,7 +32,8 @@ from ..errors import CsdfError
 from ..expr import param
 from ..shapes import box, cylinder, sphere, union
 
-__all__ = ["Robot", "Joint", "Primitive", "sphere_jacobian", "sphere_jacobian_many"]
+__all__ = ["Robot", "Joint", "Primitive", "sphere_jacobian", "sphere_jacobian_many",
+           "pair_gaps"]
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 #: the most spheres one primitive is covered by
@@ -110,12 +111,6 @@ def _param_name(joint: str, taken: set[str]) -> str:
         name, k = f"{base}_{k}", k + 1
     taken.add(name)
     return name
-
-
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues: the rotation by ``angle`` about unit ``axis``."""
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * (K @ K)
 
 
 class Robot:
@@ -241,22 +236,8 @@ class Robot:
 
     def fk(self, q: Any) -> dict[str, np.ndarray]:
         """Forward kinematics: ``{link: (4, 4) pose in the root's frame}`` at joint
-        positions ``q`` ``(dof,)``."""
-        q = self._q(q)
-        value = {j.name: float(v) for j, v in zip(self.movable, q)}
-        pose = {self.root: np.eye(4)}
-        for j in self.joints:
-            T = pose[j.parent] @ j.origin
-            if j.type in ("revolute", "continuous"):
-                M = np.eye(4)
-                M[:3, :3] = _axis_rotation(j.axis, value[j.name])
-                T = T @ M
-            elif j.type == "prismatic":
-                M = np.eye(4)
-                M[:3, 3] = j.axis * value[j.name]
-                T = T @ M
-            pose[j.child] = T
-        return pose
+        positions ``q`` ``(dof,)`` (:meth:`fk_many` of one position)."""
+        return {k: v[0] for k, v in self.fk_many(self._q(q)[None]).items()}
 
     def fk_many(self, Q: Any) -> dict[str, np.ndarray]:
         """Forward kinematics of many joint positions at once: ``Q`` ``(B, dof)`` ->
@@ -435,8 +416,7 @@ class Robot:
             Q = rng.uniform(lim[:, 0], lim[:, 1], (int(samples), self.dof))
             always = np.ones(len(i), bool)
             for part in np.array_split(np.arange(len(Q)), max(1, len(Q) // 100)):
-                c = self.spheres_many(Q[part], spacing)
-                gap = np.linalg.norm(c[:, i] - c[:, j], axis=2) - (r[i] + r[j])
+                gap = pair_gaps(self.spheres_many(Q[part], spacing), r, i, j)[2]
                 always &= (gap < touch).all(axis=0)
             pair_link = la[keep] * len(self.links) + lb[keep]
             bad_links = np.unique(pair_link[always])
@@ -457,22 +437,23 @@ class Robot:
             return np.full(len(Q), np.inf)
         _, r, _ = self.sphere_cover(spacing)
         c = self.spheres_many(Q, spacing)
-        i, j = pairs[:, 0], pairs[:, 1]
-        return (np.linalg.norm(c[:, i] - c[:, j], axis=2) - (r[i] + r[j])).min(axis=1)
+        return pair_gaps(c, r, pairs[:, 0], pairs[:, 1])[2].min(axis=1)
 
     def spheres(self, q: Any, spacing: float | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The sphere cover (:meth:`sphere_cover`) placed at joint positions ``q``:
         ``(centers (S, 3) root frame, radii (S,), link index (S,))``."""
-        c, r, link = self.sphere_cover(spacing)
-        poses = self.fk(q)
-        out = np.empty_like(c)
-        for k, name in enumerate(self.links):
-            sel = link == k
-            if sel.any():
-                T = poses[name]
-                out[sel] = c[sel] @ T[:3, :3].T + T[:3, 3]
-        return out, r, link
+        _, r, link = self.sphere_cover(spacing)
+        return self.spheres_many(self._q(q)[None], spacing)[0], r, link
+
+
+def pair_gaps(c: np.ndarray, r: np.ndarray, i: np.ndarray, j: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sphere pairs ``(i, j)`` of centres ``c`` ``(B, S, 3)`` and radii ``r`` ``(S,)``:
+    ``(c_i - c_j (B, P, 3), their distance (B, P), the gap between the spheres (B, P))``."""
+    d = c[:, i] - c[:, j]
+    dist = np.linalg.norm(d, axis=2)
+    return d, dist, dist - (r[i] + r[j])
 
 
 def _ancestors(robot: Robot) -> dict[str, set[int]]:
@@ -522,22 +503,8 @@ def sphere_jacobian(robot: Robot, q: Any, spacing: float | None = None
     (S,), J (S, 3, dof))`` with ``J[s, :, j]`` the derivative of centre ``s`` by joint
     ``j`` (``a x (c - o)`` for a revolute joint of world axis ``a`` through ``o``, ``a``
     for a prismatic one, 0 for a joint that does not move the sphere)."""
-    q = robot._q(q)
-    c, r, link = robot.spheres(q, spacing)
-    poses = robot.fk(q)
-    anc = _ancestors(robot)
-    J = np.zeros((len(c), 3, robot.dof))
-    for k, j in enumerate(robot.movable):
-        T = poses[j.parent] @ j.origin
-        a = T[:3, :3] @ j.axis
-        moved = np.array([k in anc[robot.links[i]] for i in link])
-        if not moved.any():
-            continue
-        if j.type == "prismatic":
-            J[moved, :, k] = a
-        else:
-            J[moved, :, k] = np.cross(a, c[moved] - T[:3, 3])
-    return c, r, J
+    c, J = sphere_jacobian_many(robot, robot._q(q)[None], spacing)
+    return c[0], robot.sphere_cover(spacing)[1], J[0]
 
 
 def _placed(shape, T: np.ndarray):

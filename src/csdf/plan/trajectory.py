@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import CsdfError
-from .robot import Robot, sphere_jacobian_many
+from .robot import Robot, pair_gaps, sphere_jacobian_many
 
 __all__ = ["Trajectory", "Check", "optimize", "check"]
 
@@ -99,12 +99,14 @@ def check(scene, robot: Robot, q, step: float = 0.01, spacing: float | None = No
     dense = _dense(q, float(step))
     cover = robot.sphere_cover(spacing)
     S = len(cover[1])
-    centers = robot.spheres_many(dense, spacing).reshape(-1, 3)
+    centers = robot.spheres_many(dense, spacing)
     radii = np.tile(cover[1], len(dense))
-    clear, _ = scene.sphere_distance(centers, radii, max_distance=1.0)
+    clear, _ = scene.sphere_distance(centers.reshape(-1, 3), radii, max_distance=1.0)
     per = clear.reshape(len(dense), S).min(axis=1)
-    if self_collision:  # the robot's own spheres (Robot.self_pairs) count too
-        per = np.minimum(per, robot.self_clearance(dense, spacing))
+    pairs = robot.self_pairs(spacing) if self_collision else None
+    if pairs is not None and len(pairs):  # the robot's own spheres count too
+        gap = pair_gaps(centers, cover[1], pairs[:, 0], pairs[:, 1])[2]
+        per = np.minimum(per, gap.min(axis=1))
     bad = np.flatnonzero(per < margin)
     first = int(bad[0]) if len(bad) else -1
     return Check(ok=first < 0, min_clearance=float(per.min()), first_collision=first,
@@ -176,9 +178,7 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
             c, J = sphere_jacobian_many(robot, q[1:-1], spacing)
             clear, grad = scene.sphere_distance(c.reshape(-1, 3), np.tile(radii1, T - 2),
                                                 max_distance=margin)
-            d = c[:, pi] - c[:, pj]  # (T-2, P, 3)
-            dist = np.linalg.norm(d, axis=2)
-            gap = dist - (radii1[pi] + radii1[pj])
+            d, dist, gap = pair_gaps(c, radii1, pi, pj)  # (T-2, P, 3), (T-2, P) x 2
             cache[key] = (q, clear, grad, J, d, dist, gap)
         return cache[key]
 

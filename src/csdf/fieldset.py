@@ -102,12 +102,13 @@ class _Pool:
     def add_cells(self, t: int, fld: Field, depth: int) -> None:
         """Tapes for every cell of a ``2**depth`` grid over the field's box grown by its
         size on each side (points farther out run the whole tape)."""
-        from .backends.pruned import CellTapes
+        from .backends.pruned import cell_tapes
 
         box = fld.model_bounds
         size = np.maximum(box[1] - box[0], 1e-6)
         region = np.array([box[0] - size, box[1] + size])
-        ct = CellTapes(fld.program, fld.pvals, region, depth)
+        # cached on the program: a scene rebuilt after an update shortens no tape again
+        ct = cell_tapes(fld.program, fld.pvals, region, depth)
         n = 1 << depth
         leaves = ct.tapes(depth, np.arange(n ** 3))
         pool = ct.pool

@@ -145,7 +145,6 @@ def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, tape
         best = below[i]
         win = -1
         nmin = np.inf  # the nearest box of an evaluated instance of contract 'neither'
-        top = 0
         stack[0] = 0
         top = 1
         done = False

@@ -120,7 +120,13 @@ def test_instances_are_added_updated_removed_and_named():
     assert sc[a].model is sc[b].model  # loaded once, compiled once
     assert [i.name for i in sc] == ["left", "chair_1"]
     fs = sc._fieldset()
-    assert len(np.unique(fs.inst_i[:, 0])) == 2  # two parameter values: two tapes
+    parts = int((fs.owner == a).sum())  # the chair is a union: searched part by part
+    assert parts > 1 and (fs.owner == b).sum() == parts
+    assert len(np.unique(fs.inst_i[:, 0])) == 2 * parts  # two parameter values: two sets
+    three = csdf.Scene()
+    for x in range(3):  # same values, same tapes
+        three.add("chair", pose=csdf.Pose(translation=[x, 0, 0]))
+    assert len(np.unique(three._fieldset().inst_i[:, 0])) == parts
     sc.update(b, params={"leg": 0.03})
     assert sc[b].params == {"seat_height": 0.5, "leg": 0.03}
     p = np.array([[1.0, 0.0, 0.45]])
@@ -227,10 +233,11 @@ def test_the_hierarchy_covers_every_box_once():
 def test_long_models_run_their_cells_tapes_with_the_same_values(monkeypatch):
     import csdf.fieldset as FS
 
-    chair = csdf.zoo.load("chair")
+    chair = csdf.zoo.load("chair").translate((0.0, 0.0, 0.0))  # not a union: kept whole
     assert FS.cell_depth(len(chair.compile().code)) > 0
     fields = [csdf.as_field(chair, pose=csdf.Pose.from_rotvec([0, 0, 0.3], [0.5, 0, 0]))]
     celled = FieldSet(fields)
+    assert FS.union_parts(fields[0]) is None and len(celled.owner) == 1
     assert celled.tape_i[0, 4] > 0 and len(celled.tape_i) > 1
     monkeypatch.setattr(FS, "CELL_MIN_INSTRUCTIONS", 10**9)
     whole = FieldSet(fields)
@@ -241,6 +248,38 @@ def test_long_models_run_their_cells_tapes_with_the_same_values(monkeypatch):
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
     assert celled.tape_i[1:, 1].mean() < 0.5 * celled.tape_i[0, 1]  # and shorter
+
+
+def test_unions_are_searched_part_by_part_with_the_same_answers():
+    import csdf.fieldset as FS
+
+    chair = csdf.zoo.load("chair")
+    pose = csdf.Pose.from_rotvec([0, 0, 0.3], [0.5, 0, 0], scale=1.5)
+    parts = FS.union_parts(csdf.as_field(chair, {"arm_height": 0.2}, pose=pose))
+    assert parts is not None and len(parts) >= 5
+    split = FieldSet([csdf.as_field(chair, {"arm_height": 0.2}, pose=pose),
+                      csdf.as_field(csdf.sphere(0.2), pose=csdf.Pose(translation=[2, 0, 0]))])
+    assert len(split.owner) == len(parts) + 1 and set(split.owner) == {0, 1}
+    whole_chair = chair.translate((0.0, 0.0, 0.0))
+    whole = FieldSet([csdf.as_field(whole_chair, {"arm_height": 0.2}, pose=pose),
+                      csdf.as_field(csdf.sphere(0.2), pose=csdf.Pose(translation=[2, 0, 0]))])
+    assert len(whole.owner) == 2
+    pts = RNG.uniform([-1, -1.5, -0.5], [3, 1.5, 2], (20000, 3))
+    a, b = split.nearest(pts, grad=True), whole.nearest(pts, grad=True)
+    np.testing.assert_allclose(a[0], b[0], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(a[2], b[2])  # instance indices, not parts
+    # exact where the whole says so, and more often: a chair part whose tight box is
+    # farther than the sphere's surface cannot hide a nearer surface
+    assert np.all(a[3][b[3]]) and a[3].sum() > b[3].sum()
+    ok = np.abs(a[1] - b[1]).max(axis=1) < 1e-9  # gradients differ only at part ties
+    assert ok.mean() > 0.999
+    # part boxes are tighter than the whole chair's box, and inside it
+    lo, hi = split.inst_f[:-1, 13:16], split.inst_f[:-1, 16:19]
+    assert np.all(lo >= split.boxes[0, 0] - 1e-9) and np.all(hi <= split.boxes[0, 1] + 1e-9)
+    vol = np.prod(hi - lo, axis=1) / np.prod(split.boxes[0, 1] - split.boxes[0, 0])
+    assert np.median(vol) < 0.25
+    hits = split.nearest(pts[:500], below=np.full(500, 0.05), stop=True)[2]
+    np.testing.assert_array_equal(hits >= 0, a[0][:500] < 0.05)
 
 
 def test_a_margin_caps_distances_and_skips_far_surfaces():

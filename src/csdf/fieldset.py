@@ -7,6 +7,12 @@ exact distance, and collision tests of spheres. A bounding volume hierarchy over
 instances' world boxes (:func:`build_bvh`) keeps the cost of a query close to that of
 the few instances near it (:mod:`csdf.backends.nearest_kernels`). Each distinct
 (program, parameter values) pair becomes one register tape, shared by its instances.
+
+A model whose shape is a hard union (``a | b | ...``, nested unions flattened) enters
+the hierarchy part by part (:func:`union_parts`): the scene's value is the smallest
+part value either way, but each part has its own tight box, so a query evaluates the
+parts near it instead of the whole model (a point 1 m from a chair runs the leg nearest
+to it, not all of the chair). The parts keep the model's contract and instance index.
 """
 
 from __future__ import annotations
@@ -16,10 +22,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from .errors import CsdfError
-from .field import Field, numba_available
+from .field import Field, field_bounds, numba_available
 from .parallel import N_THREADS, executor
 
-__all__ = ["FieldSet", "build_bvh", "cell_depth", "LEAF_SIZE", "CELL_MIN_INSTRUCTIONS"]
+__all__ = ["FieldSet", "build_bvh", "cell_depth", "union_parts", "LEAF_SIZE",
+           "CELL_MIN_INSTRUCTIONS", "MAX_PARTS"]
 
 #: instances per BVH leaf
 LEAF_SIZE = 2
@@ -27,7 +34,53 @@ LEAF_SIZE = 2
 SERIAL_BELOW = 4096
 #: models of at least this many instructions keep tapes per cell of a grid
 CELL_MIN_INSTRUCTIONS = 64
+#: a hard union of more operands than this is kept whole
+MAX_PARTS = 64
 _CONTRACT = {"exact": 0, "bound": 1, "neither": 2}
+
+
+def _hard_union_operands(shape) -> list:
+    """The operands of ``shape`` as nested hard unions, flattened (``[shape]`` when its
+    root is anything else)."""
+    if getattr(shape, "name", None) != "union" or shape.kwargs.get("k") is not None:
+        return [shape]
+    out = []
+    for c in shape.children:
+        out.extend(_hard_union_operands(c))
+    return out
+
+
+def union_parts(fld: Field) -> list[tuple[object, np.ndarray, np.ndarray]] | None:
+    """The parts of a field whose shape is a hard union: ``[(program, parameter values,
+    object-frame box (2, 3))]``, each part compiled on its own; None when the field is
+    not such a union, has more than :data:`MAX_PARTS` parts, was given its box, or a
+    part has no box. The smallest part value is the field's value. Cached on the
+    field's program per parameter values."""
+    shape = fld.shape
+    if shape is None or fld.dim != 3 or fld._bounds_given is not None:
+        return None
+    key = tuple(np.asarray(fld.pvals, dtype=np.float64).tolist())
+    cache = fld.program.__dict__.setdefault("_union_parts", {})
+    if key in cache:
+        return cache[key]
+    ops = _hard_union_operands(shape)
+    parts: list | None = None
+    if 1 < len(ops) <= MAX_PARTS:
+        values = dict(zip(fld.program.param_names, key))
+        parts = []
+        for op in ops:
+            try:
+                prog = op.compile()
+                pv = {n: values[n] for n in prog.param_names}
+                box = field_bounds(prog, pv, shape=op)
+            except (CsdfError, KeyError):
+                parts = None
+                break
+            parts.append((prog, prog.param_values(pv, check_ranges=False), box))
+    if len(cache) >= 8:
+        cache.clear()
+    cache[key] = parts
+    return parts
 
 
 def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE
@@ -161,34 +214,52 @@ class FieldSet:
         K = len(self.fields)
         tapes: dict[int, int] = {}
         pool = _Pool()
-        inst_f = np.empty((K, 19))
-        inst_i = np.empty((K, 2), np.int64)
+        rows_f: list[np.ndarray] = []
+        rows_i: list[tuple[int, int]] = []
+        owner: list[int] = []
+        boxes = np.empty((K, 2, 3))
+
+        def tape_row(prog, pvals, fld=None) -> int:
+            tape = reg_tape(prog, pvals)
+            t = tapes.get(id(tape))
+            if t is None:
+                t = tapes[id(tape)] = pool.add(tape.code, tape.imm, tape.out, tape.n_regs)
+                depth = cell_depth(len(tape.code)) if fld is not None else 0
+                if depth:
+                    pool.add_cells(t, fld, depth)
+            return t
+
         for k, fld in enumerate(self.fields):
             if fld.dim != 3:
                 raise CsdfError(f"instance {k}: a scene holds 3D fields; extrude or revolve "
                                 "a 2D shape first")
-            tape = reg_tape(fld.program, fld.pvals)
-            t = tapes.get(id(tape))
-            if t is None:
-                t = tapes[id(tape)] = pool.add(tape.code, tape.imm, tape.out, tape.n_regs)
-                depth = cell_depth(len(tape.code))
-                if depth:
-                    pool.add_cells(t, fld, depth)
             pose = fld.pose
-            box = fld.bounds
-            inst_f[k, :9] = pose.rotation.reshape(-1)
-            inst_f[k, 9:12] = pose.translation
-            inst_f[k, 12] = pose.scale
-            inst_f[k, 13:16] = box[0]
-            inst_f[k, 16:19] = box[1]
-            inst_i[k] = (t, _CONTRACT[fld.exactness])
+            boxes[k] = fld.bounds
+            frame = np.concatenate([pose.rotation.reshape(-1), pose.translation,
+                                    [pose.scale]])
+            contract = _CONTRACT[fld.exactness]
+            parts = union_parts(fld)
+            if parts is None:
+                rows_f.append(np.concatenate([frame, boxes[k, 0], boxes[k, 1]]))
+                rows_i.append((tape_row(fld.program, fld.pvals, fld), contract))
+                owner.append(k)
+                continue
+            for prog, pvals, box in parts:
+                wb = box if pose.is_identity() else pose.apply_box(box)
+                rows_f.append(np.concatenate([frame, wb[0], wb[1]]))
+                rows_i.append((tape_row(prog, pvals), contract))
+                owner.append(k)
         self.code, self.imm, self.tape_i, self.tape_f, self.cell_tab = pool.arrays()
         self.max_regs = int(self.tape_i[:, 3].max())
-        self.inst_f = inst_f
-        self.inst_i = inst_i
+        #: per entry of the hierarchy (an instance, or one part of a union instance)
+        self.inst_f = np.array(rows_f, dtype=np.float64).reshape(-1, 19)
+        self.inst_i = np.array(rows_i, dtype=np.int64).reshape(-1, 2)
+        #: ``(E,)`` the instance of each entry
+        self.owner = np.array(owner, dtype=np.int64)
         self.lipschitz = max(float(f.lipschitz) for f in self.fields)
-        self.boxes = np.stack([inst_f[:, 13:16], inst_f[:, 16:19]], axis=1)
-        self.node_f, self.node_i, self.order = build_bvh(inst_f[:, 13:16], inst_f[:, 16:19])
+        self.boxes = boxes
+        self.node_f, self.node_i, self.order = build_bvh(self.inst_f[:, 13:16],
+                                                         self.inst_f[:, 16:19])
 
     def __len__(self) -> int:
         return len(self.fields)
@@ -228,4 +299,6 @@ class FieldSet:
             NK.nearest(*args, 0, 1)
         else:
             list(executor().map(lambda c: NK.nearest(*args, c, n), range(n)))
+        if len(self.owner) != len(self.fields):  # entries -> instances
+            inst = np.where(inst >= 0, self.owner[np.maximum(inst, 0)], -1)
         return dist, (g if grad else None), inst, exact

@@ -12,8 +12,12 @@
 
 The URDF is parsed by ``yourdfpy`` (the ``plan`` extra: ``pip install csdf[plan]``).
 Joint types: revolute, continuous, prismatic and fixed (a floating or planar joint is
-refused); collision geometry: box, cylinder and sphere (a mesh is refused, naming the
-link, until meshes can be read as shapes).
+refused); ``<mimic>`` joints follow their leader (they are not degrees of freedom), and
+``lock=`` turns chosen joints into fixed ones (a gripper held open). Collision geometry:
+box, cylinder, sphere and capsule (the ``<capsule radius length>`` tag of the URDFs made
+for MoveIt and Drake, which yourdfpy does not read itself: csdf reads it); a mesh is
+refused, naming the link, until meshes can be read as shapes. An SRDF's
+``<disable_collisions>`` give the link pairs that self-collision checks leave out.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import io
 import math
 import os
 import re
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,10 +35,10 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..expr import param
-from ..shapes import box, cylinder, sphere, union
+from ..shapes import box, capsule, cylinder, sphere, union
 
 __all__ = ["Robot", "Joint", "Primitive", "sphere_jacobian", "sphere_jacobian_many",
-           "pair_gaps"]
+           "pair_gaps", "read_srdf"]
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 #: the most spheres one primitive is covered by
@@ -50,6 +55,8 @@ class Joint:
         parent, child: link names; origin: ``(4, 4)`` child frame in the parent's at
             position 0; axis: ``(3,)`` unit axis (child frame).
         lower, upper: position limits (radians or metres; +-inf for continuous).
+        mimic: the movable joint whose position drives this one (``None`` for an
+            independent joint); its position is ``multiplier * q[mimic] + offset``.
     """
 
     name: str
@@ -61,6 +68,9 @@ class Joint:
     axis: np.ndarray
     lower: float
     upper: float
+    mimic: str | None = None
+    multiplier: float = 1.0
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -68,8 +78,9 @@ class Primitive:
     """A collision primitive of a link, in the link's frame.
 
     Attributes:
-        link: the link's name; kind: ``'box' | 'cylinder' | 'sphere'``; size: its
-            dimensions (box: full sizes (3,); cylinder: radius, length along z;
+        link: the link's name; kind: ``'box' | 'cylinder' | 'sphere' | 'capsule'``;
+            size: its dimensions (box: full sizes (3,); cylinder and capsule: radius,
+            length of the axis along z (a capsule's caps add ``radius`` at each end);
             sphere: radius); origin: ``(4, 4)`` its pose in the link frame.
     """
 
@@ -79,7 +90,35 @@ class Primitive:
     origin: np.ndarray
 
 
+def _xml_root(text: str, what: str) -> ET.Element:
+    try:
+        return ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise CsdfError(f"{what}: not valid XML: {exc}") from None
+
+
+def _take_capsules(root: ET.Element) -> dict[tuple[str, int], tuple[float, float]]:
+    """Capsules of the URDF tree ``root``: ``{(link, collision index): (radius,
+    length)}``; each ``<capsule>`` tag is turned into a ``<cylinder>`` in place, so that
+    yourdfpy reads the tree, and :meth:`Robot.from_urdf` makes it a capsule again."""
+    out = {}
+    for link in root.iter("link"):
+        for k, col in enumerate(link.findall("collision")):
+            geom = col.find("geometry")
+            cap = None if geom is None else geom.find("capsule")
+            if cap is not None:
+                try:
+                    out[(link.get("name"), k)] = (float(cap.get("radius")),
+                                                  float(cap.get("length")))
+                except (TypeError, ValueError):
+                    raise CsdfError(f"link {link.get('name')!r}: a <capsule> needs numeric "
+                                    "radius and length") from None
+                cap.tag = "cylinder"
+    return out
+
+
 def _read_urdf(source: str | os.PathLike):
+    """``(yourdfpy robot, capsules as in _take_capsules, what)`` of a URDF file or text."""
     try:
         import yourdfpy
     except ImportError:  # pragma: no cover - the plan extra
@@ -88,18 +127,44 @@ def _read_urdf(source: str | os.PathLike):
     opts = dict(build_scene_graph=False, build_collision_scene_graph=False,
                 load_meshes=False, load_collision_meshes=False)
     text = str(source)
-    what = "the URDF text" if "<robot" in text else str(source)
-    try:
-        if "<robot" in text:
-            return yourdfpy.URDF.load(io.StringIO(text), **opts).robot, what
+    if "<robot" in text:
+        what = "the URDF text"
+    else:
+        what = str(source)
         path = Path(source)
         if not path.is_file():
             raise CsdfError(f"cannot read {path}: no such file")
-        return yourdfpy.URDF.load(str(path), **opts).robot, what
-    except CsdfError:
-        raise
+        text = path.read_text(encoding="utf-8", errors="replace")
+    root = _xml_root(text, what)
+    try:
+        capsules = _take_capsules(root)
+    except CsdfError as exc:
+        raise CsdfError(f"{what}: {exc}") from None
+    try:
+        xml = ET.tostring(root, encoding="unicode")
+        return yourdfpy.URDF.load(io.StringIO(xml), **opts).robot, capsules, what
     except Exception as exc:  # the parser's own errors (XML, missing attributes)
         raise CsdfError(f"{what}: not a URDF csdf can read: {exc}") from None
+
+
+def read_srdf(source: str | os.PathLike) -> list[tuple[str, str]]:
+    """The ``<disable_collisions link1=... link2=...>`` pairs of an SRDF file (or SRDF
+    text): the link pairs a self-collision check leaves out."""
+    text = str(source)
+    what = "the SRDF text"
+    if "<robot" not in text:
+        what = text
+        path = Path(source)
+        if not path.is_file():
+            raise CsdfError(f"cannot read {path}: no such file")
+        text = path.read_text(encoding="utf-8", errors="replace")
+    pairs = []
+    for el in _xml_root(text, what).iter("disable_collisions"):
+        a, b = el.get("link1"), el.get("link2")
+        if not a or not b:
+            raise CsdfError(f"{what}: <disable_collisions> needs link1 and link2")
+        pairs.append((a, b))
+    return pairs
 
 
 def _param_name(joint: str, taken: set[str]) -> str:
@@ -120,17 +185,24 @@ class Robot:
         name: the URDF's robot name; root: the base link; links: link names (the root
             first, parents before children); joints: every :class:`Joint`, parents
             before children; movable: the joints that move, in that order (``dof`` of
-            them); primitives: every :class:`Primitive`.
+            them; mimic joints are not among them); primitives: every
+            :class:`Primitive`; ignore: link pairs that self-collision checks leave out
+            (from an SRDF), besides adjacent links.
     """
 
     def __init__(self, name: str, root: str, links: list[str], joints: list[Joint],
-                 primitives: list[Primitive]):
+                 primitives: list[Primitive], ignore: Any = ()):
         self.name = name
         self.root = root
         self.links = links
         self.joints = joints
-        self.movable = [j for j in joints if j.type != "fixed"]
+        self.movable = [j for j in joints if j.type != "fixed" and j.mimic is None]
         self.primitives = primitives
+        for a, b in ignore:
+            for end in (a, b):
+                if end not in links:
+                    raise CsdfError(f"ignore: unknown link {end!r}")
+        self.ignore = tuple((str(a), str(b)) for a, b in ignore)
         self._shape = None
         self._covers: dict = {}  # sphere covers by spacing
 
@@ -154,17 +226,30 @@ class Robot:
 
     # ------------------------------------------------------------------ reading
     @classmethod
-    def from_urdf(cls, source: str | os.PathLike) -> Robot:
+    def from_urdf(cls, source: str | os.PathLike, srdf: str | os.PathLike | None = None,
+                  lock: dict[str, float] | None = None) -> Robot:
         """Read a URDF file (or URDF text).
+
+        Args:
+            source: the URDF's path, or its text.
+            srdf: an SRDF's path or text whose ``<disable_collisions>`` pairs
+                self-collision checks leave out (:attr:`ignore`).
+            lock: ``{joint name: position}`` of joints held still (fixed at that
+                position, within their limits); mimic joints of a locked joint follow.
 
         Raises:
             CsdfError: an unreadable file, a malformed URDF, a joint type or geometry
                 csdf cannot model (naming the joint or link), or not one tree.
         """
-        robot, what = _read_urdf(source)
+        robot, capsules, what = _read_urdf(source)
+        lock = dict(lock or {})
         links = {link.name: link for link in robot.links}
         children: dict[str, list] = {}
         has_parent: set[str] = set()
+        by_name = {j.name: j for j in robot.joints}
+        for name in lock:
+            if name not in by_name:
+                raise CsdfError(f"lock: {what} has no joint {name!r}")
         for j in robot.joints:
             for end in (j.parent, j.child):
                 if end not in links:
@@ -176,6 +261,24 @@ class Robot:
         roots = [n for n in links if n not in has_parent]
         if len(roots) != 1:
             raise CsdfError(f"{what}: the links must form one tree (roots: {roots})")
+
+        def leader(j) -> tuple[str, float, float]:
+            """The independent joint driving ``j``: (name, multiplier, offset)."""
+            mult, off, seen = 1.0, 0.0, {j.name}
+            while j.mimic is not None:
+                m = j.mimic
+                if m.joint not in by_name:
+                    raise CsdfError(f"{what}: joint {j.name!r} mimics an unknown joint "
+                                    f"{m.joint!r}")
+                a = 1.0 if m.multiplier is None else float(m.multiplier)
+                b = 0.0 if m.offset is None else float(m.offset)
+                mult, off = a * mult, a * off + b
+                j = by_name[m.joint]
+                if j.name in seen:
+                    raise CsdfError(f"{what}: joint {j.name!r} mimics itself")
+                seen.add(j.name)
+            return j.name, mult, off
+
         order, joints, taken = [roots[0]], [], set()
         stack = [roots[0]]
         while stack:
@@ -200,17 +303,41 @@ class Robot:
                     lo, hi = float(lim.lower), float(lim.upper)
                     if not lo <= hi:
                         raise CsdfError(f"{what}: joint {j.name!r} has limits {lo} > {hi}")
-                param = None if jtype == "fixed" else _param_name(j.name, taken)
+                mimic, mult, off = None, 1.0, 0.0
+                if jtype != "fixed":
+                    lead, mult, off = leader(j)
+                    if lead in lock:
+                        value = float(lock[lead])
+                        lj = by_name[lead]
+                        llo = -math.inf if lj.limit is None or lj.limit.lower is None \
+                            else float(lj.limit.lower)
+                        lhi = math.inf if lj.limit is None or lj.limit.upper is None \
+                            else float(lj.limit.upper)
+                        if lj.type in ("revolute", "prismatic") and not llo <= value <= lhi:
+                            raise CsdfError(f"lock: joint {lead!r} at {value} is outside "
+                                            f"its limits [{llo}, {lhi}]")
+                        origin = origin @ _motion(jtype, axis, mult * value + off)
+                        jtype, mult, off = "fixed", 1.0, 0.0
+                    elif lead != j.name:
+                        mimic = lead
+                param = None if jtype == "fixed" or mimic else _param_name(j.name, taken)
                 joints.append(Joint(j.name, param, jtype, j.parent, j.child, origin, axis,
-                                    lo, hi))
+                                    lo, hi, mimic, mult, off))
                 order.append(j.child)
                 stack.append(j.child)
+        names = {j.name for j in joints if j.type != "fixed" and j.mimic is None}
+        for j in joints:
+            if j.mimic is not None and j.mimic not in names:
+                raise CsdfError(f"{what}: joint {j.name!r} mimics {j.mimic!r}, which "
+                                "does not move")
         prims = []
         for name in order:
-            for c in links[name].collisions:
+            for k, c in enumerate(links[name].collisions):
                 g = c.geometry
                 origin = np.eye(4) if c.origin is None else np.asarray(c.origin, float)
-                if g.box is not None:
+                if (name, k) in capsules:
+                    prims.append(Primitive(name, "capsule", capsules[(name, k)], origin))
+                elif g.box is not None:
                     prims.append(Primitive(name, "box", tuple(float(v) for v in g.box.size),
                                            origin))
                 elif g.cylinder is not None:
@@ -221,8 +348,19 @@ class Robot:
                     prims.append(Primitive(name, "sphere", (float(g.sphere.radius),), origin))
                 else:
                     raise CsdfError(f"{what}: link {name!r} has mesh collision geometry; "
-                                    "csdf models boxes, cylinders and spheres")
-        return cls(robot.name, roots[0], order, joints, prims)
+                                    "csdf models boxes, cylinders, spheres and capsules "
+                                    "(a robot description's primitive collision model, "
+                                    "such as a *_collision.urdf, works)")
+        for p in prims:
+            if min(p.size) < 0 or not all(math.isfinite(v) for v in p.size):
+                raise CsdfError(f"{what}: link {p.link!r} has a {p.kind} of size {p.size}")
+        ignore = read_srdf(srdf) if srdf is not None else ()
+        for a, b in ignore:
+            for end in (a, b):
+                if end not in links:
+                    raise CsdfError(f"{srdf}: <disable_collisions> names an unknown link "
+                                    f"{end!r}")
+        return cls(robot.name, roots[0], order, joints, prims, ignore)
 
     # ------------------------------------------------------------------ kinematics
     def _q(self, q: Any) -> np.ndarray:
@@ -246,24 +384,23 @@ class Robot:
         if Q.ndim != 2 or Q.shape[1] != self.dof:
             raise CsdfError(f"Q must have shape (B, {self.dof}), got {Q.shape}")
         B = len(Q)
-        col = {j.name: k for k, j in enumerate(self.movable)}
         pose = {self.root: np.broadcast_to(np.eye(4), (B, 4, 4))}
         for j in self.joints:
             T = pose[j.parent] @ j.origin
-            if j.type in ("revolute", "continuous"):
-                th = Q[:, col[j.name]]
-                a = j.axis
-                K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-                M = np.broadcast_to(np.eye(4), (B, 4, 4)).copy()
-                M[:, :3, :3] = (np.eye(3) + np.sin(th)[:, None, None] * K
-                                + (1 - np.cos(th))[:, None, None] * (K @ K))
-                T = T @ M
-            elif j.type == "prismatic":
-                M = np.broadcast_to(np.eye(4), (B, 4, 4)).copy()
-                M[:, :3, 3] = Q[:, col[j.name], None] * j.axis
-                T = T @ M
+            if j.type != "fixed":
+                T = T @ _motion_many(j.type, j.axis, self._position(Q, j))
             pose[j.child] = T
         return pose
+
+    def _position(self, Q: np.ndarray, j: Joint) -> np.ndarray:
+        """``(B,)`` the position of movable or mimic joint ``j`` at ``Q`` ``(B, dof)``."""
+        col = self._columns()
+        if j.mimic is None:
+            return Q[:, col[j.name]]
+        return j.multiplier * Q[:, col[j.mimic]] + j.offset
+
+    def _columns(self) -> dict[str, int]:
+        return {j.name: k for k, j in enumerate(self.movable)}
 
     def spheres_many(self, Q: Any, spacing: float | None = None) -> np.ndarray:
         """Sphere centres at many joint positions: ``(B, S, 3)`` (radii and links as in
@@ -290,6 +427,9 @@ class Robot:
             s = box(tuple(0.5 * v for v in p.size))
         elif p.kind == "cylinder":
             s = cylinder(p.size[0], p.size[1])
+        elif p.kind == "capsule":
+            h = 0.5 * p.size[1]
+            s = capsule((0.0, 0.0, -h), (0.0, 0.0, h), p.size[0])
         else:
             s = sphere(p.size[0])
         return _placed(s, p.origin)
@@ -317,10 +457,14 @@ class Robot:
             link = prim.link
             while link in chain:  # up the tree: each joint's motion, then its origin
                 j = chain[link]
-                if j.type in ("revolute", "continuous"):
-                    s = s.rotate(params[j.name], tuple(j.axis))
-                elif j.type == "prismatic":
-                    s = s.translate(tuple(params[j.name] * float(a) for a in j.axis))
+                if j.type != "fixed":
+                    q = params[j.mimic or j.name]
+                    if j.mimic is not None:
+                        q = q * j.multiplier + j.offset
+                    if j.type == "prismatic":
+                        s = s.translate(tuple(q * float(a) for a in j.axis))
+                    else:
+                        s = s.rotate(q, tuple(j.axis))
                 s = _placed(s, j.origin)
                 link = j.parent
             parts.append(s)
@@ -340,7 +484,8 @@ class Robot:
         ``(centers (S, 3), radii (S,), link index into links (S,))``. A box is cut into
         near-cubic cells along its longer sides (at most ``spacing`` apart, default its
         shortest side), each covered by its circumscribed sphere; a cylinder into
-        slices along its axis, each covered by the sphere through its rims."""
+        slices along its axis, each covered by the sphere through its rims; a capsule
+        as its cylinder, plus a sphere on each cap."""
         hit = self._covers.get(spacing)
         if hit is not None:
             return hit
@@ -367,6 +512,9 @@ class Robot:
                 z = (np.arange(m) + 0.5) * dz - length / 2
                 c = np.stack([np.zeros(m), np.zeros(m), z], 1)
                 r = np.full(m, math.hypot(radius, dz / 2))
+                if prim.kind == "capsule":  # and the caps
+                    c = np.concatenate([c, [[0, 0, -length / 2], [0, 0, length / 2]]])
+                    r = np.concatenate([r, [radius, radius]])
             T = prim.origin
             cs.append(c @ T[:3, :3].T + T[:3, 3])
             rs.append(r)
@@ -381,12 +529,13 @@ class Robot:
                    ignore: Any = (), touch: float = 0.01) -> np.ndarray:
         """The sphere pairs of the cover that self-collision checks test: ``(P, 2)``
         indices into the cover, one sphere of each of two links. Link pairs are left out
-        when a joint joins them (adjacent), when ``ignore`` names them (pairs of link
-        names, like an SRDF's disabled collisions), and when their spheres come within
-        ``touch`` (m) of each other in every one of ``samples`` seeded random positions
-        within the limits (always touching, as at a wrist: the cover is coarser than the
-        links). Cached per
+        when a joint joins them (adjacent), when ``ignore`` or :attr:`ignore` names them
+        (pairs of link names, like an SRDF's disabled collisions), and when their
+        spheres come within ``touch`` (m) of each other in every one of ``samples``
+        seeded random positions within the limits (always touching, as at a wrist: the
+        cover is coarser than the links). Cached per
         arguments."""
+        ignore = tuple(self.ignore) + tuple(tuple(p) for p in ignore)
         key = ("pairs", spacing, samples, seed, float(touch),
                tuple(sorted(tuple(sorted(p)) for p in ignore)))
         if key in self._covers:
@@ -456,20 +605,19 @@ def pair_gaps(c: np.ndarray, r: np.ndarray, i: np.ndarray, j: np.ndarray
     return d, dist, dist - (r[i] + r[j])
 
 
-def _ancestors(robot: Robot) -> dict[str, set[int]]:
-    """For each link, the indices (into ``movable``) of the joints that move it."""
-    index = {j.name: k for k, j in enumerate(robot.movable)}
+def _ancestors(robot: Robot) -> dict[str, list]:
+    """For each link, the joints that move it (movable and mimic ones)."""
     up = {j.child: j for j in robot.joints}
-    out: dict[str, set[int]] = {}
+    out: dict[str, list] = {}
     for link in robot.links:
-        s: set[int] = set()
+        moving = []
         cur = link
         while cur in up:
             j = up[cur]
-            if j.name in index:
-                s.add(index[j.name])
+            if j.type != "fixed":
+                moving.append(j)
             cur = j.parent
-        out[link] = s
+        out[link] = moving
     return out
 
 
@@ -482,18 +630,22 @@ def sphere_jacobian_many(robot: Robot, Q: Any, spacing: float | None = None
     c = robot.spheres_many(Q, spacing)
     poses = robot.fk_many(Q)
     anc = _ancestors(robot)
+    col = robot._columns()
     J = np.zeros(c.shape + (robot.dof,))
-    for k, j in enumerate(robot.movable):
-        moved = np.array([k in anc[robot.links[i]] for i in link])
+    for j in robot.joints:
+        if j.type == "fixed":
+            continue
+        moved = np.array([any(m is j for m in anc[robot.links[i]]) for i in link])
         if not moved.any():
             continue
         T = poses[j.parent] @ j.origin
         a = T[:, :3, :3] @ j.axis  # (B, 3)
-        Jk = J[..., k]  # (B, S, 3), a view
+        Jk = J[..., col[j.mimic or j.name]]  # (B, S, 3), a view
         if j.type == "prismatic":
-            Jk[:, moved] = a[:, None, :]
+            Jk[:, moved] += j.multiplier * a[:, None, :]
         else:
-            Jk[:, moved] = np.cross(a[:, None, :], c[:, moved] - T[:, None, :3, 3])
+            Jk[:, moved] += j.multiplier * np.cross(a[:, None, :],
+                                                    c[:, moved] - T[:, None, :3, 3])
     return c, J
 
 
@@ -505,6 +657,26 @@ def sphere_jacobian(robot: Robot, q: Any, spacing: float | None = None
     for a prismatic one, 0 for a joint that does not move the sphere)."""
     c, J = sphere_jacobian_many(robot, robot._q(q)[None], spacing)
     return c[0], robot.sphere_cover(spacing)[1], J[0]
+
+
+def _motion_many(jtype: str, axis: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``(B, 4, 4)`` a joint's motion at positions ``q`` ``(B,)``: a rotation by ``q``
+    (rad) about ``axis`` (Rodrigues), or a translation by ``q`` (m) along it."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1)
+    M = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+    if jtype == "prismatic":
+        M[:, :3, 3] = q[:, None] * axis
+    else:
+        a = axis
+        K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+        M[:, :3, :3] = (np.eye(3) + np.sin(q)[:, None, None] * K
+                        + (1 - np.cos(q))[:, None, None] * (K @ K))
+    return M
+
+
+def _motion(jtype: str, axis: np.ndarray, q: float) -> np.ndarray:
+    """``(4, 4)`` one joint motion (:func:`_motion_many` at one position)."""
+    return _motion_many(jtype, axis, np.array([q]))[0]
 
 
 def _placed(shape, T: np.ndarray):

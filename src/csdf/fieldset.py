@@ -217,6 +217,7 @@ class FieldSet:
         rows_f: list[np.ndarray] = []
         rows_i: list[tuple[int, int]] = []
         owner: list[int] = []
+        ent_range: list[tuple[int, int]] = []
         boxes = np.empty((K, 2, 3))
 
         def tape_row(prog, pvals, fld=None) -> int:
@@ -239,6 +240,7 @@ class FieldSet:
                                     [pose.scale]])
             contract = _CONTRACT[fld.exactness]
             parts = union_parts(fld)
+            ent_range.append((len(owner), 1 if parts is None else len(parts)))
             if parts is None:
                 rows_f.append(np.concatenate([frame, boxes[k, 0], boxes[k, 1]]))
                 rows_i.append((tape_row(fld.program, fld.pvals, fld), contract))
@@ -249,17 +251,21 @@ class FieldSet:
                 rows_f.append(np.concatenate([frame, wb[0], wb[1]]))
                 rows_i.append((tape_row(prog, pvals), contract))
                 owner.append(k)
+                boxes[k, 0] = np.minimum(boxes[k, 0], wb[0])  # holds its parts' boxes
+                boxes[k, 1] = np.maximum(boxes[k, 1], wb[1])
         self.code, self.imm, self.tape_i, self.tape_f, self.cell_tab = pool.arrays()
         self.max_regs = int(self.tape_i[:, 3].max())
         #: per entry of the hierarchy (an instance, or one part of a union instance)
         self.inst_f = np.array(rows_f, dtype=np.float64).reshape(-1, 19)
         self.inst_i = np.array(rows_i, dtype=np.int64).reshape(-1, 2)
-        #: ``(E,)`` the instance of each entry
+        #: ``(E,)`` the instance of each entry; ``(K, 2)`` each instance's entries
         self.owner = np.array(owner, dtype=np.int64)
+        self.ent_range = np.array(ent_range, dtype=np.int64).reshape(-1, 2)
         self.lipschitz = max(float(f.lipschitz) for f in self.fields)
         self.boxes = boxes
-        self.node_f, self.node_i, self.order = build_bvh(self.inst_f[:, 13:16],
-                                                         self.inst_f[:, 16:19])
+        self.inst_box = np.ascontiguousarray(boxes.reshape(K, 6))
+        # a two-level hierarchy: a tree over the instances, then each one's entries
+        self.node_f, self.node_i, self.order = build_bvh(boxes[:, 0], boxes[:, 1])
 
     def __len__(self) -> int:
         return len(self.fields)
@@ -293,7 +299,8 @@ class FieldSet:
         exact = np.empty(N, np.bool_)
         args = (pts, start, bool(stop), bool(grad), self.inst_f, self.inst_i, self.code,
                 self.imm, self.tape_i, self.tape_f, self.cell_tab, self.node_f,
-                self.node_i, self.order, self.max_regs, dist, g, inst, exact)
+                self.node_i, self.order, self.inst_box, self.ent_range, self.max_regs, dist,
+                g, inst, exact)
         n = 1 if N < SERIAL_BELOW else N_THREADS
         if n == 1:
             NK.nearest(*args, 0, 1)

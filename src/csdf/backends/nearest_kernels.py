@@ -10,20 +10,24 @@ Compiled once for all programs: each instance runs a register tape
 
 Data (packed to keep the call cheap):
 
-* ``inst_f`` ``(K, 19)`` float64 per instance: the rotation ``R`` row by row (9), the
-  translation ``t`` (3), the scale ``s`` (1), the world box ``lo`` (3) and ``hi`` (3);
-  the instance's field at a world point ``p`` is ``s f(R^T (p - t) / s)``.
-* ``inst_i`` ``(K, 2)`` int64: the instance's tape and its contract (0 exact, 1 bound,
-  2 neither).
+* Entries: an instance is one entry, or one per part when its model is a hard union
+  (:func:`csdf.fieldset.union_parts`). ``inst_f`` ``(E, 19)`` float64 per entry: the
+  instance's rotation ``R`` row by row (9), translation ``t`` (3) and scale ``s`` (1),
+  the entry's world box ``lo`` (3) and ``hi`` (3); the entry's field at a world point
+  ``p`` is ``s f(R^T (p - t) / s)``. ``inst_i`` ``(E, 2)`` int64: the entry's tape and
+  the instance's contract (0 exact, 1 bound, 2 neither).
+* ``inst_box`` ``(K, 6)`` float64 per instance: its world box (holding its entries'
+  boxes); ``ent_range`` ``(K, 2)`` int64: its first entry and entry count.
 * ``tape_i`` ``(T, 6)`` int64 per tape: first row in ``code``/``imm``, row count, output
   register, registers used, and for a tape kept per cell of a grid over the model's
   region (long models) the cells per axis ``n`` (0: none) and the first entry of its
   ``n**3`` cells in ``cell_tab`` (``(C,)`` int64: the cell's tape); ``tape_f`` ``(T,
   6)`` float64: that region's ``lo`` and ``span`` (object frame). A point of the region
   runs its cell's tape (bit-identical there), any other the whole tape.
-* ``node_f`` ``(M, 6)`` float64 per BVH node: its box ``lo``, ``hi``; ``node_i`` ``(M,
-  2)`` int64: the two children, or ``(-1 - first, count)`` for a leaf holding
-  ``order[first:first + count]``.
+* ``node_f`` ``(M, 6)`` float64 per BVH node (over the instances): its box ``lo``,
+  ``hi``; ``node_i`` ``(M, 2)`` int64: the two children, or ``(-1 - first, count)`` for
+  a leaf holding instances ``order[first:first + count]``, whose entries are searched
+  in turn (a two-level hierarchy: a tree of instances, then each instance's parts).
 
 Pruning by boxes is sound for every contract whose sign is right: outside an
 instance's box its true distance is at least the distance to the box, so an instance
@@ -93,11 +97,11 @@ def _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i, tape_f, cel
 
 @njit(**_OPTS)
 def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, tape_f,
-            cell_tab, node_f, node_i, order, max_regs, dist, grad, inst, exact, part,
-            n_parts):
+            cell_tab, node_f, node_i, order, inst_box, ent_range, max_regs, dist, grad,
+            inst, exact, part, n_parts):
     """For points ``pts`` ``(N, 3)`` (the ``part``-th of ``n_parts`` slices): the
-    smallest instance value ``dist`` ``(N,)``, its instance ``inst`` ``(N,)`` (-1: no
-    instance holds a value below the start), its world gradient ``grad`` ``(N, 3)``
+    smallest entry value ``dist`` ``(N,)``, its entry ``inst`` ``(N,)`` (-1: no
+    entry holds a value below the start), its world gradient ``grad`` ``(N, 3)``
     (with ``want_grad``) and whether the value is the exact distance ``exact`` ``(N,)``
     (the winner is exact and no instance of contract 'neither' could be nearer).
 
@@ -111,6 +115,7 @@ def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, tape
     N = pts.shape[0]
     R = np.empty((max(max_regs, 3), 1))
     stack = np.empty(STACK, np.int64)
+    sdist = np.empty(STACK)
     a = (N * part) // n_parts
     b = (N * (part + 1)) // n_parts
     for i in range(a, b):
@@ -128,33 +133,43 @@ def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, tape
         win = -1
         nmin = np.inf  # the nearest box of an evaluated instance of contract 'neither'
         stack[0] = 0
+        sdist[0] = _box_distance(p0, p1, p2, node_f[0], 0)
         top = 1
         done = False
         while top > 0 and not done:
             top -= 1
             node = stack[top]
-            bd = _box_distance(p0, p1, p2, node_f[node], 0)
+            bd = sdist[top]  # the node's box distance, found when it was pushed
             if bd > 0.0 and bd >= best:
                 continue
             c0 = node_i[node, 0]
             c1 = node_i[node, 1]
-            if c0 < 0:  # a leaf
+            if c0 < 0:  # a leaf: its instances, each with its entries (parts)
                 first = -1 - c0
                 for j in range(first, first + c1):
                     k = order[j]
-                    bk = _box_distance(p0, p1, p2, inst_f[k], 13)
-                    if bk > 0.0 and bk >= best:
-                        continue
-                    v = _eval_instance(k, p0, p1, p2, inst_f, inst_i, code, imm, tape_i,
-                                       tape_f, cell_tab, R)
-                    if inst_i[k, 1] == 2 and bk < nmin:
-                        nmin = bk
-                    if v < best:
-                        best = v
-                        win = k
-                        if stop:
-                            done = True
-                            break
+                    e0 = ent_range[k, 0]
+                    e1 = e0 + ent_range[k, 1]
+                    if e1 - e0 > 1:
+                        bk = _box_distance(p0, p1, p2, inst_box[k], 0)
+                        if bk > 0.0 and bk >= best:
+                            continue
+                    for e in range(e0, e1):
+                        bk = _box_distance(p0, p1, p2, inst_f[e], 13)
+                        if bk > 0.0 and bk >= best:
+                            continue
+                        v = _eval_instance(e, p0, p1, p2, inst_f, inst_i, code, imm,
+                                           tape_i, tape_f, cell_tab, R)
+                        if inst_i[e, 1] == 2 and bk < nmin:
+                            nmin = bk
+                        if v < best:
+                            best = v
+                            win = e
+                            if stop:
+                                done = True
+                                break
+                    if done:
+                        break
             else:
                 # the nearer child is searched first
                 d0 = _box_distance(p0, p1, p2, node_f[c0], 0)
@@ -163,10 +178,14 @@ def nearest(pts, below, stop, want_grad, inst_f, inst_i, code, imm, tape_i, tape
                     raise RuntimeError("BVH too deep")
                 if d0 <= d1:
                     stack[top] = c1
+                    sdist[top] = d1
                     stack[top + 1] = c0
+                    sdist[top + 1] = d0
                 else:
                     stack[top] = c0
+                    sdist[top] = d0
                     stack[top + 1] = c1
+                    sdist[top + 1] = d1
                 top += 2
         dist[i] = best
         inst[i] = win

@@ -62,8 +62,12 @@ def test_an_unreachable_goal_is_reported_not_hidden(arm):
     scene = csdf.Scene()
     scene.add(csdf.sphere(0.25), pose=csdf.Pose(translation=[0.0, 0.55, 0.6]))
     qg = np.array([np.pi / 2 - 0.3, 0.0, 0.0])  # the forearm ends inside the sphere
-    tr = optimize(scene, arm, [0.0, 0.0, 0.0], qg, n_waypoints=8, restarts=1, max_nfev=30)
-    assert not tr.success and tr.min_clearance < 0 and tr.attempts == 2
+    tr = optimize(scene, arm, [0.0, 0.0, 0.0], qg, n_waypoints=8, restarts=1, max_nfev=30,
+                  refine=0)
+    assert not tr.success and tr.min_clearance < 0 and tr.attempts == 2 and len(tr.q) == 8
+    finer = optimize(scene, arm, [0.0, 0.0, 0.0], qg, n_waypoints=8, restarts=1,
+                     max_nfev=30)  # then twice more, on paths of 15 and 29 waypoints
+    assert not finer.success and finer.attempts == 4 and len(finer.q) in (8, 15, 29)
 
 
 def test_bad_requests(arm, wall):

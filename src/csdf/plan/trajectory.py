@@ -117,7 +117,8 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
              margin: float = 0.05, smooth: float = 1.0, obstacle: float = 10.0,
              restarts: int = 4, seed: int = 0, step: float = 0.02,
              spacing: float | None = None, max_nfev: int = 200,
-             self_collision: bool = True, self_margin: float = 0.01) -> Trajectory:
+             self_collision: bool = True, self_margin: float = 0.01,
+             refine: int = 2) -> Trajectory:
     """Plan a path from ``q_start`` to ``q_goal`` (see the module docs).
 
     Args:
@@ -134,17 +135,18 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
         max_nfev: solver evaluations per attempt.
         self_collision: keep the robot's own spheres apart too (the pairs of
             :meth:`Robot.self_pairs`), by ``self_margin`` (m).
+        refine: when every attempt fails, up to this many further attempts, each
+            from the best path so far with twice as many steps between waypoints
+            (a finer path bends around what a coarse one cuts through).
 
     Returns:
         :class:`Trajectory`; ``success`` False (with the best attempt) when no
-        attempt passes the check.
+        attempt passes the check. ``q`` has ``n_waypoints`` rows, or more after
+        refinement (``2 * (T - 1) + 1`` for each).
 
     Raises:
         CsdfError: bad shapes, ends outside the limits, or fewer than 3 waypoints.
     """
-    from scipy.optimize import least_squares
-    from scipy.sparse import coo_matrix
-
     t0 = time.perf_counter()
     a, b = robot._q(q_start), robot._q(q_goal)
     for name, q in (("q_start", a), ("q_goal", b)):
@@ -153,11 +155,64 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
     T = int(n_waypoints)
     if T < 3:
         raise CsdfError(f"n_waypoints must be >= 3, got {n_waypoints}")
-    dof = robot.dof
+    lim = robot.limits
+    line = a + np.linspace(0, 1, T)[:, None] * (b - a)
+    opts = dict(margin=margin, smooth=smooth, obstacle=obstacle, spacing=spacing,
+                max_nfev=max_nfev, self_collision=self_collision, self_margin=self_margin)
+
+    def attempt(start: np.ndarray):
+        q = _solve(scene, robot, start, **opts)
+        chk = check(scene, robot, q, step=step, spacing=spacing,
+                    self_collision=self_collision)
+        length = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum())
+        return chk.ok, chk.min_clearance, q, length, chk
+
+    rng = np.random.default_rng(seed)
+    best = None
+    attempts = 0
+    for k in range(1 + max(0, int(restarts))):
+        attempts += 1
+        start = line.copy()
+        if k:  # a random detour: a bump through a random mid-point
+            mid = rng.uniform(np.clip(lim[:, 0], -np.pi, np.pi),
+                              np.clip(lim[:, 1], -np.pi, np.pi))
+            w = np.sin(np.linspace(0, np.pi, T))[:, None]
+            start = start + w * (mid - line[T // 2])
+        cand = attempt(start)
+        if best is None or (cand[0], cand[1]) > (best[0], best[1]):
+            best = cand
+        if cand[0]:
+            break
+    for _ in range(max(0, int(refine)) if not best[0] else 0):
+        attempts += 1
+        q = best[2]  # each step halved: the waypoints and their midpoints
+        finer = np.empty((2 * len(q) - 1, q.shape[1]))
+        finer[0::2] = q
+        finer[1::2] = 0.5 * (q[:-1] + q[1:])
+        cand = attempt(finer)
+        if (cand[0], cand[1]) > (best[0], best[1]):
+            best = cand
+        if cand[0]:
+            break
+    ok, clear, q, length, chk = best
+    return Trajectory(q=q, success=bool(ok), min_clearance=float(clear),
+                      seconds=time.perf_counter() - t0, attempts=attempts, length=length,
+                      info={"check": chk})
+
+
+def _solve(scene, robot: Robot, start: np.ndarray, *, margin: float, smooth: float,
+           obstacle: float, spacing: float | None, max_nfev: int, self_collision: bool,
+           self_margin: float) -> np.ndarray:
+    """One bounded least-squares solve (module docs) from the path ``start`` ``(T,
+    dof)`` (its ends are held): the solved ``(T, dof)`` path."""
+    from scipy.optimize import least_squares
+    from scipy.sparse import coo_matrix
+
+    T, dof = start.shape
+    a, b = start[0], start[-1]
     lim = robot.limits
     lo = np.tile(lim[:, 0], T - 2)
     hi = np.tile(lim[:, 1], T - 2)
-    line = a + np.linspace(0, 1, T)[:, None] * (b - a)
     S = len(robot.sphere_cover(spacing)[1])
     ws, wo = float(np.sqrt(smooth)), float(np.sqrt(obstacle))
 
@@ -220,31 +275,8 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
                                                   np.concatenate(cols))),
                           shape=(n_rows, (T - 2) * dof)).tocsr()
 
-    rng = np.random.default_rng(seed)
-    best = None
-    attempts = 0
-    for attempt in range(1 + max(0, int(restarts))):
-        attempts += 1
-        start = line.copy()
-        if attempt:  # a random detour: a bump through a random mid-point
-            mid = rng.uniform(np.clip(lim[:, 0], -np.pi, np.pi),
-                              np.clip(lim[:, 1], -np.pi, np.pi))
-            w = np.sin(np.linspace(0, np.pi, T))[:, None]
-            start = start + w * (mid - line[T // 2])
-        x0 = np.clip(start[1:-1].ravel(), lo, hi)
-        sol = least_squares(residuals, x0, jac=jacobian, bounds=(lo, hi), method="trf",
-                            tr_solver="lsmr", tr_options={"maxiter": 40},
-                            max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
-        q = unpack(sol.x)
-        chk = check(scene, robot, q, step=step, spacing=spacing,
-                    self_collision=self_collision)
-        length = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum())
-        cand = (chk.ok, chk.min_clearance, q, length, chk)
-        if best is None or (cand[0], cand[1]) > (best[0], best[1]):
-            best = cand
-        if chk.ok:
-            break
-    ok, clear, q, length, chk = best
-    return Trajectory(q=q, success=bool(ok), min_clearance=float(clear),
-                      seconds=time.perf_counter() - t0, attempts=attempts, length=length,
-                      info={"check": chk})
+    x0 = np.clip(start[1:-1].ravel(), lo, hi)
+    sol = least_squares(residuals, x0, jac=jacobian, bounds=(lo, hi), method="trf",
+                        tr_solver="lsmr", tr_options={"maxiter": 40},
+                        max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
+    return unpack(sol.x)

@@ -66,6 +66,9 @@ def load_robot(name: str):
 
     if name == "panda":
         return example_robot("panda", lock={"panda_finger_joint1": 0.04})
+    if name == "panda_mesh":  # the STL collision meshes, each as spheres holding it
+        return example_robot("panda", lock={"panda_finger_joint1": 0.04}, meshes=True,
+                             mesh_spacing=0.1)
     return Robot.from_urdf(URDF)
 
 
@@ -85,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--problems", type=int, default=100)
     p.add_argument("--waypoints", type=int, default=32)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--robot", choices=("panda", "panda_like"), default=None,
+    p.add_argument("--robot", choices=("panda", "panda_mesh", "panda_like"), default=None,
                    help="the arm (default: panda where example-robot-data is installed)")
     p.add_argument("--no-ompl", action="store_true", help="skip OMPL's RRTConnect")
     p.add_argument("--ompl-time", type=float, default=2.0,

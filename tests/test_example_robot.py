@@ -32,3 +32,15 @@ def test_the_panda_collision_model():
 def test_an_unknown_robot_is_named():
     with pytest.raises(CsdfError, match="no robot 'robbie' .*panda"):
         example_robot("robbie")
+
+
+def test_the_panda_mesh_model_as_spheres():
+    panda = example_robot("panda", lock={"panda_finger_joint1": 0.04}, meshes=True,
+                          mesh_spacing=0.1)
+    assert panda.dof == 7 and all(p.kind in ("sphere", "box") for p in panda.primitives)
+    capsules = example_robot("panda", lock={"panda_finger_joint1": 0.04})
+    q = np.array([0, -0.785398, 0, -2.35619, 0, 1.5707, 0.785398])
+    for link in ("panda_link4", "panda_hand"):  # the same kinematics
+        np.testing.assert_allclose(panda.fk(q)[link], capsules.fk(q)[link], atol=1e-12)
+    c, r, _ = panda.spheres(q)
+    assert 50 < len(r) < 600

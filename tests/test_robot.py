@@ -135,7 +135,8 @@ def test_robot_spheres_against_a_scene(arm):
 
 @pytest.mark.parametrize("edit, match", [
     (('type="fixed">', 'type="floating">'), r"joint 'tool-mount' is 'floating'"),
-    (('<sphere radius="0.06"/>', '<mesh filename="hand.stl"/>'), r"link 'hand' has mesh"),
+    (('<sphere radius="0.06"/>', '<mesh filename="hand.stl"/>'),
+     r"link 'hand': cannot find its collision mesh 'hand.stl'"),
     (('<limit lower="-2" upper="2" effort="1" velocity="1"/>', ''),
      r"joint 'elbow' \(revolute\) needs <limit"),
     (('<child link="tool"/>', '<child link="nowhere"/>'), r"unknown link 'nowhere'"),

@@ -15,10 +15,11 @@ from .robot import Robot
 __all__ = ["example_robot", "example_robot_files"]
 
 
-def example_robot_files(name: str) -> tuple[Path, Path | None]:
+def example_robot_files(name: str, meshes: bool = False) -> tuple[Path, Path | None]:
     """``(urdf, srdf or None)`` of robot ``name`` in example-robot-data: its
-    ``{name}_collision.urdf`` where there is one (primitive collision geometry), else
-    ``{name}.urdf``, and ``srdf/{name}.srdf``.
+    ``{name}_collision.urdf`` where there is one (primitive collision geometry) unless
+    ``meshes``, else ``{name}.urdf`` (usually mesh collision geometry), and
+    ``srdf/{name}.srdf``.
 
     Raises:
         CsdfError: the package is not installed, or has no such robot.
@@ -34,7 +35,8 @@ def example_robot_files(name: str) -> tuple[Path, Path | None]:
         s = str(f).replace("\\", "/")
         if prefix in s:
             found[s.split(prefix, 1)[1]] = Path(str(dist.locate_file(f)))
-    urdf = found.get(f"urdf/{name}_collision.urdf") or found.get(f"urdf/{name}.urdf")
+    urdf = None if meshes else found.get(f"urdf/{name}_collision.urdf")
+    urdf = urdf or found.get(f"urdf/{name}.urdf")
     if urdf is None:
         names = sorted({str(f).split("robots/", 1)[1].split("_description")[0]
                         for f in dist.files or () if "_description/urdf/" in str(f)})
@@ -43,9 +45,11 @@ def example_robot_files(name: str) -> tuple[Path, Path | None]:
     return urdf, found.get(f"srdf/{name}.srdf")
 
 
-def example_robot(name: str = "panda", lock: dict[str, float] | None = None) -> Robot:
+def example_robot(name: str = "panda", lock: dict[str, float] | None = None,
+                  meshes: bool = False, mesh_spacing: float | None = None) -> Robot:
     """Robot ``name`` of example-robot-data, read with its SRDF's disabled collision
     pairs (:meth:`Robot.from_urdf`; ``lock`` holds joints still, e.g. the Panda's
-    fingers: ``{'panda_finger_joint1': 0.04}``)."""
-    urdf, srdf = example_robot_files(name)
-    return Robot.from_urdf(urdf, srdf=srdf, lock=lock)
+    fingers: ``{'panda_finger_joint1': 0.04}``; ``meshes`` reads the description with
+    mesh collision geometry, each mesh as spheres holding it)."""
+    urdf, srdf = example_robot_files(name, meshes)
+    return Robot.from_urdf(urdf, srdf=srdf, lock=lock, mesh_spacing=mesh_spacing)

@@ -15,8 +15,9 @@ Joint types: revolute, continuous, prismatic and fixed (a floating or planar joi
 refused); ``<mimic>`` joints follow their leader (they are not degrees of freedom), and
 ``lock=`` turns chosen joints into fixed ones (a gripper held open). Collision geometry:
 box, cylinder, sphere and capsule (the ``<capsule radius length>`` tag of the URDFs made
-for MoveIt and Drake, which yourdfpy does not read itself: csdf reads it); a mesh is
-refused, naming the link, until meshes can be read as shapes. An SRDF's
+for MoveIt and Drake, which yourdfpy does not read itself: csdf reads it), and meshes
+as sets of spheres that hold their surface (:mod:`csdf.plan.meshcover`; a bound: the
+spheres reach up to ``mesh_spacing`` beyond it). An SRDF's
 ``<disable_collisions>`` give the link pairs that self-collision checks leave out.
 """
 
@@ -118,7 +119,9 @@ def _take_capsules(root: ET.Element) -> dict[tuple[str, int], tuple[float, float
 
 
 def _read_urdf(source: str | os.PathLike):
-    """``(yourdfpy robot, capsules as in _take_capsules, what)`` of a URDF file or text."""
+    """``(yourdfpy robot, capsules as in _take_capsules, what, directory)`` of a URDF
+    file or text (the directory that relative mesh paths start from: the file's, or the
+    working directory for text)."""
     try:
         import yourdfpy
     except ImportError:  # pragma: no cover - the plan extra
@@ -127,6 +130,7 @@ def _read_urdf(source: str | os.PathLike):
     opts = dict(build_scene_graph=False, build_collision_scene_graph=False,
                 load_meshes=False, load_collision_meshes=False)
     text = str(source)
+    where = Path.cwd()
     if "<robot" in text:
         what = "the URDF text"
     else:
@@ -135,6 +139,7 @@ def _read_urdf(source: str | os.PathLike):
         if not path.is_file():
             raise CsdfError(f"cannot read {path}: no such file")
         text = path.read_text(encoding="utf-8", errors="replace")
+        where = path.resolve().parent
     root = _xml_root(text, what)
     try:
         capsules = _take_capsules(root)
@@ -142,9 +147,36 @@ def _read_urdf(source: str | os.PathLike):
         raise CsdfError(f"{what}: {exc}") from None
     try:
         xml = ET.tostring(root, encoding="unicode")
-        return yourdfpy.URDF.load(io.StringIO(xml), **opts).robot, capsules, what
+        return yourdfpy.URDF.load(io.StringIO(xml), **opts).robot, capsules, what, where
     except Exception as exc:  # the parser's own errors (XML, missing attributes)
         raise CsdfError(f"{what}: not a URDF csdf can read: {exc}") from None
+
+
+def _mesh_spheres(mesh: Any, where: Path, spacing: float | None, what: str
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The spheres standing for a URDF ``<mesh>`` (its file found as yourdfpy finds it:
+    relative to the URDF, or through a ``package://`` path), scaled as the URDF says."""
+    import trimesh
+    import yourdfpy
+
+    from .meshcover import sphere_set
+
+    name = str(mesh.filename)
+    path = Path(yourdfpy.filename_handler_magic(name, dir=str(where)))
+    if not path.is_file():
+        raise CsdfError(f"{what}: cannot find its collision mesh {name!r}")
+    try:
+        m = trimesh.load(str(path), force="mesh")
+    except Exception as exc:  # trimesh's own errors for unreadable files
+        raise CsdfError(f"{what}: cannot read its collision mesh {name!r}: {exc}") from None
+    if not isinstance(m, trimesh.Trimesh) or not len(m.faces):
+        raise CsdfError(f"{what}: its collision mesh {name!r} has no triangles")
+    scale = np.ones(3) if mesh.scale is None else \
+        np.broadcast_to(np.asarray(mesh.scale, dtype=np.float64), (3,))
+    try:
+        return sphere_set(np.asarray(m.vertices) * scale, np.asarray(m.faces), spacing)
+    except CsdfError as exc:
+        raise CsdfError(f"{what}: collision mesh {name!r}: {exc}") from None
 
 
 def read_srdf(source: str | os.PathLike) -> list[tuple[str, str]]:
@@ -227,7 +259,8 @@ class Robot:
     # ------------------------------------------------------------------ reading
     @classmethod
     def from_urdf(cls, source: str | os.PathLike, srdf: str | os.PathLike | None = None,
-                  lock: dict[str, float] | None = None) -> Robot:
+                  lock: dict[str, float] | None = None,
+                  mesh_spacing: float | None = None) -> Robot:
         """Read a URDF file (or URDF text).
 
         Args:
@@ -236,12 +269,15 @@ class Robot:
                 self-collision checks leave out (:attr:`ignore`).
             lock: ``{joint name: position}`` of joints held still (fixed at that
                 position, within their limits); mimic joints of a locked joint follow.
+            mesh_spacing: for mesh collision geometry, about how far the spheres that
+                stand for a mesh may reach beyond its surface (m; default a tenth of
+                each mesh's largest extent; :func:`csdf.plan.meshcover.sphere_set`).
 
         Raises:
             CsdfError: an unreadable file, a malformed URDF, a joint type or geometry
                 csdf cannot model (naming the joint or link), or not one tree.
         """
-        robot, capsules, what = _read_urdf(source)
+        robot, capsules, what, where = _read_urdf(source)
         lock = dict(lock or {})
         links = {link.name: link for link in robot.links}
         children: dict[str, list] = {}
@@ -346,11 +382,15 @@ class Robot:
                                            origin))
                 elif g.sphere is not None:
                     prims.append(Primitive(name, "sphere", (float(g.sphere.radius),), origin))
+                elif g.mesh is not None:
+                    c, r = _mesh_spheres(g.mesh, where, mesh_spacing, f"{what}: link {name!r}")
+                    for ck, rk in zip(c, r):
+                        at = np.eye(4)
+                        at[:3, 3] = ck
+                        prims.append(Primitive(name, "sphere", (float(rk),), origin @ at))
                 else:
-                    raise CsdfError(f"{what}: link {name!r} has mesh collision geometry; "
-                                    "csdf models boxes, cylinders, spheres and capsules "
-                                    "(a robot description's primitive collision model, "
-                                    "such as a *_collision.urdf, works)")
+                    raise CsdfError(f"{what}: link {name!r} has a collision without "
+                                    "geometry csdf reads")
         for p in prims:
             if min(p.size) < 0 or not all(math.isfinite(v) for v in p.size):
                 raise CsdfError(f"{what}: link {p.link!r} has a {p.kind} of size {p.size}")

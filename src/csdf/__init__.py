@@ -36,7 +36,7 @@ from .version import __version__
 if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
     from . import io, zoo
     from .field import Field, as_field, glsl_params, shadertoy, to_glsl
-    from .fit import FitResult, fit, icp
+    from .fit import FitResult, TrackResult, fit, fit_depth, fit_silhouette, icp, track
     from .lang import dumps, load, loads
     from .mesh import mesh
     from .raster import raster
@@ -61,6 +61,10 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "FitResult": (".fit", "FitResult"),
     "fit": (".fit", "fit"),
     "icp": (".fit", "icp"),
+    "fit_depth": (".fit", "fit_depth"),
+    "fit_silhouette": (".fit", "fit_silhouette"),
+    "track": (".fit", "track"),
+    "TrackResult": (".fit", "TrackResult"),
     "dumps": (".lang", "dumps"),
     "load": (".lang", "load"),
     "loads": (".lang", "loads"),
@@ -133,5 +137,5 @@ __all__ = [
     "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
     "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", "Scene",
-    "SceneQuery", *_shape_names,
+    "SceneQuery", "fit_depth", "fit_silhouette", "track", "TrackResult", *_shape_names,
 ]

@@ -1,0 +1,517 @@
+"""Registration from images (paper §4.5: SDF-RGBD and SDF-RGB): :func:`fit_depth` from
+a depth image with an optional silhouette term, :func:`fit_silhouette` from binary masks
+alone.
+
+Frames: a camera is a :class:`csdf.Camera` (OpenCV: x right, y down, z forward; its
+pose is camera-to-world). :func:`fit_depth` works in the **camera frame**: the result's
+pose maps the model into the camera (BOP's ``cam_R_m2c``, ``cam_t_m2c``).
+:func:`fit_silhouette` works in the **world frame** of its cameras.
+
+Residuals (all in scene units, metres for csdf's models):
+
+* **Depth points.** Each valid pixel (depth > 0 and finite; inside ``mask`` when one is
+  given) is back-projected to ``p = depth / d_z * d`` (``d`` the pixel's unit ray) and
+  scored by its signed distance to the posed model, ``r = s f(R^T (p - t) / s)``, with
+  a robust loss (no correspondences: :mod:`.problem`).
+* **Silhouette.** For pixels within ``band`` pixels of the mask's boundary (both sides),
+  the ray's minimum of the posed field, ``m = min_u s f(...(o + u d))``, should equal
+  the pixel's signed distance to the boundary turned into metres at the depth ``z`` of
+  the minimising point: ``m = e z / f_px`` (``e`` in pixels, positive outside the mask,
+  from the Euclidean distance transform; ``f_px`` the focal length). For a sphere this is
+  exact (a ray passing ``delta`` from the centre has ``m = delta - radius``); for other
+  shapes it is first order near the contour. So pixels inside the mask pull the model's
+  silhouette out to them and pixels outside push it in, smoothly, and a pose whose
+  silhouette matches the mask has zero residual. The minimum's derivative by pose and
+  parameters is the field's at the minimising point (the derivative along the ray
+  vanishes there), from the same forward-mode pass as the depth points.
+  Occlusion: a pixel outside the mask whose measured depth lies in front of the model's
+  minimising point (by more than ``occlusion_margin``) sees an occluder, not the
+  background, and is left out.
+
+The ray minimum is found by sampling the ray across the posed model's bounding sphere
+(``RAY_SAMPLES`` points) and a golden-section refinement around the smallest sample
+(``GOLDEN_STEPS``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CsdfError
+from ..pose import Pose
+from .lm import State, normal_equations
+from .problem import jacobian, loss_weights, make_result, prepare
+from .result import FitResult
+
+__all__ = ["backproject", "fit_depth", "fit_silhouette", "contour_rays", "ray_minima",
+           "RAY_SAMPLES", "GOLDEN_STEPS"]
+
+#: samples along a silhouette ray across the model's bounding sphere
+RAY_SAMPLES = 24
+#: golden-section steps refining the smallest sample
+GOLDEN_STEPS = 6
+_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+# ------------------------------------------------------------------ image inputs
+def _camera(camera, what: str = "camera"):
+    from ..render.camera import Camera
+
+    if not isinstance(camera, Camera):
+        raise CsdfError(f"{what} must be a csdf.Camera, got {type(camera).__name__}")
+    return camera
+
+
+def _image(a, camera, what: str, dtype=np.float64) -> np.ndarray:
+    try:
+        img = np.asarray(a, dtype=dtype)
+    except (TypeError, ValueError):
+        raise CsdfError(f"{what} must be an image of numbers") from None
+    if img.shape != (camera.height, camera.width):
+        raise CsdfError(f"{what} must have the camera's shape ({camera.height}, "
+                        f"{camera.width}), got {img.shape}")
+    return img
+
+
+def _mask(mask, camera, what: str = "mask") -> np.ndarray:
+    m = _image(mask, camera, what, dtype=np.float64)
+    if not np.isin(m, (0.0, 1.0)).all():
+        raise CsdfError(f"{what} must be binary (0/1 or bool)")
+    return m > 0.5
+
+
+def backproject(depth, camera, mask=None) -> tuple[np.ndarray, np.ndarray]:
+    """The valid pixels of a depth image as camera-frame points.
+
+    Args:
+        depth: ``(H, W)`` depth along the optical axis (scene units); 0, negative,
+            NaN or inf is missing.
+        camera: the :class:`csdf.Camera` of the image (its size is the image's).
+        mask: optional ``(H, W)`` bool: only pixels inside it.
+
+    Returns:
+        ``(points (N, 3), pixels (N,) flat indices v * W + u)``.
+    """
+    cam = _camera(camera)
+    z = _image(depth, cam, "depth")
+    ok = np.isfinite(z) & (z > 0)
+    if mask is not None:
+        ok &= _mask(mask, cam)
+    idx = np.flatnonzero(ok.ravel())
+    d = cam.pixel_directions()[idx]
+    pts = d * (z.ravel()[idx] / d[:, 2])[:, None]
+    return pts, idx
+
+
+def _subsample(n: int, k: int | None, rng: np.random.Generator) -> np.ndarray:
+    if k is None or n <= k:
+        return np.arange(n)
+    return np.sort(rng.choice(n, size=int(k), replace=False))
+
+
+# ------------------------------------------------------------------ silhouette rays
+@dataclass
+class Rays:
+    """Silhouette rays of one or more views (scene frame).
+
+    Attributes:
+        origins: ``(M, 3)``; dirs: ``(M, 3)`` unit; axis: ``(M, 3)`` the optical axis of
+        each ray's camera (depth is measured along it); target: ``(M,)`` the pixel's
+        signed distance to the mask boundary over the focal length (positive outside;
+        ``m = target * z``); outside: ``(M,)`` bool; depth: ``(M,)`` the measured depth
+        of the pixel (inf where none).
+    """
+
+    origins: np.ndarray
+    dirs: np.ndarray
+    axis: np.ndarray
+    target: np.ndarray
+    outside: np.ndarray
+    depth: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.dirs)
+
+
+def _signed_distance(mask: np.ndarray) -> np.ndarray:
+    """Signed distance in pixels from each pixel centre to the mask's boundary (which
+    runs between pixels): positive outside, negative inside."""
+    from scipy import ndimage
+
+    if mask.all() or not mask.any():
+        return np.full(mask.shape, -np.inf if mask.all() else np.inf)
+    out = ndimage.distance_transform_edt(~mask) - 0.5
+    inn = ndimage.distance_transform_edt(mask) - 0.5
+    return np.where(mask, -inn, out)
+
+
+def contour_rays(mask, camera, band: float = 4.0, max_rays: int | None = 400,
+                 depth=None, seed: int = 0) -> Rays:
+    """The rays of the pixels within ``band`` pixels of a mask's boundary (both sides),
+    in the world frame of ``camera``, at most ``max_rays`` of them (a seeded subset)."""
+    cam = _camera(camera)
+    m = _mask(mask, cam)
+    e = _signed_distance(m)
+    sel = np.flatnonzero((np.abs(e) <= band).ravel())
+    sel = sel[_subsample(len(sel), max_rays, np.random.default_rng(seed))]
+    dc = cam.pixel_directions()[sel]
+    fpx = 0.5 * (cam.fx + cam.fy)
+    z = np.full(len(sel), np.inf)
+    if depth is not None:
+        zz = _image(depth, cam, "depth").ravel()[sel]
+        good = np.isfinite(zz) & (zz > 0)
+        z[good] = zz[good]
+    R = cam.R
+    return Rays(origins=np.broadcast_to(cam.t, (len(sel), 3)).copy(), dirs=dc @ R.T,
+                axis=np.broadcast_to(R[:, 2], (len(sel), 3)).copy(),
+                target=e.ravel()[sel] / fpx, outside=~m.ravel()[sel], depth=z)
+
+
+def ray_minima(prog, pv: dict, backend: str, R: np.ndarray, t: np.ndarray, s: float,
+               centre: np.ndarray, radius: float, rays: Rays
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The minimum of the posed field along each ray over the model's bounding sphere
+    (centre ``centre``, radius ``radius``, model units): ``(points (M, 3) scene frame,
+    values (M,))``."""
+    M = len(rays)
+    C = s * (R @ centre) + t
+    rw = s * radius
+    b = np.einsum("ij,ij->i", rays.dirs, C - rays.origins)
+    u0 = np.maximum(b - rw, 1e-9)
+    u1 = np.maximum(b + rw, u0 + 1e-9)
+
+    def values(u: np.ndarray) -> np.ndarray:  # u (M, k) -> (M, k)
+        X = rays.origins[:, None, :] + u[..., None] * rays.dirs[:, None, :]
+        q = ((X.reshape(-1, 3) - t) @ R) / s
+        return s * np.asarray(prog(q, pv, backend=backend, check_ranges=False)
+                              ).reshape(u.shape)
+
+    K = RAY_SAMPLES
+    u = u0[:, None] + (u1 - u0)[:, None] * np.linspace(0.0, 1.0, K)[None, :]
+    v = values(u)
+    k = np.argmin(v, axis=1)
+    rows = np.arange(M)
+    lo = u[rows, np.maximum(k - 1, 0)]
+    hi = u[rows, np.minimum(k + 1, K - 1)]
+    # golden-section search on [lo, hi] (the field is unimodal there for small steps)
+    a = hi - _GOLD * (hi - lo)
+    c = lo + _GOLD * (hi - lo)
+    fa = values(a[:, None])[:, 0]
+    fc = values(c[:, None])[:, 0]
+    for _ in range(GOLDEN_STEPS):
+        left = fa < fc
+        hi = np.where(left, c, hi)
+        lo = np.where(left, lo, a)
+        c_new = np.where(left, a, lo + _GOLD * (hi - lo))
+        a_new = np.where(left, hi - _GOLD * (hi - lo), c)
+        probe = np.where(left, a_new, c_new)
+        fp = values(probe[:, None])[:, 0]
+        fc, fa = np.where(left, fa, fp), np.where(left, fp, fc)
+        a, c = a_new, c_new
+    cand_u = np.stack([u[rows, k], a, c], axis=1)
+    cand_v = np.stack([v[rows, k], fa, fc], axis=1)
+    j = np.argmin(cand_v, axis=1)
+    ub = cand_u[rows, j]
+    return rays.origins + ub[:, None] * rays.dirs, cand_v[rows, j]
+
+
+# ------------------------------------------------------------------ the solve
+def _linearise(prob, st: State, idx: list[int], P: np.ndarray):
+    """Residuals ``s f`` (N,) and Jacobian rows (N, n) of points ``P`` (N, 3) at ``st``."""
+    s = math.exp(st.sigma)
+    values = prob.values.copy()
+    values[idx] = st.cvals
+    pv = dict(zip(prob.pnames, values))
+    a = P - st.t
+    q = (a @ st.R) / s
+    if idx:
+        f, g, J = prob.prog.value_grad_param_jacobian(q, pv, backend=prob.backend,
+                                                      check_ranges=False)
+        Jp = s * np.asarray(J)[:, idx]
+    else:
+        f, g = prob.prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
+        Jp = None
+    f = np.asarray(f, dtype=float)
+    gw = np.asarray(g) @ st.R.T
+    return s * f, jacobian(prob.pose, prob.scale, s, a, f, gw, Jp)
+
+
+@dataclass
+class _Terms:
+    """Which residuals a solve uses: depth points (in ``prob.points``) and silhouette
+    rays, with the silhouette's weight and occlusion margin."""
+
+    rays: Rays | None
+    weight: float
+    occlusion: float
+    depth: bool = True
+
+
+def _evaluate(prob, st: State, idx: list[int], terms: _Terms):
+    """All residuals (N,), Jacobian (N, n) and robust weights at ``st``, and the
+    silhouette rays used."""
+    rs, Js = [], []
+    if terms.depth:
+        r, J = _linearise(prob, st, idx, prob.points)
+        rs.append(r)
+        Js.append(J)
+    used = np.zeros(0, dtype=np.int64)
+    if terms.rays is not None and len(terms.rays):
+        rays = terms.rays
+        s = math.exp(st.sigma)
+        values = prob.values.copy()
+        values[idx] = st.cvals
+        pv = dict(zip(prob.pnames, values))
+        X, m = ray_minima(prob.prog, pv, prob.backend, st.R, st.t, s, prob.centre,
+                          0.5 * prob.size, rays)
+        z = np.einsum("ij,ij->i", X - rays.origins, rays.axis)
+        keep = np.ones(len(rays), bool)
+        # an outside pixel whose measured depth is in front of the model sees an occluder
+        keep &= ~(rays.outside & (rays.depth < z - terms.occlusion))
+        used = np.flatnonzero(keep)
+        if len(used):
+            r, J = _linearise(prob, st, idx, X[used])
+            rs.append(terms.weight * (r - rays.target[used] * z[used]))
+            Js.append(terms.weight * J)
+    r = np.concatenate(rs) if rs else np.zeros(0)
+    J = np.concatenate(Js) if Js else np.zeros((0, 0))
+    return r, J, used
+
+
+def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-7):
+    """Robust Levenberg-Marquardt over the terms' residuals from ``prob``'s state
+    (updated in place). Returns stats as :mod:`.stages` does."""
+    idx = [prob.pnames.index(n) for n in prob.names]
+    lo = np.array([prob.prog.params[i].lo for i in idx])
+    hi = np.array([prob.prog.params[i].hi for i in idx])
+    st = State(prob.R, np.asarray(prob.t, float), math.log(prob.s), prob.values[idx].copy())
+    r, J, used = _evaluate(prob, st, idx, terms)
+    if len(r) < J.shape[1]:
+        raise CsdfError(f"{len(r)} residual(s) cannot determine {J.shape[1]} unknowns")
+    cost, w = loss_weights(r, prob.f_scale, prob.loss)
+    lam, nev, converged = 1e-3, 1, False
+    while nev < max_iter:
+        A, b = normal_equations(J, w, r)
+        D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
+        accepted = False
+        while nev < max_iter:
+            try:
+                dx = -np.linalg.solve(A + lam * np.diag(D), b)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            if prob.pose and np.linalg.norm(dx[:3]) > 0.5:
+                dx *= 0.5 / np.linalg.norm(dx[:3])
+            new = st.step(dx, prob.pose, prob.scale, lo, hi)
+            r2, J2, used2 = _evaluate(prob, new, idx, terms)
+            nev += 1
+            c2, w2 = loss_weights(r2, prob.f_scale, prob.loss)
+            if c2 <= cost and len(r2) >= J.shape[1]:
+                rel = (cost - c2) / max(cost, 1e-300)
+                st, r, J, w, used = new, r2, J2, w2, used2
+                cost = c2
+                lam = max(lam / 3.0, 1e-9)
+                accepted = True
+                converged = rel < tol
+                break
+            lam *= 4.0
+            if lam > 1e10:
+                converged = True
+                break
+        if converged or not accepted:
+            break
+    prob.R, prob.t, prob.s = st.R, st.t, math.exp(st.sigma)
+    prob.values[idx] = st.cvals
+    return {"nfev": nev, "converged": converged, "cost": cost, "notes": [],
+            "loss": prob.loss, "residuals": r, "rays_used": len(used)}
+
+
+def _silhouette_quality(r_sil: np.ndarray, rays: Rays | None, used: int, f_scale: float
+                        ) -> dict:
+    if rays is None or not len(rays):
+        return {}
+    rms = float(np.sqrt(np.mean(r_sil ** 2))) if len(r_sil) else math.nan
+    return {"silhouette_rays": int(len(rays)), "silhouette_rays_used": int(used),
+            "silhouette_rmse": rms, "silhouette_rmse_ratio": rms / f_scale}
+
+
+def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), params=None,
+              *, silhouette: bool = True, silhouette_weight: float = 1.0,
+              band: float = 4.0, max_points: int | None = 2000,
+              max_rays: int | None = 400, occlusion_margin: float | None = None,
+              loss: str = "huber", f_scale: float | None = None, max_iter: int = 50,
+              multistart: bool = False, seed: int = 0, backend: str = "auto",
+              check_ranges: bool = True) -> FitResult:
+    """Fit a model to a depth image (SDF-RGBD, paper §4.5; see the module docs).
+
+    Args:
+        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program`.
+        depth: ``(H, W)`` depth along the optical axis (scene units; 0/NaN missing).
+        camera: its :class:`csdf.Camera` (the result is in this camera's frame).
+        init: starting model-to-camera pose, as :func:`csdf.fit` takes it (default:
+            identity rotation at the back-projected points' centroid).
+        mask: ``(H, W)`` bool: the object's visible pixels. The depth term uses only
+            these; the silhouette term needs it.
+        estimate, params, loss, f_scale, backend, check_ranges: as :func:`csdf.fit`
+            (``f_scale`` default 1 % of the model's size).
+        silhouette: add the silhouette term (when ``mask`` is given).
+        silhouette_weight: its weight against the depth residuals.
+        band: the contour band's half-width (pixels).
+        max_points, max_rays: seeded subsets of the depth pixels and contour rays.
+        occlusion_margin: an outside pixel whose measured depth is this much in front of
+            the model is occluded (default ``3 f_scale``).
+        max_iter: evaluations of the Levenberg-Marquardt solve.
+        multistart: find the start first with :func:`csdf.fit` ``(multistart=True)`` on
+            the back-projected points (large initial errors, a lost track).
+        seed: seeds the subsets and the multistart.
+
+    Returns:
+        :class:`csdf.FitResult` of the model-to-camera pose; ``success`` is the point
+        fit's test (:mod:`.quality`, with the camera centre as viewpoint) and, with the
+        silhouette term, its residual's RMS within ``2 f_scale``; ``quality`` adds
+        ``silhouette_rmse`` and the ray counts.
+
+    Raises:
+        CsdfError: a depth or mask of the wrong shape, no valid pixels, bad options.
+    """
+    t0 = time.perf_counter()
+    cam = _camera(camera)
+    m = None if mask is None else _mask(mask, cam)
+    pts, _ = backproject(depth, cam, m)
+    if not len(pts):
+        raise CsdfError("the depth image has no valid pixels"
+                        + (" inside the mask" if m is not None else ""))
+    rng = np.random.default_rng(seed)
+    pts = pts[_subsample(len(pts), max_points, rng)]
+    if multistart:
+        from .api import fit
+
+        init = fit(shape, pts, estimate=("pose",), multistart=True, seed=seed,
+                   viewpoint=np.zeros(3), backend=backend, check_ranges=check_ranges,
+                   max_iter=40, f_scale=f_scale)
+    prob = prepare(shape, pts, init, estimate, params, loss, f_scale, backend,
+                   check_ranges=check_ranges)
+    if prob.loss == "auto":
+        prob.loss = "huber"
+    rays = None
+    if silhouette and m is not None:
+        # (the camera's own frame: the fit is in camera coordinates)
+        local = _camera_at_origin(cam)
+        rays = contour_rays(m, local, band=band, max_rays=max_rays, depth=depth, seed=seed)
+    occ = 3.0 * prob.f_scale if occlusion_margin is None else float(occlusion_margin)
+    terms = _Terms(rays, float(silhouette_weight), occ)
+    stats = _solve(prob, terms, max_iter)
+    n_sil = stats["rays_used"]
+    r_sil = stats["residuals"][len(prob.points):] / max(float(silhouette_weight), 1e-300)
+    res = make_result(prob, stats, time.perf_counter() - t0, "csdf-depth", None,
+                      viewpoint=np.zeros(3))
+    sq = _silhouette_quality(r_sil, rays, n_sil, prob.f_scale)
+    res.quality.update(sq)
+    if sq and not sq["silhouette_rmse_ratio"] <= 2.0:
+        res.success = False
+        res.quality.setdefault("reasons", []).append(
+            f"the silhouette's residual RMS is {sq['silhouette_rmse_ratio']:.2f} f_scale "
+            "(> 2)")
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
+def _camera_at_origin(cam):
+    """The same camera with the identity pose (its own frame as the world)."""
+    from ..render.camera import Camera
+
+    return Camera(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
+
+
+def fit_silhouette(shape, masks, cameras, init=None, estimate=("pose",), params=None, *,
+                   band: float = 4.0, max_rays: int | None = 600, loss: str = "huber",
+                   f_scale: float | None = None, max_iter: int = 60, seed: int = 0,
+                   backend: str = "auto", check_ranges: bool = True) -> FitResult:
+    """Fit a model to one or more binary masks alone (SDF-RGB, paper §4.5; the
+    silhouette term of the module docs, in the cameras' world frame).
+
+    Args:
+        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program`.
+        masks: one ``(H, W)`` bool mask or a sequence of them.
+        cameras: one :class:`csdf.Camera` or one per mask (posed in the world).
+        init: starting model-to-world pose (as :func:`csdf.fit`); default: the model
+            placed on the first view's ray through the mask's centroid, at the depth
+            where the model's size matches the mask's.
+        estimate, params, loss, f_scale, max_iter, seed, backend, check_ranges: as
+            :func:`fit_depth`.
+
+    Returns:
+        :class:`csdf.FitResult` of the model-to-world pose; ``rmse`` and the inlier
+        fraction are of the silhouette residuals (scene units); ``success`` when their
+        RMS is within ``2 f_scale``.
+
+    Raises:
+        CsdfError: masks and cameras that do not match, an empty or full mask.
+    """
+    t0 = time.perf_counter()
+    if isinstance(masks, np.ndarray) and masks.ndim == 2:
+        masks = [masks]
+    masks = list(masks)
+    cams = [cameras] if not isinstance(cameras, (list, tuple)) else list(cameras)
+    if len(cams) == 1 and len(masks) > 1:
+        cams = cams * len(masks)
+    if len(cams) != len(masks) or not masks:
+        raise CsdfError(f"fit_silhouette needs one camera per mask; got {len(masks)} "
+                        f"mask(s) and {len(cams)} camera(s)")
+    ms = [_mask(mk, _camera(c, f"cameras[{i}]"), f"masks[{i}]")
+          for i, (mk, c) in enumerate(zip(masks, cams))]
+    for i, mk in enumerate(ms):
+        if not mk.any() or mk.all():
+            raise CsdfError(f"masks[{i}] is {'empty' if not mk.any() else 'full'}: no "
+                            "silhouette to fit")
+    per = None if max_rays is None else max(1, int(max_rays) // len(ms))
+    parts = [contour_rays(mk, c, band=band, max_rays=per, seed=seed + i)
+             for i, (mk, c) in enumerate(zip(ms, cams))]
+    rays = Rays(*(np.concatenate([getattr(p, f) for p in parts])
+                  for f in ("origins", "dirs", "axis", "target", "outside", "depth")))
+    if init is None:
+        init = _silhouette_start(shape, ms[0], cams[0], backend)
+    # the rays' points stand in for a cloud: prepare() validates the rest
+    prob = prepare(shape, rays.origins + rays.dirs, init, estimate, params, loss, f_scale,
+                   backend, check_ranges=check_ranges)
+    if prob.loss == "auto":
+        prob.loss = "huber"
+    terms = _Terms(rays, 1.0, math.inf, depth=False)
+    stats = _solve(prob, terms, max_iter)
+    r = stats["residuals"]
+    thr = 3.0 * prob.f_scale
+    inl = np.abs(r) <= thr
+    sq = _silhouette_quality(r, rays, stats["rays_used"], prob.f_scale)
+    ok = bool(sq and sq["silhouette_rmse_ratio"] <= 2.0)
+    sq["reasons"] = [] if ok else [
+        f"the silhouette's residual RMS is {sq.get('silhouette_rmse_ratio', math.nan):.2f} "
+        "f_scale (> 2)"]
+    return FitResult(
+        rotation=prob.R.copy(), translation=np.asarray(prob.t, float).copy(),
+        scale=float(prob.s), params=dict(zip(prob.pnames, map(float, prob.values))),
+        rmse=float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else math.inf,
+        inlier_fraction=float(inl.mean()) if len(r) else 0.0, inlier_threshold=thr,
+        converged=bool(stats["converged"]), iterations=int(stats["nfev"]),
+        seconds=time.perf_counter() - t0, cost=float(stats["cost"]),
+        method="csdf-silhouette", notes=[], loss=prob.loss, success=ok, quality=sq)
+
+
+def _silhouette_start(shape, mask: np.ndarray, cam, backend: str) -> Pose:
+    """A start on the ray through the mask's centroid, at the depth where the model's
+    bounding diagonal spans the mask's bounding-box diagonal; identity rotation."""
+    from ..field import as_field
+
+    fld = as_field(shape, backend=backend, what="fit_silhouette")
+    box = fld.model_bounds
+    diag = float(np.linalg.norm(box[1] - box[0]))
+    v, u = np.nonzero(mask)
+    span = math.hypot(u.max() - u.min() + 1, v.max() - v.min() + 1)
+    z = 0.5 * (cam.fx + cam.fy) * diag / span
+    d = np.array([(u.mean() - cam.cx) / cam.fx, (v.mean() - cam.cy) / cam.fy, 1.0])
+    centre_world = cam.R @ (d * z) + cam.t
+    centre = 0.5 * (box[0] + box[1])
+    return Pose(np.eye(3), centre_world - centre)

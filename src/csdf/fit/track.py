@@ -1,0 +1,219 @@
+"""Tracking over a depth video (paper §4.5): :func:`track` fits each frame with
+:func:`csdf.fit_depth` from a constant-velocity prediction, tells when it has lost the
+object, and re-initialises.
+
+* **Prediction.** With model-to-camera poses ``T_{k-1}``, ``T_k`` of the last two
+  frames, frame ``k + 1`` starts from ``(T_k T_{k-1}^-1) T_k``: the same motion again
+  (one pose after a start or a re-initialisation).
+* **Lost-track detector.** A frame whose fit fails :attr:`csdf.FitResult.success` (too
+  few depth points within ``3 f_scale`` of the model, their RMS beyond ``1.5 f_scale``,
+  the visible model surface unexplained by the measurements, or, with masks, a
+  silhouette residual beyond ``2 f_scale``) is *lost*. With ``reinit`` it is fitted
+  again from scratch (``multistart``: a search over rotations on the frame's points) and
+  the better of the two fits is kept; the motion history restarts there. The
+  re-initialisation also tries the multistart pose turned half a turn about each of
+  the model's axes (a search on depth points alone confuses them; the silhouette
+  tells them apart).
+* **Shape parameters** (``'params'`` in ``estimate``): each frame's fit starts from the
+  running mean of the estimates of the frames tracked so far, and that mean (the
+  accumulated evidence) is what the frame reports, so the estimate settles as frames
+  come in.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import CsdfError
+from ..pose import Pose
+from .images import fit_depth
+from .result import FitResult
+
+__all__ = ["track", "TrackFrame", "TrackResult"]
+
+
+@dataclass
+class TrackFrame:
+    """One tracked frame.
+
+    Attributes:
+        index: the frame's index; pose: the model-to-camera :class:`csdf.Pose`;
+        params: parameter values (the running estimate when parameters are tracked);
+        success: the fit explains the frame (its :attr:`FitResult.success`);
+        lost: the detector fired on the frame's first fit; reinitialised: a
+        multistart fit was made; rmse, inlier_fraction: of the depth points;
+        silhouette_rmse: of the silhouette residuals (NaN without masks); seconds:
+        the frame's time; result: the kept :class:`FitResult`.
+    """
+
+    index: int
+    pose: Pose
+    params: dict[str, float]
+    success: bool
+    lost: bool
+    reinitialised: bool
+    rmse: float
+    inlier_fraction: float
+    silhouette_rmse: float
+    seconds: float
+    result: FitResult = field(repr=False)
+
+
+@dataclass
+class TrackResult:
+    """All frames of a :func:`track` run."""
+
+    frames: list[TrackFrame]
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, k: int) -> TrackFrame:
+        return self.frames[k]
+
+    @property
+    def poses(self) -> list[Pose]:
+        """The model-to-camera pose of every frame."""
+        return [f.pose for f in self.frames]
+
+    @property
+    def success(self) -> np.ndarray:
+        """``(F,)`` bool: the frames whose fit explains them."""
+        return np.array([f.success for f in self.frames], dtype=bool)
+
+    @property
+    def seconds(self) -> np.ndarray:
+        """``(F,)`` each frame's time (s)."""
+        return np.array([f.seconds for f in self.frames])
+
+
+def _as_pose(init, what: str = "init") -> tuple[Pose, dict]:
+    if isinstance(init, FitResult):
+        return Pose(init.rotation, init.translation, init.scale), dict(init.params)
+    if isinstance(init, Pose):
+        return init, {}
+    try:
+        M = np.asarray(init, dtype=float)
+    except (TypeError, ValueError):
+        M = np.zeros(0)
+    if M.shape != (4, 4):
+        raise CsdfError(f"{what} must be a csdf.Pose, a FitResult or a (4, 4) transform")
+    return Pose.nearest(M, what), {}
+
+
+def _frames(frames, masks) -> Iterable[tuple[np.ndarray, np.ndarray | None]]:
+    ms = None if masks is None else list(masks)
+    for k, fr in enumerate(frames):
+        if isinstance(fr, tuple):
+            if len(fr) != 2:
+                raise CsdfError(f"frames[{k}]: a tuple must be (depth, mask)")
+            yield fr[0], fr[1]
+            continue
+        if ms is not None and k >= len(ms):
+            raise CsdfError(f"masks has {len(ms)} entries but frames has more")
+        yield fr, (None if ms is None else ms[k])
+
+
+def _reinitialise(shape, depth, camera, mask, centre: np.ndarray, opts: dict) -> FitResult:
+    """A lost frame fitted from scratch: the multistart fit, and the same pose turned
+    half a turn about each of the model's axes through its centre (the usual ambiguity
+    of a search on depth points alone, which the silhouette resolves), each refined;
+    the first that succeeds, else the one of lowest cost."""
+    best = fit_depth(shape, depth, camera, init=None, mask=mask, multistart=True, **opts)
+    if best.success:
+        return best
+    R, t, s = best.rotation, best.translation, best.scale
+    for axis in np.eye(3):
+        turn = Pose.from_rotvec(np.pi * axis).rotation
+        R2 = R @ turn
+        start = {"rotation": R2, "translation": t + s * (R - R2) @ centre, "scale": s,
+                 "params": dict(best.params)}
+        alt = fit_depth(shape, depth, camera, init=start, mask=mask, **opts)
+        if alt.success:
+            return alt
+        if alt.cost < best.cost:
+            best = alt
+    return best
+
+
+def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=None, *,
+          reinit: bool = True, max_points: int | None = 600, max_rays: int | None = 200,
+          max_iter: int = 20, f_scale: float | None = None, seed: int = 0,
+          backend: str = "auto", **fit_kwargs) -> TrackResult:
+    """Track a model through depth frames (see the module docs).
+
+    Args:
+        shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program`.
+        frames: depth images ``(H, W)`` (scene units, 0 missing), or ``(depth, mask)``
+            pairs; any iterable.
+        camera: the :class:`csdf.Camera` of the frames.
+        init: the first frame's model-to-camera pose (:class:`csdf.Pose`, a (4, 4)
+            transform or a :class:`csdf.FitResult`, whose parameters start the
+            estimate).
+        masks: the object's visible pixels per frame (optional; adds the silhouette
+            term and restricts the depth term).
+        estimate, params: as :func:`csdf.fit_depth`; with ``'params'`` the parameters
+            are tracked as a running mean.
+        reinit: re-initialise a lost frame with a multistart fit.
+        max_points, max_rays, max_iter, f_scale, seed, backend, fit_kwargs: passed to
+            :func:`csdf.fit_depth` (fewer points and evaluations than a single fit's
+            defaults: a prediction starts close).
+
+    Returns:
+        :class:`TrackResult`, one :class:`TrackFrame` per frame.
+    """
+    pose, pvals = _as_pose(init)
+    est = tuple(e.strip() for e in estimate.split(",")) if isinstance(estimate, str) \
+        else tuple(estimate)
+    track_params = "params" in est
+    prev: Pose | None = None
+    mean: dict[str, float] = dict(pvals)
+    n_mean = 0
+    out: list[TrackFrame] = []
+    opts = dict(estimate=est, params=params, max_points=max_points, max_rays=max_rays,
+                max_iter=max_iter, f_scale=f_scale, seed=seed, backend=backend)
+    opts.update(fit_kwargs)
+    from ..field import as_field
+
+    box = as_field(shape, backend=backend, what="track").model_bounds
+    centre = 0.5 * (box[0] + box[1])
+    for k, (depth, mask) in enumerate(_frames(frames, masks)):
+        t0 = time.perf_counter()
+        guess = pose if prev is None else Pose.nearest(
+            pose.matrix @ np.linalg.inv(prev.matrix) @ pose.matrix, "the prediction")
+        start = {"rotation": guess.rotation, "translation": guess.translation,
+                 "scale": guess.scale, "params": dict(mean)}
+        res = fit_depth(shape, depth, camera, init=start, mask=mask, **opts)
+        lost = not res.success
+        again = False
+        if lost and reinit:
+            alt = _reinitialise(shape, depth, camera, mask, centre, opts)
+            again = True
+            if alt.success or alt.cost < res.cost:
+                res = alt
+                prev = None  # the motion history restarts
+            else:
+                prev = pose
+        else:
+            prev = pose
+        pose = Pose.nearest(res.transform, "the fitted pose")  # (re-orthonormalised)
+        if track_params and res.success:
+            n_mean += 1
+            for name, v in res.params.items():
+                mean[name] = mean.get(name, v) + (v - mean.get(name, v)) / n_mean
+        reported = dict(res.params)
+        if track_params and n_mean:
+            reported.update(mean)
+        q = res.quality or {}
+        out.append(TrackFrame(
+            index=k, pose=pose, params=reported, success=bool(res.success), lost=lost,
+            reinitialised=again, rmse=float(res.rmse),
+            inlier_fraction=float(res.inlier_fraction),
+            silhouette_rmse=float(q.get("silhouette_rmse", math.nan)),
+            seconds=time.perf_counter() - t0, result=res))
+    return TrackResult(out)

@@ -184,11 +184,12 @@ def ray_minima(prog, pv: dict, backend: str, R: np.ndarray, t: np.ndarray, s: fl
     u0 = np.maximum(b - rw, 1e-9)
     u1 = np.maximum(b + rw, u0 + 1e-9)
 
+    fn = _value_function(prog, pv, backend)
+
     def values(u: np.ndarray) -> np.ndarray:  # u (M, k) -> (M, k)
         X = rays.origins[:, None, :] + u[..., None] * rays.dirs[:, None, :]
-        q = ((X.reshape(-1, 3) - t) @ R) / s
-        return s * np.asarray(prog(q, pv, backend=backend, check_ranges=False)
-                              ).reshape(u.shape)
+        q = np.ascontiguousarray(((X.reshape(-1, 3) - t) @ R) / s)
+        return s * np.asarray(fn(q)).reshape(u.shape)
 
     K = RAY_SAMPLES
     u = u0[:, None] + (u1 - u0)[:, None] * np.linspace(0.0, 1.0, K)[None, :]
@@ -217,6 +218,22 @@ def ray_minima(prog, pv: dict, backend: str, R: np.ndarray, t: np.ndarray, s: fl
     j = np.argmin(cand_v, axis=1)
     ub = cand_u[rows, j]
     return rays.origins + ub[:, None] * rays.dirs, cand_v[rows, j]
+
+
+def _value_function(prog, pv: dict, backend: str):
+    """``f(q (M, 3)) -> (M,)`` model values at these parameter values: the compiled
+    evaluator's serial kernel where there is one (no per-call setup: the ray search
+    makes many small calls), else the program's own call."""
+    from ..field import as_field
+
+    if backend in ("auto", "fast"):
+        try:
+            fn = as_field(prog, pv, backend="fast", check_ranges=False).serial_values()
+        except Exception:  # no Numba, or a program the compiled backend cannot take
+            fn = None
+        if fn is not None:
+            return fn
+    return lambda q: prog(q, pv, backend=backend, check_ranges=False)
 
 
 # ------------------------------------------------------------------ the solve
@@ -282,9 +299,14 @@ def _evaluate(prob, st: State, idx: list[int], terms: _Terms):
     return r, J, used
 
 
-def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-7):
+def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-4, step_tol: float = 1e-5,
+           max_rejects: int = 3):
     """Robust Levenberg-Marquardt over the terms' residuals from ``prob``'s state
-    (updated in place). Returns stats as :mod:`.stages` does."""
+    (updated in place); converged when an accepted step lowers the cost by less than
+    ``tol`` of it or moves less than ``step_tol`` (radians and scene units relative to
+    the model's size), or after ``max_rejects`` rejected steps in a row (the silhouette
+    term's ray minima make the cost slightly rough at the optimum). Returns stats as
+    :mod:`.stages` does."""
     idx = [prob.pnames.index(n) for n in prob.names]
     lo = np.array([prob.prog.params[i].lo for i in idx])
     hi = np.array([prob.prog.params[i].hi for i in idx])
@@ -298,6 +320,7 @@ def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-7):
         A, b = normal_equations(J, w, r)
         D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
         accepted = False
+        rejects = 0
         while nev < max_iter:
             try:
                 dx = -np.linalg.solve(A + lam * np.diag(D), b)
@@ -316,10 +339,14 @@ def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-7):
                 cost = c2
                 lam = max(lam / 3.0, 1e-9)
                 accepted = True
-                converged = rel < tol
+                scale = np.ones(len(dx))
+                if prob.pose:
+                    scale[3:6] = 1.0 / max(prob.size * prob.s, 1e-300)
+                converged = rel < tol or float(np.abs(dx * scale).max()) < step_tol
                 break
             lam *= 4.0
-            if lam > 1e10:
+            rejects += 1
+            if lam > 1e10 or rejects >= max_rejects:
                 converged = True
                 break
         if converged or not accepted:
@@ -345,7 +372,7 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
               max_rays: int | None = 400, occlusion_margin: float | None = None,
               loss: str = "huber", f_scale: float | None = None, max_iter: int = 50,
               multistart: bool = False, seed: int = 0, backend: str = "auto",
-              check_ranges: bool = True) -> FitResult:
+              check_ranges: bool = True, check_visibility: bool = True) -> FitResult:
     """Fit a model to a depth image (SDF-RGBD, paper §4.5; see the module docs).
 
     Args:
@@ -368,6 +395,9 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
         multistart: find the start first with :func:`csdf.fit` ``(multistart=True)`` on
             the back-projected points (large initial errors, a lost track).
         seed: seeds the subsets and the multistart.
+        check_visibility: include the success test's check that the model's surface
+            visible from the camera is explained by the measurements (a ray cast of
+            the fitted model: about 10 ms; the silhouette term checks much the same).
 
     Returns:
         :class:`csdf.FitResult` of the model-to-camera pose; ``success`` is the point
@@ -408,7 +438,7 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
     n_sil = stats["rays_used"]
     r_sil = stats["residuals"][len(prob.points):] / max(float(silhouette_weight), 1e-300)
     res = make_result(prob, stats, time.perf_counter() - t0, "csdf-depth", None,
-                      viewpoint=np.zeros(3))
+                      viewpoint=np.zeros(3) if check_visibility else None)
     sq = _silhouette_quality(r_sil, rays, n_sil, prob.f_scale)
     res.quality.update(sq)
     if sq and not sq["silhouette_rmse_ratio"] <= 2.0:

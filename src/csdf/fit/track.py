@@ -177,6 +177,8 @@ def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=No
     out: list[TrackFrame] = []
     opts = dict(estimate=est, params=params, max_points=max_points, max_rays=max_rays,
                 max_iter=max_iter, f_scale=f_scale, seed=seed, backend=backend)
+    if masks is not None:  # the silhouette term checks what the ray cast would
+        opts["check_visibility"] = False
     opts.update(fit_kwargs)
     from ..field import as_field
 

@@ -34,7 +34,7 @@ from .shapes import __all__ as _shape_names
 from .version import __version__
 
 if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
-    from . import io, zoo
+    from . import io, synth, zoo
     from .field import Field, as_field, glsl_params, shadertoy, to_glsl
     from .fit import FitResult, TrackResult, fit, fit_depth, fit_silhouette, icp, track
     from .lang import dumps, load, loads
@@ -46,12 +46,15 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
     from .scene import Scene, SceneQuery
     from .slicing import save_slice
     from .slicing import slice as slice  # noqa: A004 - public name csdf.slice
+    from .synth import Sequence
 
 #: public name -> (module relative to this package, attribute; ``None``: the module
 #: itself), loaded on first access by :func:`__getattr__`
 _LAZY: dict[str, tuple[str, str | None]] = {
     "io": (".io", None),
     "zoo": (".zoo", None),
+    "synth": (".synth", None),
+    "Sequence": (".synth", "Sequence"),
     "plan": (".plan", None),
     "Field": (".field", "Field"),
     "as_field": (".field", "as_field"),
@@ -137,5 +140,6 @@ __all__ = [
     "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
     "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", "Scene",
-    "SceneQuery", "fit_depth", "fit_silhouette", "track", "TrackResult", *_shape_names,
+    "SceneQuery", "fit_depth", "fit_silhouette", "track", "TrackResult", "synth", "Sequence",
+    *_shape_names,
 ]

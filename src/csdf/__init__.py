@@ -34,7 +34,7 @@ from .shapes import __all__ as _shape_names
 from .version import __version__
 
 if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
-    from . import io, synth, zoo
+    from . import io, metrics, synth, zoo
     from .field import Field, as_field, glsl_params, shadertoy, to_glsl
     from .fit import FitResult, TrackResult, fit, fit_depth, fit_silhouette, icp, track
     from .lang import dumps, load, loads
@@ -54,6 +54,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "io": (".io", None),
     "zoo": (".zoo", None),
     "synth": (".synth", None),
+    "metrics": (".metrics", None),
     "Sequence": (".synth", "Sequence"),
     "plan": (".plan", None),
     "Field": (".field", "Field"),
@@ -141,5 +142,5 @@ __all__ = [
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
     "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", "Scene",
     "SceneQuery", "fit_depth", "fit_silhouette", "track", "TrackResult", "synth", "Sequence",
-    *_shape_names,
+    "metrics", *_shape_names,
 ]

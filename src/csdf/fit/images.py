@@ -44,7 +44,7 @@ import numpy as np
 from ..errors import CsdfError
 from ..pose import Pose
 from .lm import State, normal_equations
-from .problem import jacobian, loss_weights, make_result, prepare
+from .problem import jacobian, loss_weights, make_result, prepare, residuals
 from .result import FitResult
 
 __all__ = ["backproject", "fit_depth", "fit_silhouette", "contour_rays", "ray_minima",
@@ -372,7 +372,8 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
               max_rays: int | None = 400, occlusion_margin: float | None = None,
               loss: str = "huber", f_scale: float | None = None, max_iter: int = 50,
               multistart: bool = False, seed: int = 0, backend: str = "auto",
-              check_ranges: bool = True, check_visibility: bool = True) -> FitResult:
+              check_ranges: bool = True, check_visibility: bool = True,
+              gate: float | None = None) -> FitResult:
     """Fit a model to a depth image (SDF-RGBD, paper §4.5; see the module docs).
 
     Args:
@@ -395,6 +396,11 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
         multistart: find the start first with :func:`csdf.fit` ``(multistart=True)`` on
             the back-projected points (large initial errors, a lost track).
         seed: seeds the subsets and the multistart.
+        gate: without a mask, from a start (``init``, no ``multistart``), only the
+            points within this distance of the model posed at the start count; the
+            others are clutter (another object, a table). Default 10 % of the model's
+            size; 0 keeps every point. (The visibility check is skipped then: the
+            points gated away would look like holes.)
         check_visibility: include the success test's check that the model's surface
             visible from the camera is explained by the measurements (a ray cast of
             the fitted model: about 10 ms; the silhouette term checks much the same).
@@ -416,7 +422,10 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
         raise CsdfError("the depth image has no valid pixels"
                         + (" inside the mask" if m is not None else ""))
     rng = np.random.default_rng(seed)
-    pts = pts[_subsample(len(pts), max_points, rng)]
+    gating = m is None and init is not None and not multistart and gate != 0
+    # (gating keeps a part of the points: draw more first)
+    pts = pts[_subsample(len(pts), None if max_points is None else
+                         (4 * max_points if gating else max_points), rng)]
     if multistart:
         from .api import fit
 
@@ -427,6 +436,17 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
                    check_ranges=check_ranges)
     if prob.loss == "auto":
         prob.loss = "huber"
+    kept = 1.0
+    if gating:  # clutter: only the points near the model at the start
+        g = 0.1 * prob.size * prob.s if gate is None else float(gate)
+        r0 = residuals(prob, prob.R, prob.t, prob.s, prob.values)
+        near = np.flatnonzero(np.abs(r0) <= g)
+        kept = len(near) / len(r0)
+        if len(near) < 10:
+            raise CsdfError(f"no depth points within {g:.4g} of the model at the start "
+                            "(pass a better init, multistart=True or a mask)")
+        near = near[_subsample(len(near), max_points, rng)]
+        prob.points = prob.points[near]
     rays = None
     if silhouette and m is not None:
         # (the camera's own frame: the fit is in camera coordinates)
@@ -438,9 +458,10 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
     n_sil = stats["rays_used"]
     r_sil = stats["residuals"][len(prob.points):] / max(float(silhouette_weight), 1e-300)
     res = make_result(prob, stats, time.perf_counter() - t0, "csdf-depth", None,
-                      viewpoint=np.zeros(3) if check_visibility else None)
+                      viewpoint=np.zeros(3) if check_visibility and not gating else None)
     sq = _silhouette_quality(r_sil, rays, n_sil, prob.f_scale)
     res.quality.update(sq)
+    res.quality["gated"] = kept
     if sq and not sq["silhouette_rmse_ratio"] <= 2.0:
         res.success = False
         res.quality.setdefault("reasons", []).append(

@@ -1,0 +1,116 @@
+"""The model side of the pose errors: the points ``x`` the errors run over (vertices of
+the model's mesh) and the model's diameter (the largest distance between two of them).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import CsdfError
+from ..mesh import mesh
+from .inputs import model_pts
+
+__all__ = ["model_points", "diameter"]
+
+#: rows of the pairwise-distance block in :func:`diameter` (memory: 8 x rows x H bytes)
+_BLOCK = 1024
+
+
+def model_points(shape: Any, n: int | None = None, *, params: dict | None = None,
+                 resolution: int = 64, check_ranges: bool = True) -> np.ndarray:
+    """Vertices of the model's mesh, the ``x`` of MSSD, MSPD, ADD and ADD-S.
+
+    The shape is meshed by dual contouring (:func:`csdf.mesh`, ``method='dc'``: flat
+    faces, sharp edges and corners are kept, and the vertices lie on the surface), at
+    ``resolution`` voxels along the longest side of its bounds.
+
+    Args:
+        shape: a 3D :class:`csdf.Shape`, :class:`csdf.Program` or field.
+        n: keep ``n`` of the vertices by farthest-point sampling, starting from the
+            vertex farthest from their centroid (deterministic; it keeps the extremes
+            that decide a maximum like MSSD); ``None`` keeps all of them.
+        params: parameter values ``{name: value}``.
+        resolution: mesh resolution (voxels along the longest side).
+        check_ranges: refuse a parameter value outside its declared range.
+
+    Returns:
+        ``(N, 3)`` float64 points in the model frame, model units.
+
+    Raises:
+        CsdfError: ``n`` not a positive integer, or what :func:`csdf.mesh` raises.
+    """
+    if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer))
+                          or n < 1):
+        raise CsdfError(f"n must be a positive integer or None, got {n!r}")
+    m = mesh(shape, resolution=resolution, method="dc", params=params, progress=False,
+             check_thin=False, check_ranges=check_ranges)
+    v = np.asarray(m.vertices, dtype=np.float64)
+    if len(v) == 0:
+        raise CsdfError("the model's mesh has no vertices (an empty shape?)")
+    if n is None or n >= len(v):
+        return v
+    return v[_farthest_points(v, int(n))]
+
+
+def _farthest_points(v: np.ndarray, n: int) -> np.ndarray:
+    """Indices ``(n,)`` of a farthest-point subset of ``v`` ``(N, 3)``."""
+    first = int(np.argmax(np.sum((v - v.mean(axis=0)) ** 2, axis=1)))
+    idx = np.empty(n, dtype=np.int64)
+    idx[0] = first
+    d2 = np.sum((v - v[first]) ** 2, axis=1)
+    for i in range(1, n):
+        j = int(np.argmax(d2))
+        idx[i] = j
+        np.minimum(d2, np.sum((v - v[j]) ** 2, axis=1), out=d2)
+    return idx
+
+
+def diameter(points: Any) -> float:
+    """The largest distance between two points (BOP's object diameter), exactly.
+
+    The farthest pair lies on the convex hull, so the maximum runs over the hull's
+    vertices (:class:`scipy.spatial.ConvexHull`; the 2D hull in their plane for flat
+    points, the two extremes for points on a line), in blocks of pairwise distances.
+
+    Args:
+        points: ``(N, 3)`` model points (e.g. :func:`model_points`), model units.
+
+    Returns:
+        The diameter in the points' units (0 for a single point).
+
+    Raises:
+        CsdfError: ``points`` not a finite ``(N, 3)`` array with ``N >= 1``.
+    """
+    p = model_pts(points, "points")
+    h = _hull_vertices(p)
+    best = 0.0
+    for a in range(0, len(h), _BLOCK):
+        blk = h[a:a + _BLOCK]
+        d2 = np.sum((blk[:, None, :] - h[None, a:, :]) ** 2, axis=2)
+        best = max(best, float(d2.max()))
+    return float(np.sqrt(best))
+
+
+def _hull_vertices(p: np.ndarray) -> np.ndarray:
+    """Points of ``p`` ``(N, 3)`` that include the farthest pair: the vertices of the
+    convex hull, or of the 2D hull in the plane of a flat set, or the two extremes of
+    a set on a line."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    c = p - p.mean(axis=0)
+    _, s, vt = np.linalg.svd(c, full_matrices=False)
+    rank = int(np.sum(s > 1e-12 * max(float(s[0]), 1e-300)))
+    if rank == 0:
+        return p[:1]
+    if rank == 1:
+        t = c @ vt[0]
+        return p[[int(np.argmin(t)), int(np.argmax(t))]]
+    if len(p) <= 3:
+        return p
+    dims = 3 if rank == 3 else 2
+    try:
+        return p[ConvexHull(c @ vt[:dims].T).vertices]
+    except QhullError:  # nearly degenerate: the hull of the flat projection
+        return p[ConvexHull(c @ vt[:2].T).vertices]

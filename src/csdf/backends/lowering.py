@@ -112,7 +112,21 @@ class Lowered:
         return repr(sorted(self.prefix_param_deps().items())).encode()
 
     def uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
-        """Uniform row values ``(U,)`` and tangents ``(U, T)`` for this call."""
+        """Uniform row values ``(U,)`` and tangents ``(U, T)`` for this call (and the
+        rows whose tangents are all zero). The last few answers are kept: a fit or a
+        tracker calls with the same parameter values many times, and the prefix is
+        evaluated in Python (copies are returned)."""
+        key = (np.asarray(pvals, dtype=np.float64).tobytes(), np.dtype(dtype).str,
+               bool(spatial), bool(wrt_params))
+        cache = self.__dict__.setdefault("_uniform_cache", {})
+        hit = cache.get(key)
+        if hit is None:
+            if len(cache) >= 16:
+                cache.clear()
+            hit = cache[key] = self._uniform(pvals, dtype, spatial, wrt_params)
+        return hit[0].copy(), hit[1].copy(), hit[2].copy()
+
+    def _uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
         prog = self.prog
         P = self.n_params
         vals, dparams = uniform_prefix(prog, pvals, self.n_prefix)

@@ -15,7 +15,7 @@ from .api import check_fit, fit
 from .icp import icp
 from .images import backproject, fit_depth, fit_silhouette
 from .result import FitResult
-from .track import TrackFrame, TrackResult, track
+from .track import Tracker, TrackFrame, TrackResult, track
 
 __all__ = ["fit", "check_fit", "icp", "FitResult", "fit_depth", "fit_silhouette",
-           "backproject", "track", "TrackResult", "TrackFrame"]
+           "backproject", "track", "Tracker", "TrackResult", "TrackFrame"]

@@ -35,6 +35,7 @@ The ray minimum is found by sampling the ray across the posed model's bounding s
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -84,6 +85,21 @@ def _mask(mask, camera, what: str = "mask") -> np.ndarray:
     return m > 0.5
 
 
+@functools.lru_cache(maxsize=8)
+def _directions_of(fx: float, fy: float, cx: float, cy: float, w: int, h: int) -> np.ndarray:
+    from ..render.camera import Camera
+
+    d = Camera(fx, fy, cx, cy, w, h).pixel_directions()
+    d.setflags(write=False)
+    return d
+
+
+def _directions(cam) -> np.ndarray:
+    """``(H*W, 3)`` the camera's unit pixel rays in its own frame (cached per
+    intrinsics: a video asks for the same ones every frame)."""
+    return _directions_of(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
+
+
 def backproject(depth, camera, mask=None) -> tuple[np.ndarray, np.ndarray]:
     """The valid pixels of a depth image as camera-frame points.
 
@@ -102,7 +118,7 @@ def backproject(depth, camera, mask=None) -> tuple[np.ndarray, np.ndarray]:
     if mask is not None:
         ok &= _mask(mask, cam)
     idx = np.flatnonzero(ok.ravel())
-    d = cam.pixel_directions()[idx]
+    d = _directions(cam)[idx]
     pts = d * (z.ravel()[idx] / d[:, 2])[:, None]
     return pts, idx
 
@@ -137,16 +153,27 @@ class Rays:
         return len(self.dirs)
 
 
-def _signed_distance(mask: np.ndarray) -> np.ndarray:
+def _signed_distance(mask: np.ndarray, reach: float = np.inf) -> np.ndarray:
     """Signed distance in pixels from each pixel centre to the mask's boundary (which
-    runs between pixels): positive outside, negative inside."""
+    runs between pixels): positive outside, negative inside. With ``reach``, only
+    values within ``reach`` are exact (computed on the mask's box grown by it; farther
+    pixels get +-inf)."""
     from scipy import ndimage
 
     if mask.all() or not mask.any():
         return np.full(mask.shape, -np.inf if mask.all() else np.inf)
-    out = ndimage.distance_transform_edt(~mask) - 0.5
-    inn = ndimage.distance_transform_edt(mask) - 0.5
-    return np.where(mask, -inn, out)
+    out = np.where(mask, -np.inf, np.inf)
+    v, u = np.nonzero(mask)
+    g = int(math.ceil(reach)) + 2 if math.isfinite(reach) else max(mask.shape)
+    r0, r1 = max(v.min() - g, 0), min(v.max() + g + 1, mask.shape[0])
+    c0, c1 = max(u.min() - g, 0), min(u.max() + g + 1, mask.shape[1])
+    m = mask[r0:r1, c0:c1]
+    if m.all():  # the box is the mask: the boundary is the image's edge
+        return out
+    outside = ndimage.distance_transform_edt(~m) - 0.5
+    inside = ndimage.distance_transform_edt(m) - 0.5 if (~m).any() else np.full(m.shape, np.inf)
+    out[r0:r1, c0:c1] = np.where(m, -inside, outside)
+    return out
 
 
 def contour_rays(mask, camera, band: float = 4.0, max_rays: int | None = 400,
@@ -155,10 +182,10 @@ def contour_rays(mask, camera, band: float = 4.0, max_rays: int | None = 400,
     in the world frame of ``camera``, at most ``max_rays`` of them (a seeded subset)."""
     cam = _camera(camera)
     m = _mask(mask, cam)
-    e = _signed_distance(m)
+    e = _signed_distance(m, band)
     sel = np.flatnonzero((np.abs(e) <= band).ravel())
     sel = sel[_subsample(len(sel), max_rays, np.random.default_rng(seed))]
-    dc = cam.pixel_directions()[sel]
+    dc = _directions(cam)[sel]
     fpx = 0.5 * (cam.fx + cam.fy)
     z = np.full(len(sel), np.inf)
     if depth is not None:

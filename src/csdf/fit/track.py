@@ -34,7 +34,7 @@ from ..pose import Pose
 from .images import fit_depth
 from .result import FitResult
 
-__all__ = ["track", "TrackFrame", "TrackResult"]
+__all__ = ["track", "Tracker", "TrackFrame", "TrackResult"]
 
 
 @dataclass
@@ -141,11 +141,97 @@ def _reinitialise(shape, depth, camera, mask, centre: np.ndarray, opts: dict) ->
     return best
 
 
+class Tracker:
+    """Frame-by-frame tracking (what :func:`track` runs over a sequence): ``update``
+    fits the next frame from the constant-velocity prediction, ``reset`` restarts from
+    a given pose (a re-detection, or a benchmark's reset to the truth after a failure).
+
+    Args: as :func:`track` (``init``: the first frame's model-to-camera pose).
+    """
+
+    def __init__(self, shape, camera, init, estimate=("pose",), params=None, *,
+                 masks: bool = False, reinit: bool = True,
+                 max_points: int | None = 600, max_rays: int | None = 200,
+                 max_iter: int = 20, f_scale: float | None = None, seed: int = 0,
+                 backend: str = "auto", **fit_kwargs):
+        from ..field import as_field
+
+        self.shape, self.camera = shape, camera
+        est = tuple(e.strip() for e in estimate.split(",")) if isinstance(estimate, str) \
+            else tuple(estimate)
+        self.track_params = "params" in est
+        self.reinit = bool(reinit)
+        self.opts = dict(estimate=est, params=params, max_points=max_points,
+                         max_rays=max_rays, max_iter=max_iter, f_scale=f_scale, seed=seed,
+                         backend=backend)
+        if masks:  # the silhouette term checks what the ray cast would
+            self.opts["check_visibility"] = False
+        self.opts.update(fit_kwargs)
+        box = as_field(shape, backend=backend, what="track").model_bounds
+        self.centre = 0.5 * (box[0] + box[1])
+        self.frames = 0
+        self.mean: dict[str, float] = {}
+        self.n_mean = 0
+        self.reset(init)
+
+    def reset(self, pose) -> None:
+        """Restart from ``pose`` (as ``init``): the motion history is forgotten; the
+        parameter estimate is kept (a :class:`FitResult`'s parameters replace it)."""
+        self.pose, pvals = _as_pose(pose)
+        if pvals:
+            self.mean, self.n_mean = dict(pvals), 0
+        self.prev: Pose | None = None
+
+    def predict(self) -> Pose:
+        """The next frame's start: the last motion applied once more."""
+        if self.prev is None:
+            return self.pose
+        return Pose.nearest(self.pose.matrix @ np.linalg.inv(self.prev.matrix)
+                            @ self.pose.matrix, "the prediction")
+
+    def update(self, depth, mask=None) -> TrackFrame:
+        """Fit the next frame (depth ``(H, W)``, optional mask) and return it."""
+        t0 = time.perf_counter()
+        guess = self.predict()
+        start = {"rotation": guess.rotation, "translation": guess.translation,
+                 "scale": guess.scale, "params": dict(self.mean)}
+        shape, camera, opts = self.shape, self.camera, self.opts
+        res = fit_depth(shape, depth, camera, init=start, mask=mask, **opts)
+        lost = not res.success
+        again = False
+        self.prev = self.pose
+        if lost and self.reinit:
+            alt = _reinitialise(shape, depth, camera, mask, self.centre, opts)
+            again = True
+            if alt.success or alt.cost < res.cost:
+                res = alt
+                self.prev = None  # the motion history restarts
+        self.pose = Pose.nearest(res.transform, "the fitted pose")  # (re-orthonormalised)
+        if self.track_params and res.success:
+            self.n_mean += 1
+            for name, v in res.params.items():
+                old = self.mean.get(name, v)
+                self.mean[name] = old + (v - old) / self.n_mean
+        reported = dict(res.params)
+        if self.track_params and self.n_mean:
+            reported.update(self.mean)
+        q = res.quality or {}
+        frame = TrackFrame(
+            index=self.frames, pose=self.pose, params=reported, success=bool(res.success),
+            lost=lost, reinitialised=again, rmse=float(res.rmse),
+            inlier_fraction=float(res.inlier_fraction),
+            silhouette_rmse=float(q.get("silhouette_rmse", math.nan)),
+            seconds=time.perf_counter() - t0, result=res)
+        self.frames += 1
+        return frame
+
+
 def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=None, *,
           reinit: bool = True, max_points: int | None = 600, max_rays: int | None = 200,
           max_iter: int = 20, f_scale: float | None = None, seed: int = 0,
           backend: str = "auto", **fit_kwargs) -> TrackResult:
-    """Track a model through depth frames (see the module docs).
+    """Track a model through depth frames (see the module docs; :class:`Tracker` does it
+    frame by frame).
 
     Args:
         shape: a 3D :class:`csdf.Shape` or :class:`csdf.Program`.
@@ -156,7 +242,8 @@ def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=No
             transform or a :class:`csdf.FitResult`, whose parameters start the
             estimate).
         masks: the object's visible pixels per frame (optional; adds the silhouette
-            term and restricts the depth term).
+            term and restricts the depth term; without masks, the depth points far
+            from the predicted model are left out as clutter).
         estimate, params: as :func:`csdf.fit_depth`; with ``'params'`` the parameters
             are tracked as a running mean.
         reinit: re-initialise a lost frame with a multistart fit.
@@ -167,55 +254,8 @@ def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=No
     Returns:
         :class:`TrackResult`, one :class:`TrackFrame` per frame.
     """
-    pose, pvals = _as_pose(init)
-    est = tuple(e.strip() for e in estimate.split(",")) if isinstance(estimate, str) \
-        else tuple(estimate)
-    track_params = "params" in est
-    prev: Pose | None = None
-    mean: dict[str, float] = dict(pvals)
-    n_mean = 0
-    out: list[TrackFrame] = []
-    opts = dict(estimate=est, params=params, max_points=max_points, max_rays=max_rays,
-                max_iter=max_iter, f_scale=f_scale, seed=seed, backend=backend)
-    if masks is not None:  # the silhouette term checks what the ray cast would
-        opts["check_visibility"] = False
-    opts.update(fit_kwargs)
-    from ..field import as_field
-
-    box = as_field(shape, backend=backend, what="track").model_bounds
-    centre = 0.5 * (box[0] + box[1])
-    for k, (depth, mask) in enumerate(_frames(frames, masks)):
-        t0 = time.perf_counter()
-        guess = pose if prev is None else Pose.nearest(
-            pose.matrix @ np.linalg.inv(prev.matrix) @ pose.matrix, "the prediction")
-        start = {"rotation": guess.rotation, "translation": guess.translation,
-                 "scale": guess.scale, "params": dict(mean)}
-        res = fit_depth(shape, depth, camera, init=start, mask=mask, **opts)
-        lost = not res.success
-        again = False
-        if lost and reinit:
-            alt = _reinitialise(shape, depth, camera, mask, centre, opts)
-            again = True
-            if alt.success or alt.cost < res.cost:
-                res = alt
-                prev = None  # the motion history restarts
-            else:
-                prev = pose
-        else:
-            prev = pose
-        pose = Pose.nearest(res.transform, "the fitted pose")  # (re-orthonormalised)
-        if track_params and res.success:
-            n_mean += 1
-            for name, v in res.params.items():
-                mean[name] = mean.get(name, v) + (v - mean.get(name, v)) / n_mean
-        reported = dict(res.params)
-        if track_params and n_mean:
-            reported.update(mean)
-        q = res.quality or {}
-        out.append(TrackFrame(
-            index=k, pose=pose, params=reported, success=bool(res.success), lost=lost,
-            reinitialised=again, rmse=float(res.rmse),
-            inlier_fraction=float(res.inlier_fraction),
-            silhouette_rmse=float(q.get("silhouette_rmse", math.nan)),
-            seconds=time.perf_counter() - t0, result=res))
-    return TrackResult(out)
+    tracker = Tracker(shape, camera, init, estimate, params, masks=masks is not None,
+                      reinit=reinit, max_points=max_points, max_rays=max_rays,
+                      max_iter=max_iter, f_scale=f_scale, seed=seed, backend=backend,
+                      **fit_kwargs)
+    return TrackResult([tracker.update(depth, mask) for depth, mask in _frames(frames, masks)])

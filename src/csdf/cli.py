@@ -652,6 +652,248 @@ def plan(
     _run(go)
 
 
+def _model_or_zoo(path: Path):
+    """A model file, or a zoo model's name (no suffix, no such file)."""
+    if not path.suffix and not path.exists():
+        from . import zoo
+
+        if str(path) in zoo.names():
+            return zoo.load(str(path))
+        raise CsdfError(f"{path}: no such file, and not a zoo model (csdf zoo list)")
+    return _load(path)
+
+
+def _camera_file(path: Path, size: tuple[int, int] | None):
+    """A camera from JSON: ``{"fx", "fy", "cx", "cy", "width", "height"}`` or
+    ``{"cam_K": [9 numbers], "width", "height"}`` (size default: the frames')."""
+    import json
+
+    from .render import Camera
+
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise CsdfError(f"cannot read {path}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise CsdfError(f"{path}: line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    if not isinstance(doc, dict):
+        raise CsdfError(f"{path}: a camera must be a JSON object")
+    try:
+        if "cam_K" in doc:
+            K = [float(v) for v in doc["cam_K"]]
+            if len(K) != 9:
+                raise ValueError
+            fx, fy, cx, cy = K[0], K[4], K[2], K[5]
+        else:
+            fx, fy, cx, cy = (float(doc[k]) for k in ("fx", "fy", "cx", "cy"))
+        w = int(doc.get("width", size[0] if size else 0))
+        h = int(doc.get("height", size[1] if size else 0))
+    except (KeyError, TypeError, ValueError):
+        raise CsdfError(f"{path}: a camera needs fx, fy, cx, cy (or cam_K, 9 numbers) and "
+                        "width, height") from None
+    return Camera(fx, fy, cx, cy, w, h)
+
+
+def _bop_pose(entry: dict, where: str, mm_per_unit: float):
+    import numpy as np
+
+    from .pose import Pose
+
+    try:
+        R = np.asarray([float(v) for v in entry["cam_R_m2c"]]).reshape(3, 3)
+        t = np.asarray([float(v) for v in entry["cam_t_m2c"]]) / mm_per_unit
+        if t.shape != (3,):
+            raise ValueError
+    except (KeyError, TypeError, ValueError):
+        raise CsdfError(f"{where}: needs cam_R_m2c (9 numbers) and cam_t_m2c (3, mm)") \
+            from None
+    return Pose.nearest(np.block([[R, t[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]),
+                        where)
+
+
+@app.command()
+def track(
+    model: Path = typer.Argument(..., help="A .csdf model (or program), or a zoo name."),
+    frames: Path = typer.Argument(..., help="A BOP-layout scene folder: scene_camera.json, "
+                                  "depth/*.png, optional mask_visib/ (csdf.io.write_bop)."),
+    output: Path = typer.Option(..., "-o", "--output", help="The poses: .json"),
+    camera: Path | None = typer.Option(None, "--camera", help="Intrinsics (JSON: fx, fy, "
+                                       "cx, cy or cam_K); default scene_camera.json's."),
+    init: Path | None = typer.Option(None, "--init", help="The first frame's pose: JSON "
+                                     "with cam_R_m2c and cam_t_m2c (mm), or a BOP "
+                                     "scene_gt.json (its first image). Default: a search "
+                                     "over rotations (multistart) on the first frame."),
+    masks: bool = typer.Option(True, "--masks/--no-masks", help="Use mask_visib/ (the "
+                               "silhouette term) when the folder has it."),
+    estimate: str = typer.Option("pose", "--estimate", help="pose or pose,params"),
+    mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", help="Millimetres per "
+                                      "model unit (1000: a model in metres)."),
+):
+    """Track a model through depth frames (csdf.track) and write each frame's
+    model-to-camera pose (BOP conventions: cam_R_m2c row-major, cam_t_m2c in mm)."""
+
+    def go():
+        import json
+
+        import numpy as np
+
+        from .fit import track as track_fn
+        from .io import atomic_path
+        from .io.bop import read_frames
+
+        if output.suffix.lower() != ".json":
+            raise CsdfError(f"{output}: the output must end in .json")
+        m = _model_or_zoo(model)
+        depth, mk, cam, ids = read_frames(frames, mm_per_unit=mm_per_unit)
+        if camera is not None:
+            cam = _camera_file(camera, (cam.width, cam.height))
+            if (cam.width, cam.height) != (depth.shape[2], depth.shape[1]):
+                raise CsdfError(f"{camera}: {cam.width}x{cam.height} pixels, but the "
+                                f"frames are {depth.shape[2]}x{depth.shape[1]}")
+        if init is None:
+            from .fit import fit_depth
+
+            first = fit_depth(m, depth[0], cam, mask=None if mk is None or not masks
+                              else mk[0], multistart=True)
+            start = first
+        else:
+            try:
+                doc = json.loads(init.read_text(encoding="utf-8"))
+            except (OSError, json.JSONDecodeError) as exc:
+                raise CsdfError(f"{init}: not readable JSON ({exc})") from None
+            if isinstance(doc, dict) and "cam_R_m2c" not in doc and doc:
+                key = sorted(doc, key=lambda k: int(k) if str(k).isdigit() else 0)[0]
+                entry = doc[key][0] if isinstance(doc[key], list) and doc[key] else doc[key]
+                where = f"{init}: image {key!r}"
+            else:
+                entry, where = doc, str(init)
+            if not isinstance(entry, dict):
+                raise CsdfError(f"{where}: a pose must be a JSON object")
+            start = _bop_pose(entry, where, mm_per_unit)
+        run = track_fn(m, list(depth), cam, start,
+                       masks=None if mk is None or not masks else list(mk),
+                       estimate=estimate)
+        doc = {"model": str(model), "frames": []}
+        for k, fr in zip(ids, run.frames):
+            doc["frames"].append({
+                "image_id": k, "cam_R_m2c": fr.pose.rotation.ravel().tolist(),
+                "cam_t_m2c": (fr.pose.translation * mm_per_unit).tolist(),
+                "success": fr.success, "lost": fr.lost,
+                "reinitialised": fr.reinitialised, "rmse": fr.rmse,
+                "params": fr.params, "seconds": fr.seconds})
+        with atomic_path(output) as tmp:
+            tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        ok = run.success
+        out.print(f"{output}: {len(run)} frames, {ok.mean():.0%} explained, "
+                  f"{sum(f.lost for f in run.frames)} lost, median "
+                  f"{np.median(run.seconds) * 1e3:.1f} ms a frame", soft_wrap=True)
+
+    _run(go)
+
+
+@app.command()
+def metrics(
+    model: Path = typer.Argument(..., help="A .csdf model (or program), or a zoo name."),
+    truth: Path = typer.Argument(..., help="A BOP-layout scene folder with scene_gt.json "
+                                 "(and depth/ for VSD)."),
+    estimates: Path = typer.Argument(..., help="Poses: csdf track's JSON, or a BOP "
+                                     "scene_gt.json of estimates."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="Also write the "
+                                       "errors and recalls as JSON."),
+    mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", help="Millimetres per "
+                                      "model unit (1000: a model in metres)."),
+    vsd: bool = typer.Option(True, "--vsd/--no-vsd", help="Compute VSD (renders the model "
+                             "twice per image)."),
+):
+    """Score pose estimates against ground truth with the BOP 2019 metrics (VSD, MSSD,
+    MSPD and their average recalls) and ADD-S (csdf.metrics)."""
+
+    def go():
+        import json
+
+        import numpy as np
+
+        from . import metrics as M
+        from .io import atomic_path
+        from .io.bop import read_bop
+
+        m = _model_or_zoo(model)
+        seq = read_bop(truth, mm_per_unit=mm_per_unit)
+        try:
+            doc = json.loads(estimates.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise CsdfError(f"{estimates}: not readable JSON ({exc})") from None
+        if isinstance(doc, dict) and isinstance(doc.get("frames"), list):
+            est = {int(f["image_id"]): _bop_pose(f, f"{estimates}: image {f.get('image_id')}",
+                                                 mm_per_unit)
+                   for f in doc["frames"] if isinstance(f, dict) and "image_id" in f}
+        elif isinstance(doc, dict):
+            est = {}
+            for key, entries in doc.items():
+                if not str(key).isdigit():
+                    raise CsdfError(f"{estimates}: key {key!r} is not an image id; expected "
+                                    "csdf track's JSON or a scene_gt.json (image id -> "
+                                    "[{cam_R_m2c, cam_t_m2c}])")
+                e = entries[0] if isinstance(entries, list) and entries else entries
+                if not isinstance(e, dict):
+                    raise CsdfError(f"{estimates}: image {key!r}: expected an object with "
+                                    "cam_R_m2c and cam_t_m2c")
+                est[int(key)] = _bop_pose(e, f"{estimates}: image {key!r}", mm_per_unit)
+        else:
+            raise CsdfError(f"{estimates}: expected csdf track's JSON or a scene_gt.json")
+        gt_ids = sorted(json.loads((truth / "scene_gt.json").read_text()), key=int)
+        pts = M.model_points(m, 2000)
+        diam = M.diameter(pts)
+        try:
+            syms = M.symmetries(m)
+        except CsdfError:  # a sphere-like model: no discrete set
+            syms = None
+        rows = []
+        for k, key in enumerate(gt_ids):
+            gt = seq.poses[k]
+            e = est.get(int(key))
+            if e is None:
+                rows.append({"image_id": int(key), "missing": True})
+                continue
+            row = {"image_id": int(key),
+                   "mssd": M.mssd(pts, e, gt, syms), "mspd": M.mspd(pts, e, gt, seq.camera,
+                                                                    syms),
+                   "adds": M.adds(pts, e, gt)}
+            if vsd:
+                row["vsd"] = M.vsd(m, e, gt, seq.depth[k], seq.camera,
+                                   delta=15.0 / mm_per_unit, diameter=diam).tolist()
+            rows.append(row)
+        have = [r for r in rows if not r.get("missing")]
+        inf = float("inf")
+        get = {name: np.array([r.get(name, inf) if not r.get("missing") else inf
+                               for r in rows]) for name in ("mssd", "mspd", "adds")}
+        visib = seq.visib_fract if np.isfinite(seq.visib_fract).all() else None
+        summary = {
+            "images": len(rows), "estimated": len(have), "diameter": diam,
+            "AR_MSSD": M.average_recall(get["mssd"], "mssd", diameter=diam,
+                                        visib_fract=visib),
+            "AR_MSPD": M.average_recall(get["mspd"], "mspd", image_width=seq.camera.width,
+                                        visib_fract=visib),
+            "ADD-S AUC (10 % of diameter)": M.auc(get["adds"], 0.1, scale=diam,
+                                                  visib_fract=visib)}
+        if vsd:
+            ev = np.array([r["vsd"] if not r.get("missing") else [inf] * len(M.VSD_TAUS)
+                           for r in rows])
+            summary["AR_VSD"] = M.average_recall(ev, "vsd", visib_fract=visib)
+            summary["AR"] = (summary["AR_VSD"] + summary["AR_MSSD"]
+                             + summary["AR_MSPD"]) / 3
+        for name, v in summary.items():
+            out.print(f"{name}: {v:.4g}" if isinstance(v, float) else f"{name}: {v}",
+                      soft_wrap=True)
+        if output is not None:
+            with atomic_path(output) as tmp:
+                tmp.write_text(json.dumps({"summary": summary, "images": rows}, indent=1)
+                               + "\n", encoding="utf-8")
+            out.print(f"{output}: errors and recalls", soft_wrap=True)
+
+    _run(go)
+
+
 def _size(text: str) -> tuple[int, int]:
     w, sep, h = text.lower().partition("x")
     try:

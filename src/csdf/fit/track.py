@@ -8,9 +8,10 @@ object, and re-initialises.
 * **Lost-track detector.** A frame whose fit fails :attr:`csdf.FitResult.success` (too
   few depth points within ``3 f_scale`` of the model, their RMS beyond ``1.5 f_scale``,
   the visible model surface unexplained by the measurements, or, with masks, a
-  silhouette residual beyond ``2 f_scale``) is *lost*. With ``reinit`` it is fitted
-  again from scratch (``multistart``: a search over rotations on the frame's points) and
-  the better of the two fits is kept; the motion history restarts there. The
+  silhouette residual over :data:`csdf.fit.images.SILHOUETTE_LIMIT`) is *lost*. With
+  ``reinit`` it is fitted again from scratch (``multistart``: a search over rotations
+  on the frame's points) and the better of the two fits is kept; the motion history
+  restarts there. The
   re-initialisation also tries the multistart pose turned half a turn about each of
   the model's axes (a search on depth points alone confuses them; the silhouette
   tells them apart).

@@ -9,11 +9,11 @@ layout, written and read).
 """
 
 from .atomic import atomic_path
-from .bop import DepthClipWarning, read_bop, write_bop
+from .bop import DepthClipWarning, read_bop, read_frames, write_bop
 from .mesh import MESH_FORMATS, write_mesh
 from .points import PointCloud, read_point_cloud, read_point_properties, read_points, write_points
 from .vm import dumps_vm, load_vm, loads_vm, save_vm
 
 __all__ = ["atomic_path", "write_mesh", "MESH_FORMATS", "read_points", "write_points",
            "read_point_properties", "read_point_cloud", "PointCloud", "load_vm", "loads_vm",
-           "save_vm", "dumps_vm", "write_bop", "read_bop", "DepthClipWarning"]
+           "save_vm", "dumps_vm", "write_bop", "read_bop", "read_frames", "DepthClipWarning"]

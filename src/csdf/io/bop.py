@@ -42,7 +42,8 @@ from ..pose import Pose
 from ..synth import MAX_SEQUENCE_PIXELS, Sequence
 from .atomic import atomic_path
 
-__all__ = ["write_bop", "read_bop", "DepthClipWarning", "DEPTH_SCALE", "MAX_DEPTH_VALUE"]
+__all__ = ["write_bop", "read_bop", "read_frames", "DepthClipWarning", "DEPTH_SCALE",
+           "MAX_DEPTH_VALUE"]
 
 #: default ``depth_scale``: stored depth in tenths of a millimetre
 DEPTH_SCALE = 0.1
@@ -359,6 +360,32 @@ def _pick(gt: dict, path: Path, ids: list[str], obj_id: int | None) -> tuple[int
     return obj_id, index
 
 
+def _intrinsics(cams: dict, cam_path: Path, ids: list[str]) -> tuple[np.ndarray, list[float]]:
+    """The one ``cam_K`` (3, 3) of images ``ids`` in ``scene_camera.json`` and each
+    image's ``depth_scale``."""
+    K0 = None
+    scales = []
+    for key in ids:
+        K = _numbers(_entry(cams, cam_path, key, "cam_K"), 9,
+                     f"{cam_path}: image {key!r}: 'cam_K'").reshape(3, 3)
+        if K0 is None:
+            if (K[0, 1] != 0 or K[1, 0] != 0 or np.any(K[2] != [0.0, 0.0, 1.0])
+                    or K[0, 0] <= 0 or K[1, 1] <= 0):
+                raise CsdfError(f"{cam_path}: image {key!r}: 'cam_K' must be "
+                                "[[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+            K0 = K
+        elif not np.allclose(K, K0, rtol=1e-9, atol=0.0):
+            raise CsdfError(f"{cam_path}: image {key!r}: 'cam_K' differs from image "
+                            f"{ids[0]!r}'s; a sequence has one camera")
+        v = _entry(cams, cam_path, key, "depth_scale")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) \
+                or not (math.isfinite(v) and v > 0):
+            raise CsdfError(f"{cam_path}: image {key!r}: 'depth_scale' must be a "
+                            f"positive number, got {json.dumps(v)}")
+        scales.append(float(v))
+    return K0, scales
+
+
 def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
              mm_per_unit: float = 1000.0) -> Sequence:
     """Read a BOP scene folder (as :func:`write_bop` writes, or one of the BOP
@@ -400,26 +427,7 @@ def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
             raise CsdfError(f"{cam_path}: no entry for image {key!r} (listed in "
                             f"{gt_path.name})")
 
-    K0 = None
-    scales = []
-    for key in ids:
-        K = _numbers(_entry(cams, cam_path, key, "cam_K"), 9,
-                     f"{cam_path}: image {key!r}: 'cam_K'").reshape(3, 3)
-        if K0 is None:
-            if (K[0, 1] != 0 or K[1, 0] != 0 or np.any(K[2] != [0.0, 0.0, 1.0])
-                    or K[0, 0] <= 0 or K[1, 1] <= 0):
-                raise CsdfError(f"{cam_path}: image {key!r}: 'cam_K' must be "
-                                "[[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
-            K0 = K
-        elif not np.allclose(K, K0, rtol=1e-9, atol=0.0):
-            raise CsdfError(f"{cam_path}: image {key!r}: 'cam_K' differs from image "
-                            f"{ids[0]!r}'s; a sequence has one camera")
-        v = _entry(cams, cam_path, key, "depth_scale")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) \
-                or not (math.isfinite(v) and v > 0):
-            raise CsdfError(f"{cam_path}: image {key!r}: 'depth_scale' must be a "
-                            f"positive number, got {json.dumps(v)}")
-        scales.append(float(v))
+    K0, scales = _intrinsics(cams, cam_path, ids)
 
     poses = []
     for key, g in zip(ids, index):
@@ -484,3 +492,47 @@ def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
     camera = Camera(K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2], w, h)
     return Sequence(depth=depth, masks=masks, poses=poses, camera=camera,
                     occluder_masks=occ, visib_fract=visib, silhouettes=sil)
+
+
+def read_frames(folder: str | os.PathLike, *, mm_per_unit: float = 1000.0
+                ) -> tuple[np.ndarray, np.ndarray | None, Any, list[int]]:
+    """The depth frames of a BOP-layout folder without ground truth (what a tracker
+    reads): ``scene_camera.json`` and ``depth/``, with ``mask_visib/`` masks of the
+    first object where that folder exists.
+
+    Returns:
+        ``(depth (N, H, W) model units, 0 = missing; masks (N, H, W) bool or None;
+        camera (csdf.Camera); image ids)``, in increasing id order.
+
+    Raises:
+        CsdfError: as :func:`read_bop`, naming the file.
+    """
+    from ..render.camera import Camera, check_resolution
+
+    root = Path(folder)
+    if not root.is_dir():
+        raise CsdfError(f"BOP scene folder {root} does not exist or is not a folder")
+    mm_per_unit = _positive(mm_per_unit, "mm_per_unit")
+    cam_path = root / "scene_camera.json"
+    cams = _load_json(cam_path)
+    ids = _image_ids(cams, cam_path)
+    K0, scales = _intrinsics(cams, cam_path, ids)
+    first = _read_png(root / "depth" / f"{int(ids[0]):06d}.png", "depth", None)
+    h, w = first.shape
+    check_resolution(w, h)
+    if len(ids) * w * h > MAX_SEQUENCE_PIXELS:
+        raise CsdfError(f"{root}: {len(ids)} images of {w}x{h} pixels are over the limit "
+                        f"of {MAX_SEQUENCE_PIXELS:,} pixels in all")
+    depth = np.empty((len(ids), h, w))
+    has_masks = (root / "mask_visib").is_dir()
+    masks = np.empty((len(ids), h, w), dtype=bool) if has_masks else None
+    for k, key in enumerate(ids):
+        im = int(key)
+        raw = first if k == 0 else _read_png(root / "depth" / f"{im:06d}.png", "depth",
+                                             (w, h))
+        depth[k] = raw * (scales[k] / mm_per_unit)
+        if masks is not None:
+            masks[k] = _read_png(root / "mask_visib" / f"{im:06d}_000000.png", "mask",
+                                 (w, h))
+    camera = Camera(K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2], w, h)
+    return depth, masks, camera, [int(i) for i in ids]

@@ -1,0 +1,68 @@
+"""``csdf track`` and ``csdf metrics`` (issue 18) on a small BOP-layout sequence written
+by ``csdf.io.write_bop``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import csdf
+from csdf.cli import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bop")
+    seq = csdf.synth.sequence(csdf.zoo.load("cross_shaft"), n_frames=6, seed=3,
+                              width=120, height=90)
+    csdf.io.write_bop(seq, root / "scene")
+    gt = json.loads((root / "scene" / "scene_gt.json").read_text())
+    (root / "init.json").write_text(json.dumps(gt["0"][0]))
+    return root, seq
+
+
+def test_track_then_metrics(scene):
+    root, seq = scene
+    poses = root / "poses.json"
+    r = runner.invoke(app, ["track", "cross_shaft", str(root / "scene"), "-o", str(poses),
+                            "--init", str(root / "init.json")])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(poses.read_text())
+    assert [f["image_id"] for f in doc["frames"]] == list(range(6))
+    for f, gt in zip(doc["frames"], seq.poses):
+        t = np.array(f["cam_t_m2c"]) / 1000.0
+        assert np.linalg.norm(t - gt.translation) < 0.005  # 4 % of the 12 cm part
+        assert f["success"]
+    out = root / "m.json"
+    r = runner.invoke(app, ["metrics", "cross_shaft", str(root / "scene"), str(poses),
+                            "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    summary = json.loads(out.read_text())["summary"]
+    assert summary["AR_MSSD"] > 0.9 and summary["AR_VSD"] > 0.8 and 0 <= summary["AR"] <= 1
+    # the ground truth scored against itself is perfect
+    r = runner.invoke(app, ["metrics", "cross_shaft", str(root / "scene"),
+                            str(root / "scene" / "scene_gt.json"), "--no-vsd"])
+    assert r.exit_code == 0 and "AR_MSSD: 1" in r.output and "AR_MSPD: 1" in r.output
+
+
+def test_bad_inputs_are_named(scene, tmp_path):
+    root, _ = scene
+    r = runner.invoke(app, ["track", "teapot", str(root / "scene"), "-o",
+                            str(tmp_path / "p.json")])
+    assert r.exit_code != 0 and "not a zoo model" in r.output
+    r = runner.invoke(app, ["track", "cross_shaft", str(tmp_path / "none"), "-o",
+                            str(tmp_path / "p.json")])
+    assert r.exit_code != 0 and "does not exist" in r.output
+    bad = tmp_path / "init.json"
+    bad.write_text('{"cam_R_m2c": [1, 0, 0]}')
+    r = runner.invoke(app, ["track", "cross_shaft", str(root / "scene"), "-o",
+                            str(tmp_path / "p.json"), "--init", str(bad)])
+    assert r.exit_code != 0 and "cam_R_m2c (9 numbers) and cam_t_m2c" in r.output
+    assert not (tmp_path / "p.json").exists()
+    r = runner.invoke(app, ["metrics", "cross_shaft", str(root / "scene"), str(bad)])
+    assert r.exit_code != 0 and "cam_t_m2c" in r.output

@@ -63,7 +63,7 @@ def test_the_ray_minimum_of_a_sphere_is_its_distance_from_the_centre_less_the_ra
                 np.zeros(50, bool), np.full(50, np.inf))
     X, m = ray_minima(prog, {}, "numpy", np.eye(3), C, 1.0, np.zeros(3), 0.2, rays)
     delta = np.linalg.norm(np.cross(d, C), axis=1)  # the rays' distances from the centre
-    np.testing.assert_allclose(m, delta - 0.2, atol=2e-5)  # (golden section, 6 steps)
+    np.testing.assert_allclose(m, delta - 0.2, atol=2e-5)  # (3 refinement rounds)
     np.testing.assert_allclose(np.linalg.norm(X - C, axis=1), np.maximum(delta, 0), atol=2e-3)
 
 

@@ -29,8 +29,8 @@ Residuals (all in scene units, metres for csdf's models):
   background, and is left out.
 
 The ray minimum is found by sampling the ray across the posed model's bounding sphere
-(``RAY_SAMPLES`` points) and a golden-section refinement around the smallest sample
-(``GOLDEN_STEPS``).
+(``RAY_SAMPLES`` points), then ``REFINE_ROUNDS`` rounds of ``REFINE_POINTS`` samples
+in the bracket around the smallest so far (one evaluation call a round).
 """
 
 from __future__ import annotations
@@ -49,16 +49,16 @@ from .problem import jacobian, loss_weights, make_result, prepare, residuals
 from .result import FitResult
 
 __all__ = ["backproject", "fit_depth", "fit_silhouette", "contour_rays", "ray_minima",
-           "RAY_SAMPLES", "GOLDEN_STEPS", "SILHOUETTE_LIMIT"]
+           "RAY_SAMPLES", "REFINE_ROUNDS", "REFINE_POINTS", "SILHOUETTE_LIMIT"]
 
 #: samples along a silhouette ray across the model's bounding sphere
-RAY_SAMPLES = 24
-#: golden-section steps refining the smallest sample
-GOLDEN_STEPS = 6
+RAY_SAMPLES = 16
+#: refinement rounds around the smallest sample, and the points each samples
+REFINE_ROUNDS = 3
+REFINE_POINTS = 4
 #: the silhouette residual's RMS passes up to the larger of these times f_scale and
 #: times a pixel's footprint at the object's depth
 SILHOUETTE_LIMIT = (2.0, 1.25)
-_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 # ------------------------------------------------------------------ image inputs
@@ -226,28 +226,24 @@ def ray_minima(prog, pv: dict, backend: str, R: np.ndarray, t: np.ndarray, s: fl
     v = values(u)
     k = np.argmin(v, axis=1)
     rows = np.arange(M)
+    best_u, best_v = u[rows, k], v[rows, k]
     lo = u[rows, np.maximum(k - 1, 0)]
     hi = u[rows, np.minimum(k + 1, K - 1)]
-    # golden-section search on [lo, hi] (the field is unimodal there for small steps)
-    a = hi - _GOLD * (hi - lo)
-    c = lo + _GOLD * (hi - lo)
-    fa = values(a[:, None])[:, 0]
-    fc = values(c[:, None])[:, 0]
-    for _ in range(GOLDEN_STEPS):
-        left = fa < fc
-        hi = np.where(left, c, hi)
-        lo = np.where(left, lo, a)
-        c_new = np.where(left, a, lo + _GOLD * (hi - lo))
-        a_new = np.where(left, hi - _GOLD * (hi - lo), c)
-        probe = np.where(left, a_new, c_new)
-        fp = values(probe[:, None])[:, 0]
-        fc, fa = np.where(left, fa, fp), np.where(left, fp, fc)
-        a, c = a_new, c_new
-    cand_u = np.stack([u[rows, k], a, c], axis=1)
-    cand_v = np.stack([v[rows, k], fa, fc], axis=1)
-    j = np.argmin(cand_v, axis=1)
-    ub = cand_u[rows, j]
-    return rays.origins + ub[:, None] * rays.dirs, cand_v[rows, j]
+    # each round samples REFINE_POINTS inside the bracket in one call and keeps the
+    # neighbourhood of the smallest: the bracket shrinks by 2 / (REFINE_POINTS + 1) a
+    # call (a call's fixed cost, not its points, is what a tracker's frame pays)
+    frac = np.arange(1, REFINE_POINTS + 1) / (REFINE_POINTS + 1)
+    for _ in range(REFINE_ROUNDS):
+        uu = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
+        vv = values(uu)
+        j = np.argmin(vv, axis=1)
+        better = vv[rows, j] < best_v
+        best_u = np.where(better, uu[rows, j], best_u)
+        best_v = np.where(better, vv[rows, j], best_v)
+        step = (hi - lo) / (REFINE_POINTS + 1)
+        lo, hi = best_u - step, best_u + step
+    ub, vb = best_u, best_v
+    return rays.origins + ub[:, None] * rays.dirs, vb
 
 
 def _value_function(prog, pv: dict, backend: str):

@@ -44,7 +44,7 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..pose import Pose
-from .lm import State, normal_equations
+from .lm import State, damped_step, linearise, normal_equations
 from .problem import jacobian, loss_weights, make_result, prepare, residuals
 from .result import FitResult
 
@@ -265,21 +265,7 @@ def _value_function(prog, pv: dict, backend: str):
 # ------------------------------------------------------------------ the solve
 def _linearise(prob, st: State, idx: list[int], P: np.ndarray):
     """Residuals ``s f`` (N,) and Jacobian rows (N, n) of points ``P`` (N, 3) at ``st``."""
-    s = math.exp(st.sigma)
-    values = prob.values.copy()
-    values[idx] = st.cvals
-    pv = dict(zip(prob.pnames, values))
-    a = P - st.t
-    q = (a @ st.R) / s
-    if idx:
-        f, g, J = prob.prog.value_grad_param_jacobian(q, pv, backend=prob.backend,
-                                                      check_ranges=False)
-        Jp = s * np.asarray(J)[:, idx]
-    else:
-        f, g = prob.prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
-        Jp = None
-    f = np.asarray(f, dtype=float)
-    gw = np.asarray(g) @ st.R.T
+    s, _, a, f, gw, Jp = linearise(prob, P, st, idx)
     return s * f, jacobian(prob.pose, prob.scale, s, a, f, gw, Jp)
 
 
@@ -344,18 +330,10 @@ def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-4, step_tol: floa
     lam, nev, converged = 1e-3, 1, False
     while nev < max_iter:
         A, b = normal_equations(J, w, r)
-        D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
         accepted = False
         rejects = 0
         while nev < max_iter:
-            try:
-                dx = -np.linalg.solve(A + lam * np.diag(D), b)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            if prob.pose and np.linalg.norm(dx[:3]) > 0.5:
-                dx *= 0.5 / np.linalg.norm(dx[:3])
-            new = st.step(dx, prob.pose, prob.scale, lo, hi)
+            dx, new, lam = damped_step(prob, A, b, lam, st, lo, hi, 0.5)
             r2, J2, used2 = _evaluate(prob, new, idx, terms)
             nev += 1
             c2, w2 = loss_weights(r2, prob.f_scale, prob.loss)

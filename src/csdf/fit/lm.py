@@ -28,7 +28,8 @@ import numpy as np
 from .lie import exp_so3, hat
 from .problem import jacobian, loss_rho, loss_weights
 
-__all__ = ["State", "Visibility", "evaluate", "normal_equations", "lm_solve",
+__all__ = ["State", "Visibility", "linearise", "evaluate", "normal_equations", "damped_step",
+           "lm_solve",
            "lm_rounds", "escape", "axis_turns"]
 
 #: points on which escape() refines its turns (ranked on half as many)
@@ -161,9 +162,10 @@ class Visibility:
             self.X = c_m + u[hit, None] * D_m[hit]
 
 
-def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
-    """Residuals (N,) and Jacobian (N, n) at state ``st``."""
-    prog = prob.prog
+def linearise(prob, P: np.ndarray, st: State, idx):
+    """The model at points ``P`` (N, 3) posed by ``st``: ``(s, parameter values {name:
+    value}, a = P - t (N, 3), values f (N,), world gradients (N, 3), scaled parameter
+    derivatives s df/dc (N, k) or None)``."""
     s = math.exp(st.sigma)
     values = prob.values.copy()
     values[idx] = st.cvals
@@ -171,13 +173,19 @@ def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
     a = P - st.t
     q = (a @ st.R) / s
     if idx:
-        f, g, J = prog.value_grad_param_jacobian(q, pv, backend=prob.backend, check_ranges=False)
-        Jp = s * J[:, idx]
+        f, g, J = prob.prog.value_grad_param_jacobian(q, pv, backend=prob.backend,
+                                                      check_ranges=False)
+        Jp = s * np.asarray(J)[:, idx]
     else:
-        f, g = prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
+        f, g = prob.prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
         Jp = None
-    f = np.asarray(f, dtype=float)
-    gw = np.asarray(g) @ st.R.T
+    return s, pv, a, np.asarray(f, dtype=float), np.asarray(g) @ st.R.T, Jp
+
+
+def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
+    """Residuals (N,) and Jacobian (N, n) at state ``st``."""
+    prog = prob.prog
+    s, pv, a, f, gw, Jp = linearise(prob, P, st, idx)
     r = s * f
     if vis is not None:
         if vis.sel is None:
@@ -203,6 +211,23 @@ def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
             f[sel] = 0.0  # the scale column of a point-to-plane residual: -s n . X
     Jm = jacobian(prob.pose, prob.scale, s, a, f, gw, Jp)
     return r, Jm
+
+
+def damped_step(prob, A: np.ndarray, b: np.ndarray, lam: float, st: State, lo, hi,
+                max_rotation: float) -> tuple[np.ndarray, State, float]:
+    """One Levenberg-Marquardt step: ``(A + lam D) dx = -b`` with ``D`` the diagonal of
+    ``A`` (floored), ``lam`` grown tenfold while the system is singular, the rotation
+    part capped at ``max_rotation`` (rad); returns ``(dx, the moved state, lam)``."""
+    D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
+    while True:
+        try:
+            dx = -np.linalg.solve(A + lam * np.diag(D), b)
+            break
+        except np.linalg.LinAlgError:
+            lam *= 10.0
+    if prob.pose and np.linalg.norm(dx[:3]) > max_rotation:  # keep rotation steps sane
+        dx *= max_rotation / np.linalg.norm(dx[:3])
+    return dx, st.step(dx, prob.pose, prob.scale, lo, hi), lam
 
 
 def lm_solve(prob, P: np.ndarray, st: State, idx: list[int], fs: float, max_iter: int,
@@ -234,17 +259,9 @@ def lm_solve(prob, P: np.ndarray, st: State, idx: list[int], fs: float, max_iter
         if prior and prob.scale:
             A[kscale, kscale] += prior * prior
             b[kscale] += prior * prior * st.sigma
-        D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
         accepted = False
         while nev < max_iter:
-            try:
-                dx = -np.linalg.solve(A + lam * np.diag(D), b)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            if prob.pose and np.linalg.norm(dx[:3]) > 1.0:  # keep rotation steps sane
-                dx *= 1.0 / np.linalg.norm(dx[:3])
-            new = st.step(dx, prob.pose, prob.scale, lo, hi)
+            dx, new, lam = damped_step(prob, A, b, lam, st, lo, hi, 1.0)
             r2, J2 = evaluate(prob, P, new, idx, fs, vis)
             nev += 1
             c2, w2 = loss_weights(r2, fs, prob.loss)

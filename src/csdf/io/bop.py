@@ -386,6 +386,19 @@ def _intrinsics(cams: dict, cam_path: Path, ids: list[str]) -> tuple[np.ndarray,
     return K0, scales
 
 
+def _first_depth(root: Path, ids: list[str]) -> np.ndarray:
+    """The first image's raw depth, its size checked, and the whole sequence's."""
+    from ..render.camera import check_resolution
+
+    first = _read_png(root / "depth" / f"{int(ids[0]):06d}.png", "depth", None)
+    h, w = first.shape
+    check_resolution(w, h)
+    if len(ids) * w * h > MAX_SEQUENCE_PIXELS:
+        raise CsdfError(f"{root}: {len(ids)} images of {w}x{h} pixels are over the limit "
+                        f"of {MAX_SEQUENCE_PIXELS:,} pixels in all")
+    return first
+
+
 def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
              mm_per_unit: float = 1000.0) -> Sequence:
     """Read a BOP scene folder (as :func:`write_bop` writes, or one of the BOP
@@ -411,7 +424,7 @@ def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
             ambiguous, depth images that are not 16-bit PNGs, a scene over
             :data:`csdf.synth.MAX_SEQUENCE_PIXELS` pixels.
     """
-    from ..render.camera import Camera, check_resolution
+    from ..render.camera import Camera
 
     root = Path(folder)
     if not root.is_dir():
@@ -440,12 +453,8 @@ def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
         t = _numbers(e["cam_t_m2c"], 3, f"{where}: 'cam_t_m2c'") / mm_per_unit
         poses.append(Pose(R, t))
 
-    first = _read_png(root / "depth" / f"{int(ids[0]):06d}.png", "depth", None)
+    first = _first_depth(root, ids)
     h, w = first.shape
-    check_resolution(w, h)
-    if len(ids) * w * h > MAX_SEQUENCE_PIXELS:
-        raise CsdfError(f"{root}: {len(ids)} images of {w}x{h} pixels are over the limit "
-                        f"of {MAX_SEQUENCE_PIXELS:,} pixels in all")
     n = len(ids)
     depth = np.empty((n, h, w))
     masks = np.empty((n, h, w), dtype=bool)
@@ -507,7 +516,7 @@ def read_frames(folder: str | os.PathLike, *, mm_per_unit: float = 1000.0
     Raises:
         CsdfError: as :func:`read_bop`, naming the file.
     """
-    from ..render.camera import Camera, check_resolution
+    from ..render.camera import Camera
 
     root = Path(folder)
     if not root.is_dir():
@@ -517,12 +526,8 @@ def read_frames(folder: str | os.PathLike, *, mm_per_unit: float = 1000.0
     cams = _load_json(cam_path)
     ids = _image_ids(cams, cam_path)
     K0, scales = _intrinsics(cams, cam_path, ids)
-    first = _read_png(root / "depth" / f"{int(ids[0]):06d}.png", "depth", None)
+    first = _first_depth(root, ids)
     h, w = first.shape
-    check_resolution(w, h)
-    if len(ids) * w * h > MAX_SEQUENCE_PIXELS:
-        raise CsdfError(f"{root}: {len(ids)} images of {w}x{h} pixels are over the limit "
-                        f"of {MAX_SEQUENCE_PIXELS:,} pixels in all")
     depth = np.empty((len(ids), h, w))
     has_masks = (root / "mask_visib").is_dir()
     masks = np.empty((len(ids), h, w), dtype=bool) if has_masks else None

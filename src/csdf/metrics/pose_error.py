@@ -31,6 +31,11 @@ def _sym_chunks(x: np.ndarray, syms: np.ndarray, gt: Pose) -> Iterator[np.ndarra
         yield gt.apply(sx)
 
 
+
+def _inputs(points, est_pose, gt_pose):
+    """The checked model points and the two poses of a pose error."""
+    return model_pts(points), pose_arg(est_pose, "est_pose"), pose_arg(gt_pose, "gt_pose")
+
 def mssd(points: Any, est_pose: Any, gt_pose: Any, symmetries: Any = None) -> float:
     """Maximum symmetry-aware surface distance (BOP 2019).
 
@@ -51,9 +56,7 @@ def mssd(points: Any, est_pose: Any, gt_pose: Any, symmetries: Any = None) -> fl
     Raises:
         CsdfError: a bad argument, naming it and the shape it expects.
     """
-    x = model_pts(points)
-    est = pose_arg(est_pose, "est_pose")
-    gt = pose_arg(gt_pose, "gt_pose")
+    x, est, gt = _inputs(points, est_pose, gt_pose)
     syms = symmetry_arg(symmetries)
     e = est.apply(x)
     best = np.inf
@@ -101,9 +104,7 @@ def mspd(points: Any, est_pose: Any, gt_pose: Any, camera: Any,
     Raises:
         CsdfError: a bad argument, naming it and the shape it expects.
     """
-    x = model_pts(points)
-    est = pose_arg(est_pose, "est_pose")
-    gt = pose_arg(gt_pose, "gt_pose")
+    x, est, gt = _inputs(points, est_pose, gt_pose)
     cam = camera_arg(camera)
     syms = symmetry_arg(symmetries)
     ue, ok_e = _project(cam, est.apply(x))
@@ -131,9 +132,7 @@ def add(points: Any, est_pose: Any, gt_pose: Any) -> float:
     Raises:
         CsdfError: a bad argument, naming it and the shape it expects.
     """
-    x = model_pts(points)
-    est = pose_arg(est_pose, "est_pose")
-    gt = pose_arg(gt_pose, "gt_pose")
+    x, est, gt = _inputs(points, est_pose, gt_pose)
     return float(np.sqrt(np.sum((est.apply(x) - gt.apply(x)) ** 2, axis=1)).mean())
 
 
@@ -153,8 +152,6 @@ def adds(points: Any, est_pose: Any, gt_pose: Any) -> float:
     """
     from scipy.spatial import cKDTree
 
-    x = model_pts(points)
-    est = pose_arg(est_pose, "est_pose")
-    gt = pose_arg(gt_pose, "gt_pose")
+    x, est, gt = _inputs(points, est_pose, gt_pose)
     d, _ = cKDTree(gt.apply(x)).query(est.apply(x), k=1)
     return float(np.mean(d))

@@ -364,3 +364,13 @@ def test_ray_casts_refuse_bad_rays_and_unbounded_steps():
     with pytest.raises(CsdfError, match="has none"):
         sc.raycast([0, 0, 5], [[0, 0, -1]])
     assert not csdf.Scene().raycast([0, 0, 0], [[1, 0, 0]]).hit.any()
+
+
+def test_boxes_found_by_intervals_are_kept_per_parameter_values():
+    chair = csdf.zoo.load("chair")
+    a = csdf.as_field(chair, {"seat_height": 0.5}).model_bounds
+    a[:] = 0.0  # a caller's copy: the program's cached box is not touched
+    b = csdf.as_field(chair, {"seat_height": 0.5}, pose=csdf.Pose(translation=[1, 0, 0]))
+    assert b.model_bounds[1, 2] > 0.8  # the backrest's top, not the zeroed copy
+    c = csdf.as_field(chair, {"seat_height": 0.5, "back_height": 0.3}).model_bounds
+    assert c[1, 2] < b.model_bounds[1, 2] - 0.05  # other values, another box

@@ -179,6 +179,20 @@ def auto_bounds(prog: Program, params: Mapping[str, float] | None = None,
     return b
 
 
+def _cached_auto_bounds(prog: Program, pv: dict) -> np.ndarray:
+    """:func:`auto_bounds` kept on the program per parameter values (a scene makes a new
+    field for every pose update of an instance; the box does not move with the pose).
+    A copy is returned."""
+    key = tuple(np.asarray(prog.param_values(pv, check_ranges=False), dtype=float).tolist())
+    cache = prog.__dict__.setdefault("_auto_bounds", {})
+    box = cache.get(key)
+    if box is None:
+        if len(cache) >= 16:
+            cache.clear()
+        box = cache[key] = auto_bounds(prog, pv)
+    return box.copy()
+
+
 def _own_bounds(prog: Program, shape: Any = None) -> np.ndarray | None:
     """The program's (or its shape's) analytic box when finite, else None."""
     b = getattr(prog, "bounds", None)
@@ -216,7 +230,7 @@ def field_bounds(prog: Program, params: Mapping[str, float] | None = None, bound
     if own is not None and not prog.params:
         return own
     try:
-        return auto_bounds(prog, pv)
+        return _cached_auto_bounds(prog, pv)
     except CsdfError:
         # interval arithmetic can be too loose to find the box (polygons' winding sign,
         # blends); a program's own box holds for every value inside the declared ranges

@@ -50,6 +50,17 @@ def _hard_union_operands(shape) -> list:
     return out
 
 
+_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
+def _posed_boxes(pose, boxes: np.ndarray) -> np.ndarray:
+    """World boxes ``(P, 2, 3)`` holding object-frame boxes ``(P, 2, 3)`` moved by
+    ``pose`` (their 8 corners mapped, as :meth:`csdf.Pose.apply_box` does one)."""
+    c = np.where(_CORNERS[None, :, :] == 0, boxes[:, None, 0, :], boxes[:, None, 1, :])
+    w = pose.apply(c.reshape(-1, 3)).reshape(len(boxes), 8, 3)
+    return np.stack([w.min(axis=1), w.max(axis=1)], axis=1)
+
+
 def union_parts(fld: Field) -> list[tuple[object, np.ndarray, np.ndarray]] | None:
     """The parts of a field whose shape is a hard union: ``[(program, parameter values,
     object-frame box (2, 3))]``, each part compiled on its own; None when the field is
@@ -246,13 +257,13 @@ class FieldSet:
                 rows_i.append((tape_row(fld.program, fld.pvals, fld), contract))
                 owner.append(k)
                 continue
-            for prog, pvals, box in parts:
-                wb = box if pose.is_identity() else pose.apply_box(box)
+            world = _posed_boxes(pose, np.array([box for _, _, box in parts]))
+            for (prog, pvals, _), wb in zip(parts, world):
                 rows_f.append(np.concatenate([frame, wb[0], wb[1]]))
                 rows_i.append((tape_row(prog, pvals), contract))
                 owner.append(k)
-                boxes[k, 0] = np.minimum(boxes[k, 0], wb[0])  # holds its parts' boxes
-                boxes[k, 1] = np.maximum(boxes[k, 1], wb[1])
+            boxes[k, 0] = np.minimum(boxes[k, 0], world[:, 0].min(axis=0))  # holds its
+            boxes[k, 1] = np.maximum(boxes[k, 1], world[:, 1].max(axis=0))  # parts' boxes
         self.code, self.imm, self.tape_i, self.tape_f, self.cell_tab = pool.arrays()
         self.max_regs = int(self.tape_i[:, 3].max())
         #: per entry of the hierarchy (an instance, or one part of a union instance)

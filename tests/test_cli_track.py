@@ -62,7 +62,21 @@ def test_bad_inputs_are_named(scene, tmp_path):
     bad.write_text('{"cam_R_m2c": [1, 0, 0]}')
     r = runner.invoke(app, ["track", "cross_shaft", str(root / "scene"), "-o",
                             str(tmp_path / "p.json"), "--init", str(bad)])
-    assert r.exit_code != 0 and "cam_R_m2c (9 numbers) and cam_t_m2c" in r.output
+    assert r.exit_code != 0 and "cam_R_m2c (9 finite numbers, row-major) and cam_t_m2c" in r.output
     assert not (tmp_path / "p.json").exists()
     r = runner.invoke(app, ["metrics", "cross_shaft", str(root / "scene"), str(bad)])
     assert r.exit_code != 0 and "cam_t_m2c" in r.output
+
+
+def test_poses_that_are_not_rotations_and_missing_estimates(scene, tmp_path):
+    root, _ = scene
+    bad = tmp_path / "init.json"
+    bad.write_text(json.dumps({"cam_R_m2c": [2, 0, 0, 0, 1, 0, 0, 0, 1],
+                               "cam_t_m2c": [0, 0, 500]}))
+    r = runner.invoke(app, ["track", "cross_shaft", str(root / "scene"), "-o",
+                            str(tmp_path / "p.json"), "--init", str(bad)])
+    assert r.exit_code != 0 and "cam_R_m2c is not a rotation" in r.output
+    empty = tmp_path / "none.json"
+    empty.write_text("{}")
+    r = runner.invoke(app, ["metrics", "cross_shaft", str(root / "scene"), str(empty)])
+    assert r.exit_code != 0 and "no pose for any image" in r.output

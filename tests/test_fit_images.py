@@ -160,3 +160,38 @@ def test_track_accumulates_shape_parameters():
                      csdf.Pose(seq[0][2], seq[0][3]), estimate=("pose", "params"))
     assert res.success.all()
     assert abs(res[-1].params["width"] - 0.24) < 0.004  # 2 % of the range
+
+
+def test_a_blank_frame_is_lost_and_tracking_goes_on():
+    rng = np.random.default_rng(6)
+    seq = _sequence(SHAPE, 6, rng)
+    frames = [(d, m) for d, m, _, _ in seq]
+    frames[2] = (np.zeros_like(frames[2][0]), np.zeros_like(frames[2][1]))  # all hidden
+    res = csdf.track(SHAPE, frames, CAM, csdf.Pose(seq[0][2], seq[0][3]))
+    assert res[2].lost and not res[2].success and res[2].result is None
+    assert res.success[3:].all()  # the prediction carried it over the gap
+    with pytest.raises(CsdfError, match=r"frames\[1\]: the depth must have"):
+        csdf.track(SHAPE, [frames[0][0], np.zeros((3, 3))], CAM, csdf.Pose(seq[0][2],
+                                                                          seq[0][3]))
+    with pytest.raises(CsdfError, match="track: unknown option\\(s\\) bogus"):
+        csdf.track(SHAPE, [frames[0][0]], CAM, csdf.Pose(seq[0][2], seq[0][3]), bogus=1)
+
+
+@pytest.mark.parametrize("option, value, match", [
+    ("band", 0, "band must be a finite number of pixels > 0"),
+    ("max_iter", 0, "max_iter must be an integer >= 1"),
+    ("max_rays", 0, "max_rays must be an integer >= 1"),
+    ("seed", -1, "seed must be an integer >= 0"),
+    ("silhouette_weight", float("nan"), "silhouette_weight must be a finite number"),
+    ("occlusion_margin", -1, "occlusion_margin must be a finite number >= 0"),
+    ("gate", -1, "gate must be a finite number >= 0"),
+])
+def test_bad_options_are_named(option, value, match):
+    depth, mask = _view(SHAPE, np.eye(3), np.array([0, 0, 0.7]))
+    with pytest.raises(CsdfError, match=match):
+        csdf.fit_depth(SHAPE, depth, CAM, init=csdf.Pose(translation=[0, 0, 0.7]),
+                       mask=mask, **{option: value})
+    with pytest.raises(CsdfError, match="init: the \\(4, 4\\) transform must be finite"):
+        csdf.fit_depth(SHAPE, depth, CAM, init=np.full((4, 4), np.nan))
+    with pytest.raises(CsdfError, match="one camera per mask"):
+        csdf.fit_silhouette(SHAPE, [mask, mask], [CAM])

@@ -124,3 +124,11 @@ def test_self_collision_pairs_and_clearance(arm):
         assert g == pytest.approx(want, abs=1e-12)
     folded = np.array([[0.0, 2.0, 0.1]])  # the forearm bent down beside the upper arm
     assert arm.self_clearance(folded)[0] < arm.self_clearance([[0.0, 0.0, 0.0]])[0]
+
+
+def test_margins_must_be_finite_and_not_negative(arm):
+    scene = csdf.Scene()
+    scene.add(csdf.sphere(0.1), pose=csdf.Pose(translation=[2.0, 0.0, 0.0]))
+    for kw in ({"margin": -0.1}, {"margin": float("nan")}, {"self_margin": -1.0}):
+        with pytest.raises(CsdfError, match="must be a finite number >= 0"):
+            optimize(scene, arm, [0.0, 0.0, 0.0], [0.5, 0.0, 0.0], n_waypoints=4, **kw)

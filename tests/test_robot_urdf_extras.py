@@ -141,3 +141,12 @@ def test_srdf_pairs_are_left_out_of_self_collision(grip):
 def test_bad_extras_are_refused_naming_what(edit, match):
     with pytest.raises(CsdfError, match=match):
         Robot.from_urdf(URDF.read_text().replace(*edit))
+
+
+def test_locking_a_follower_or_a_fixed_joint_is_refused():
+    with pytest.raises(CsdfError, match="lock: joint 'finger_right' mimics 'finger_left'"):
+        Robot.from_urdf(URDF, lock={"finger_right": 0.01})
+    fixed = URDF.read_text().replace('<joint name="pitch" type="revolute">',
+                                     '<joint name="pitch" type="fixed">')
+    with pytest.raises(CsdfError, match="lock: joint 'pitch' is fixed already"):
+        Robot.from_urdf(fixed, lock={"pitch": 0.0})

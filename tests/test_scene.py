@@ -374,3 +374,13 @@ def test_boxes_found_by_intervals_are_kept_per_parameter_values():
     assert b.model_bounds[1, 2] > 0.8  # the backrest's top, not the zeroed copy
     c = csdf.as_field(chair, {"seat_height": 0.5, "back_height": 0.3}).model_bounds
     assert c[1, 2] < b.model_bounds[1, 2] - 0.05  # other values, another box
+
+
+def test_sphere_queries_refuse_centres_they_cannot_place():
+    sc = _scene()
+    with pytest.raises(CsdfError, match=r"centers must be finite \(1 row\(s\) are not, e.g. row 1"):
+        sc.collide([[0, 0, 0], [np.nan, 0, 0]], 0.1)
+    with pytest.raises(CsdfError, match="centers must be finite"):
+        sc.sphere_distance([[np.inf, 0, 0]], 0.1)
+    with pytest.raises(CsdfError, match="max_distance must be >= 0"):
+        sc.distance([[0, 0, 0]], max_distance=-1)

@@ -36,7 +36,17 @@ from .version import __version__
 if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
     from . import io, metrics, synth, zoo
     from .field import Field, as_field, glsl_params, shadertoy, to_glsl
-    from .fit import FitResult, TrackResult, fit, fit_depth, fit_silhouette, icp, track
+    from .fit import (
+        FitResult,
+        Tracker,
+        TrackFrame,
+        TrackResult,
+        fit,
+        fit_depth,
+        fit_silhouette,
+        icp,
+        track,
+    )
     from .lang import dumps, load, loads
     from .mesh import mesh
     from .raster import raster
@@ -69,6 +79,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "fit_silhouette": (".fit", "fit_silhouette"),
     "track": (".fit", "track"),
     "TrackResult": (".fit", "TrackResult"),
+    "Tracker": (".fit", "Tracker"),
+    "TrackFrame": (".fit", "TrackFrame"),
     "dumps": (".lang", "dumps"),
     "load": (".lang", "load"),
     "loads": (".lang", "loads"),
@@ -141,6 +153,6 @@ __all__ = [
     "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
     "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", "Scene",
-    "SceneQuery", "fit_depth", "fit_silhouette", "track", "TrackResult", "synth", "Sequence",
-    "metrics", *_shape_names,
+    "SceneQuery", "fit_depth", "fit_silhouette", "track", "Tracker", "TrackFrame",
+    "TrackResult", "synth", "Sequence", "metrics", *_shape_names,
 ]

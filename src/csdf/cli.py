@@ -619,6 +619,10 @@ def plan(
     waypoints: int = typer.Option(32, "--waypoints", help="Waypoints, both ends included."),
     margin: float = typer.Option(0.05, "--margin", help="Clearance asked of the robot (m)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the restarts' detours."),
+    srdf: Path | None = typer.Option(None, "--srdf", help="An SRDF whose "
+                                     "disabled collisions self-collision leaves out."),
+    lock: list[str] = typer.Option([], "--lock", help="joint=value: hold a joint still "
+                                   "(repeatable; e.g. a gripper's finger)."),
 ):
     """Plan a robot's path between two joint positions among a scene's objects
     (csdf.plan.optimize) and write it as JSON: waypoints, success, clearance, time."""
@@ -633,7 +637,16 @@ def plan(
         if output.suffix.lower() != ".json":
             raise CsdfError(f"{output}: the output must end in .json")
         sc = Scene.load(scene)
-        bot = Robot.from_urdf(robot)
+        held = {}
+        for item in lock:
+            name, eq, value = item.partition("=")
+            try:
+                held[name.strip()] = float(value)
+            except ValueError:
+                eq = ""
+            if not eq or not name.strip():
+                raise CsdfError(f"--lock {item!r}: expected joint=value")
+        bot = Robot.from_urdf(robot, srdf=srdf, lock=held)
         names = ",".join(f"q{k + 1}" for k in range(bot.dof))
         qs = _numbers(start, "--start", names)
         qg = _numbers(goal, "--goal", names)
@@ -702,11 +715,13 @@ def _bop_pose(entry: dict, where: str, mm_per_unit: float):
     try:
         R = np.asarray([float(v) for v in entry["cam_R_m2c"]]).reshape(3, 3)
         t = np.asarray([float(v) for v in entry["cam_t_m2c"]]) / mm_per_unit
-        if t.shape != (3,):
+        if t.shape != (3,) or not (np.isfinite(R).all() and np.isfinite(t).all()):
             raise ValueError
     except (KeyError, TypeError, ValueError):
-        raise CsdfError(f"{where}: needs cam_R_m2c (9 numbers) and cam_t_m2c (3, mm)") \
-            from None
+        raise CsdfError(f"{where}: needs cam_R_m2c (9 finite numbers, row-major) and "
+                        "cam_t_m2c (3, mm)") from None
+    if np.abs(R @ R.T - np.eye(3)).max() > 1e-3 or np.linalg.det(R) < 0:
+        raise CsdfError(f"{where}: cam_R_m2c is not a rotation (orthonormal, determinant +1)")
     return Pose.nearest(np.block([[R, t[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]),
                         where)
 
@@ -768,7 +783,8 @@ def track(
             else:
                 entry, where = doc, str(init)
             if not isinstance(entry, dict):
-                raise CsdfError(f"{where}: a pose must be a JSON object")
+                raise CsdfError(f"{where}: a pose must be a JSON object with cam_R_m2c "
+                                "(9 numbers) and cam_t_m2c (3, mm)")
             start = _bop_pose(entry, where, mm_per_unit)
         run = track_fn(m, list(depth), cam, start,
                        masks=None if mk is None or not masks else list(mk),
@@ -842,6 +858,17 @@ def metrics(
         else:
             raise CsdfError(f"{estimates}: expected csdf track's JSON or a scene_gt.json")
         gt_ids = sorted(json.loads((truth / "scene_gt.json").read_text()), key=int)
+        extra = sorted(set(est) - {int(k) for k in gt_ids})
+        if extra:
+            err.print(f"warning: {estimates} has poses for images the truth does not list "
+                      f"({', '.join(map(str, extra[:5]))}{' ...' if len(extra) > 5 else ''}"
+                      "); they are not scored", soft_wrap=True, markup=False)
+        if not set(est) & {int(k) for k in gt_ids}:
+            raise CsdfError(f"{estimates}: no pose for any image of {truth}")
+        if isinstance(doc, dict) and isinstance(doc.get("model"), str) \
+                and Path(doc["model"]).stem != model.stem:
+            err.print(f"warning: {estimates} was made with model {doc['model']!r}, scored "
+                      f"here with {str(model)!r}", soft_wrap=True, markup=False)
         pts = M.model_points(m, 2000)
         diam = M.diameter(pts)
         try:

@@ -82,7 +82,7 @@ _TERMS = 3
 _PASS = 0.6
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class Sequence:
     """A depth-image sequence of one object, with ground truth.
 
@@ -114,6 +114,12 @@ class Sequence:
 
     def __len__(self) -> int:
         return len(self.poses)
+
+    def __repr__(self) -> str:
+        n, h, w = np.shape(self.depth)
+        occ = bool(np.any(self.occluder_masks))
+        return (f"<Sequence of {n} frames, {w}x{h}, {self.camera!r}"
+                f"{', with an occluder' if occ else ''}>")
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -113,9 +113,11 @@ def _init_pose(init, prob_params: dict) -> tuple:
         M = np.asarray(init, dtype=float)
     except (TypeError, ValueError):
         M = np.zeros(0)
-    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+    if M.shape != (4, 4):
         raise CsdfError("init must be a (4, 4) transform, a csdf.Pose, a FitResult, a dict "
                         "or None")
+    if not np.all(np.isfinite(M)):
+        raise CsdfError("init: the (4, 4) transform must be finite")
     pose = Pose.nearest(M, "init transform")  # the similarity nearest to it
     return pose.rotation.copy(), pose.translation.copy(), pose.scale, {}
 

@@ -35,7 +35,7 @@ from ..pose import Pose
 from .images import fit_depth
 from .result import FitResult
 
-__all__ = ["track", "Tracker", "TrackFrame", "TrackResult"]
+__all__ = ["track", "Tracker", "TrackFrame", "TrackResult", "MIN_PIXELS"]
 
 
 @dataclass
@@ -49,7 +49,8 @@ class TrackFrame:
         lost: the detector fired on the frame's first fit; reinitialised: a
         multistart fit was made; rmse, inlier_fraction: of the depth points;
         silhouette_rmse: of the silhouette residuals (NaN without masks); seconds:
-        the frame's time; result: the kept :class:`FitResult`.
+        the frame's time; result: the kept :class:`FitResult` (None for a frame with
+        too few valid pixels to fit: it is lost and keeps the prediction).
     """
 
     index: int
@@ -62,7 +63,7 @@ class TrackFrame:
     inlier_fraction: float
     silhouette_rmse: float
     seconds: float
-    result: FitResult = field(repr=False)
+    result: FitResult | None = field(repr=False)
 
 
 @dataclass
@@ -120,6 +121,29 @@ def _frames(frames, masks) -> Iterable[tuple[np.ndarray, np.ndarray | None]]:
         yield fr, (None if ms is None else ms[k])
 
 
+#: a frame with fewer valid depth pixels (inside its mask) than this is not fitted
+MIN_PIXELS = 20
+
+
+def _valid_pixels(depth, mask, camera, index: int) -> int:
+    """How many pixels of frame ``index`` have a depth (inside the mask, if any)."""
+    try:
+        z = np.asarray(depth, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CsdfError(f"frames[{index}]: the depth must be an image of numbers") from None
+    if z.shape != (camera.height, camera.width):
+        raise CsdfError(f"frames[{index}]: the depth must have the camera's shape "
+                        f"({camera.height}, {camera.width}), got {z.shape}")
+    ok = np.isfinite(z) & (z > 0)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != z.shape:
+            raise CsdfError(f"frames[{index}]: the mask must have the depth's shape "
+                            f"{z.shape}, got {m.shape}")
+        ok &= m.astype(bool)
+    return int(ok.sum())
+
+
 def _reinitialise(shape, depth, camera, mask, centre: np.ndarray, opts: dict) -> FitResult:
     """A lost frame fitted from scratch: the multistart fit, and the same pose turned
     half a turn about each of the model's axes through its centre (the usual ambiguity
@@ -169,6 +193,14 @@ class Tracker:
                          backend=backend)
         if masks:  # the silhouette term checks what the ray cast would
             self.opts["check_visibility"] = False
+        import inspect
+
+        known = set(inspect.signature(fit_depth).parameters) - {
+            "shape", "depth", "camera", "init", "mask", "multistart"}
+        bad = sorted(set(fit_kwargs) - known)
+        if bad:
+            raise CsdfError(f"track: unknown option(s) {', '.join(bad)} (fit_depth's options "
+                            f"are {', '.join(sorted(known))})")
         self.opts.update(fit_kwargs)
         box = as_field(shape, backend=backend, what="track").model_bounds
         self.centre = 0.5 * (box[0] + box[1])
@@ -199,6 +231,17 @@ class Tracker:
         start = {"rotation": guess.rotation, "translation": guess.translation,
                  "scale": guess.scale, "params": dict(self.mean)}
         shape, camera, opts = self.shape, self.camera, self.opts
+        if _valid_pixels(depth, mask, camera, self.frames) < MIN_PIXELS:
+            # nothing to fit (the object fully hidden, a dropped frame): lost, and the
+            # prediction stands in for it; the motion goes on
+            self.prev, self.pose = self.pose, guess
+            frame = TrackFrame(index=self.frames, pose=guess, params=dict(self.mean),
+                               success=False, lost=True, reinitialised=False,
+                               rmse=math.nan, inlier_fraction=0.0,
+                               silhouette_rmse=math.nan,
+                               seconds=time.perf_counter() - t0, result=None)
+            self.frames += 1
+            return frame
         res = fit_depth(shape, depth, camera, init=start, mask=mask, **opts)
         lost = not res.success
         again = False

@@ -240,6 +240,8 @@ class Robot:
 
     @property
     def dof(self) -> int:
+        """The number of joint positions in ``q``: the movable joints (not fixed, not
+        mimicking another)."""
         return len(self.movable)
 
     @property
@@ -286,6 +288,11 @@ class Robot:
         for name in lock:
             if name not in by_name:
                 raise CsdfError(f"lock: {what} has no joint {name!r}")
+            if by_name[name].type == "fixed":
+                raise CsdfError(f"lock: joint {name!r} is fixed already")
+            if by_name[name].mimic is not None:
+                raise CsdfError(f"lock: joint {name!r} mimics "
+                                f"{by_name[name].mimic.joint!r}; lock that one")
         for j in robot.joints:
             for end in (j.parent, j.child):
                 if end not in links:

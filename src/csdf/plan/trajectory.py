@@ -18,6 +18,7 @@ space and, if the dense check fails, from seeded random detours.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -155,6 +156,9 @@ def optimize(scene, robot: Robot, q_start, q_goal, n_waypoints: int = 32, *,
     T = int(n_waypoints)
     if T < 3:
         raise CsdfError(f"n_waypoints must be >= 3, got {n_waypoints}")
+    for name, v in (("margin", margin), ("self_margin", self_margin)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise CsdfError(f"{name} must be a finite number >= 0, got {v!r}")
     lim = robot.limits
     line = a + np.linspace(0, 1, T)[:, None] * (b - a)
     opts = dict(margin=margin, smooth=smooth, obstacle=obstacle, spacing=spacing,

@@ -115,6 +115,16 @@ def _points(points: Any, what: str) -> np.ndarray:
     return np.ascontiguousarray(p)
 
 
+def _finite(p: np.ndarray, what: str) -> np.ndarray:
+    """``p`` when every coordinate is finite: a sphere query never answers "clear" for a
+    sphere it cannot place (a planner would take NaN's "no collision" at its word)."""
+    if not np.isfinite(p).all():
+        rows = np.flatnonzero(~np.isfinite(p).all(axis=1))
+        raise CsdfError(f"{what} must be finite ({len(rows)} row(s) are not, e.g. row "
+                        f"{int(rows[0])})")
+    return p
+
+
 def _cap(max_distance: Any, n: int) -> np.ndarray | None:
     """The search's start values for ``max_distance`` (None: no cap)."""
     try:
@@ -123,6 +133,8 @@ def _cap(max_distance: Any, n: int) -> np.ndarray | None:
         raise CsdfError(f"max_distance must be a number, got {max_distance!r}") from None
     if m != m:
         raise CsdfError("max_distance must not be NaN")
+    if m < 0:
+        raise CsdfError(f"max_distance must be >= 0, got {m:g}")
     return None if m == np.inf else np.full(n, m)
 
 
@@ -393,7 +405,7 @@ class Scene:
         the penetration where the model is a bound). With ``max_distance``, clearances
         beyond it are reported as ``max_distance`` with gradient 0, and only surfaces
         within it of a sphere are searched."""
-        c = _points(centers, "centers")
+        c = _finite(_points(centers, "centers"), "centers")
         r = _radii(radii, len(c))
         below = None if max_distance == np.inf else _cap(max_distance, len(c)) + r
         d, g, _, _ = self._nearest(c, True, below, ids=False)
@@ -403,7 +415,7 @@ class Scene:
         """``(N,)`` bool: the sphere reaches inside the scene (``distance(centre) <
         radius``). Only instances whose boxes come within the radius are evaluated,
         and each search stops at the first hit."""
-        c = _points(centers, "centers")
+        c = _finite(_points(centers, "centers"), "centers")
         r = _radii(radii, len(c))
         _, _, k, _ = self._nearest(c, False, below=r, stop=True, ids=False)
         return k >= 0

@@ -24,7 +24,8 @@ LAYERS: dict[str, int] = {
     # 0 expression: the op set, interval arithmetic, slot numbering, the DAG, poses
     "csdf.errors": 0, "csdf.ops": 0, "csdf.interval": 0, "csdf.layout": 0,
     "csdf.expr": 0, "csdf.vec": 0, "csdf.points": 0, "csdf.version": 0,
-    "csdf.parallel": 0, "csdf.memory": 0, "csdf.pose": 0, "csdf.opformula": 0,
+    "csdf.parallel": 0, "csdf.memory": 0, "csdf.cache": 0, "csdf.pose": 0,
+    "csdf.opformula": 0,
     # 1 shapes: primitives, operators, and the text language that builds them
     "csdf.shapes": 1, "csdf.lang": 1, "csdf.zoo": 1,
     "csdf.shapes.exprfield": 1, "csdf.lang.vm": 1,  # a field from an expression; .vm in

@@ -50,6 +50,7 @@ from .backends import BACKENDS
 from .backends import fast as _fast_backend
 from .backends.glsl import glsl_float, glsl_params, shadertoy, to_glsl
 from .backends.interval_eval import evaluate_intervals
+from .cache import memo
 from .compiler.program import Program, as_program
 from .errors import CsdfError
 from .interval import check_boxes
@@ -184,13 +185,7 @@ def _cached_auto_bounds(prog: Program, pv: dict) -> np.ndarray:
     field for every pose update of an instance; the box does not move with the pose).
     A copy is returned."""
     key = tuple(np.asarray(prog.param_values(pv, check_ranges=False), dtype=float).tolist())
-    cache = prog.__dict__.setdefault("_auto_bounds", {})
-    box = cache.get(key)
-    if box is None:
-        if len(cache) >= 16:
-            cache.clear()
-        box = cache[key] = auto_bounds(prog, pv)
-    return box.copy()
+    return memo(prog, "_auto_bounds", key, lambda: auto_bounds(prog, pv), 16).copy()
 
 
 def _own_bounds(prog: Program, shape: Any = None) -> np.ndarray | None:

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .cache import memo
 from .errors import CsdfError
 from .field import Field, field_bounds, numba_available
 from .parallel import N_THREADS, executor
@@ -71,12 +72,11 @@ def union_parts(fld: Field) -> list[tuple[object, np.ndarray, np.ndarray]] | Non
     if shape is None or fld.dim != 3 or fld._bounds_given is not None:
         return None
     key = tuple(np.asarray(fld.pvals, dtype=np.float64).tolist())
-    cache = fld.program.__dict__.setdefault("_union_parts", {})
-    if key in cache:
-        return cache[key]
-    ops = _hard_union_operands(shape)
-    parts: list | None = None
-    if 1 < len(ops) <= MAX_PARTS:
+
+    def make() -> list | None:
+        ops = _hard_union_operands(shape)
+        if not 1 < len(ops) <= MAX_PARTS:
+            return None
         values = dict(zip(fld.program.param_names, key))
         parts = []
         for op in ops:
@@ -85,13 +85,11 @@ def union_parts(fld: Field) -> list[tuple[object, np.ndarray, np.ndarray]] | Non
                 pv = {n: values[n] for n in prog.param_names}
                 box = field_bounds(prog, pv, shape=op)
             except (CsdfError, KeyError):
-                parts = None
-                break
+                return None
             parts.append((prog, prog.param_values(pv, check_ranges=False), box))
-    if len(cache) >= 8:
-        cache.clear()
-    cache[key] = parts
-    return parts
+        return parts
+
+    return memo(fld.program, "_union_parts", key, make, 8)
 
 
 def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..cache import memo
 from ..layout import N_COORDS
 from ..ops import OPS_BY_CODE, tie_strict
 from .numpy_backend import uniform_prefix
@@ -118,12 +119,8 @@ class Lowered:
         evaluated in Python (copies are returned)."""
         key = (np.asarray(pvals, dtype=np.float64).tobytes(), np.dtype(dtype).str,
                bool(spatial), bool(wrt_params))
-        cache = self.__dict__.setdefault("_uniform_cache", {})
-        hit = cache.get(key)
-        if hit is None:
-            if len(cache) >= 16:
-                cache.clear()
-            hit = cache[key] = self._uniform(pvals, dtype, spatial, wrt_params)
+        hit = memo(self, "_uniform_cache", key,
+                   lambda: self._uniform(pvals, dtype, spatial, wrt_params), 16)
         return hit[0].copy(), hit[1].copy(), hit[2].copy()
 
     def _uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):

@@ -29,6 +29,7 @@ import threading
 
 import numpy as np
 
+from ..cache import memo
 from ..layout import N_COORDS
 from ..ops import OPS_BY_CODE, tie_strict
 from ..parallel import N_THREADS, executor
@@ -129,14 +130,8 @@ class RegTape:
 def reg_tape(prog, pvals: np.ndarray) -> RegTape:
     """The :class:`RegTape` of a program at these parameter values (cached on the
     program, a few per program)."""
-    key = np.asarray(pvals, np.float64).tobytes()
-    cache = prog.__dict__.setdefault("_reg_tapes", {})
-    tape = cache.get(key)
-    if tape is None:
-        if len(cache) >= 4:
-            cache.clear()
-        tape = cache[key] = RegTape(prog, pvals)
-    return tape
+    return memo(prog, "_reg_tapes", np.asarray(pvals, np.float64).tobytes(),
+                lambda: RegTape(prog, pvals), 4)
 
 
 class TapePool:
@@ -502,11 +497,5 @@ def cell_tapes(prog, pvals: np.ndarray, box: np.ndarray, depth: int | None = Non
         depth = 5 if prog.dim == 3 else 8
     key = (np.asarray(pvals, np.float64).tobytes(), np.asarray(box, np.float64).tobytes(),
            depth)
-    cache = prog.__dict__.setdefault("_cell_tapes", {})
-    ct = cache.get(key)
-    if ct is None:
-        if len(cache) > 8:
-            cache.clear()
-        ct = cache[key] = CellTapes(prog, pvals, box, depth)
-    return ct
+    return memo(prog, "_cell_tapes", key, lambda: CellTapes(prog, pvals, box, depth), 9)
 

@@ -35,6 +35,14 @@ from .version import __version__
 
 if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
     from . import io, metrics, synth, zoo
+    from .detect import (
+        Detection,
+        PrimitiveDetection,
+        detect,
+        detect_primitives,
+        detections_to_scene,
+        estimate_normals,
+    )
     from .field import Field, as_field, glsl_params, shadertoy, to_glsl
     from .fit import (
         FitResult,
@@ -81,6 +89,12 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "TrackResult": (".fit", "TrackResult"),
     "Tracker": (".fit", "Tracker"),
     "TrackFrame": (".fit", "TrackFrame"),
+    "detect": (".detect", "detect"),
+    "detect_primitives": (".detect", "detect_primitives"),
+    "detections_to_scene": (".detect", "detections_to_scene"),
+    "Detection": (".detect", "Detection"),
+    "PrimitiveDetection": (".detect", "PrimitiveDetection"),
+    "estimate_normals": (".detect", "estimate_normals"),
     "dumps": (".lang", "dumps"),
     "load": (".lang", "load"),
     "loads": (".lang", "loads"),
@@ -154,5 +168,7 @@ __all__ = [
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",
     "glsl_params", "fit", "icp", "FitResult", "Field", "as_field", "Pose", "Scene",
     "SceneQuery", "fit_depth", "fit_silhouette", "track", "Tracker", "TrackFrame",
-    "TrackResult", "synth", "Sequence", "metrics", *_shape_names,
+    "TrackResult", "synth", "Sequence", "metrics", "detect", "detect_primitives",
+    "detections_to_scene", "Detection", "PrimitiveDetection", "estimate_normals",
+    *_shape_names,
 ]

@@ -808,6 +808,69 @@ def track(
 
 
 @app.command()
+def detect(
+    scan: Path = typer.Argument(..., help="The point cloud (.ply), e.g. from csdf scan."),
+    models: str = typer.Option(..., "--models", help="Comma-separated zoo names or .csdf "
+                               "files to look for, e.g. chair,table,stool."),
+    output: Path = typer.Option(..., "-o", "--output", help="The scene file (.json): one "
+                                "instance per detection, readable by csdf.Scene.load."),
+    viewpoint: str | None = typer.Option(None, "--viewpoint", help="x,y,z: the sensor "
+                                         "position (0,0,0 for camera-frame clouds). "
+                                         "Default: the PLY header's record (csdf scan "
+                                         "writes it); 'none' ignores it."),
+    max_instances: int | None = typer.Option(None, "--max-instances", help="Stop after "
+                                             "this many detections."),
+    noise: float | None = typer.Option(None, "--noise", help="The scan's noise standard "
+                                       "deviation (default: estimated)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of every random choice."),
+    picture: Path | None = typer.Option(None, "--picture", help="Also write a PNG: the "
+                                        "scan with each detection's model drawn over it."),
+):
+    """Find known models in a cluttered scan (csdf.detect) and write them as a scene."""
+
+    def go():
+        from .detect import detect as detect_fn
+        from .detect import detections_to_scene
+        from .io import atomic_path, read_point_cloud
+
+        if output.suffix.lower() != ".json":
+            raise CsdfError(f"{output}: the output must end in .json")
+        if picture is not None and picture.suffix.lower() != ".png":
+            raise CsdfError(f"{picture}: the picture must end in .png")
+        cloud = read_point_cloud(scan)
+        if viewpoint is not None and viewpoint.strip().lower() == "none":
+            vp = None
+        elif viewpoint is not None:
+            vp = _vec3(viewpoint, "--viewpoint")
+        else:
+            vp = None if cloud.viewpoint is None else tuple(float(v) for v in cloud.viewpoint)
+        t0 = time.perf_counter()
+        dets = detect_fn(cloud.points, models, normals=cloud.normals, viewpoint=vp,
+                         max_instances=max_instances, seed=seed, noise=noise)
+        seconds = time.perf_counter() - t0
+        detections_to_scene(dets).save(output)
+        table = Table("model", "position", "score", "points")
+        for d in dets:
+            table.add_row(d.model, ", ".join(f"{v:.3f}" for v in d.pose.translation),
+                          f"{d.score:.2f}", str(len(d.inliers)))
+        out.print(table)
+        out.print(f"{output}: {len(dets)} detections in {seconds:.2f} s"
+                  + ("" if vp is not None else " (no viewpoint: free space not checked; "
+                     "give --viewpoint for a single-view scan)"), soft_wrap=True)
+        if picture is not None:
+            from PIL import Image
+
+            from .detect.picture import detections_picture
+
+            img = detections_picture(cloud.points, dets, vp)
+            with atomic_path(picture) as tmp:
+                Image.fromarray(img).save(tmp, format="PNG")
+            out.print(f"{picture}: the scan with the detections", soft_wrap=True)
+
+    _run(go)
+
+
+@app.command()
 def metrics(
     model: Path = typer.Argument(..., help="A .csdf model (or program), or a zoo name."),
     truth: Path = typer.Argument(..., help="A BOP-layout scene folder with scene_gt.json "

@@ -1,0 +1,175 @@
+"""What detection needs to know about a cloud's neighbourhoods: normals by local principal
+component analysis, the point spacing and noise level, and the k-nearest-neighbour graph
+that connected components are cut from.
+
+All of it comes from one :class:`scipy.spatial.cKDTree` query of the ``k`` nearest
+neighbours of every point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import CsdfError
+
+__all__ = ["Neighbourhood", "neighbourhood", "estimate_normals", "points_arg", "viewpoint_arg",
+           "normals_arg", "components",
+           "linked_edges", "K_NORMALS", "MAX_DETECT_POINTS", "LINK"]
+
+#: neighbours per point for normals and the neighbour graph
+K_NORMALS = 12
+#: an edge links two points when no longer than this times the local sampling scale of
+#: either end (see :func:`components`)
+LINK = 2.0
+#: points whose neighbourhoods estimate the noise level when normals are given
+NOISE_SAMPLE = 4000
+#: the most points detection accepts in one cloud
+MAX_DETECT_POINTS = 5_000_000
+
+
+def points_arg(points, what: str = "points") -> np.ndarray:
+    """``points`` as a finite ``(N, 3)`` float64 array, or a :class:`CsdfError` naming
+    ``what`` and the problem."""
+    try:
+        p = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise CsdfError(f"{what} must be an (N, 3) array of numbers: {e}") from None
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise CsdfError(f"{what} must be an (N, 3) array; got shape {p.shape}")
+    if len(p) > MAX_DETECT_POINTS:
+        raise CsdfError(f"{what}: {len(p)} points is more than the limit of "
+                        f"{MAX_DETECT_POINTS}; subsample the cloud first")
+    bad = ~np.all(np.isfinite(p), axis=1)
+    if bad.any():
+        raise CsdfError(f"{what}: row {int(np.argmax(bad))} is not finite "
+                        f"({int(bad.sum())} such rows)")
+    return p
+
+
+def viewpoint_arg(viewpoint) -> np.ndarray | None:
+    """``viewpoint`` as a finite ``(3,)`` array (None stays None), or a CsdfError."""
+    if viewpoint is None:
+        return None
+    vp = np.asarray(viewpoint, dtype=float)
+    if vp.shape != (3,) or not np.all(np.isfinite(vp)):
+        raise CsdfError(f"viewpoint must be a finite (3,) position; got {viewpoint!r}")
+    return vp
+
+
+def normals_arg(normals, points: np.ndarray) -> np.ndarray:
+    """Given normals as unit ``(N, 3)`` rows matching ``points``, or a CsdfError naming
+    the first bad row."""
+    N = points_arg(normals, "normals")
+    if N.shape != points.shape:
+        raise CsdfError(f"normals must have the shape of points {points.shape}; got {N.shape}")
+    ln = np.linalg.norm(N, axis=1)
+    if np.any(ln < 1e-12):
+        raise CsdfError(f"normals: row {int(np.argmax(ln < 1e-12))} has zero length")
+    return N / ln[:, None]
+
+
+@dataclass
+class Neighbourhood:
+    """The k-nearest-neighbour structure of a cloud.
+
+    Attributes:
+        tree: the :class:`cKDTree` of the points.
+        nbr: ``(N, k)`` the indices of each point's ``k`` nearest neighbours (itself
+            excluded).
+        lengths: ``(N, k)`` their distances (scene units).
+        spacing: the median distance to the nearest neighbour (scene units).
+        local: ``(N,)`` each point's distance to its ``k // 2``-th neighbour: the local
+            sampling scale (scene units).
+        noise: a robust estimate of the noise standard deviation: the median over points
+            of the smallest principal standard deviation of their neighbourhoods (scene
+            units; curvature raises it a little on curved surfaces).
+        normals: ``(N, 3)`` unit normals (the neighbourhoods' least principal axes),
+            oriented towards the viewpoint when one was given, else unoriented (None
+            when not asked for).
+    """
+
+    tree: cKDTree
+    nbr: np.ndarray
+    lengths: np.ndarray
+    spacing: float
+    local: np.ndarray
+    noise: float
+    normals: np.ndarray | None
+
+
+def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
+                  want_normals: bool = True) -> Neighbourhood:
+    """The :class:`Neighbourhood` of ``points`` ``(N, 3)`` with ``k`` neighbours each
+    (fewer when the cloud is smaller); ``viewpoint`` ``(3,)`` orients the normals towards
+    the sensor. Without ``want_normals`` the normals are None and the noise level is
+    estimated on a subsample of about ``NOISE_SAMPLE`` points."""
+    n = len(points)
+    tree = cKDTree(points)
+    k = int(min(k, n - 1))
+    if k < 2:
+        raise CsdfError(f"a cloud of {n} points is too small to estimate normals")
+    dist, idx = tree.query(points, k=k + 1, workers=-1)
+    dist, idx = dist[:, 1:], idx[:, 1:]
+    # the noise level from a fixed subsample (every point when normals are wanted)
+    sub = np.arange(n) if want_normals else np.arange(0, n, max(1, n // NOISE_SAMPLE))
+    nb = points[idx[sub]]  # (S, k, 3)
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centred, centred) / k
+    w, v = np.linalg.eigh(cov)
+    normals = None
+    if want_normals:
+        normals = v[:, :, 0]
+        if viewpoint is not None:
+            flip = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, float) - points) < 0
+            normals[flip] *= -1
+    return Neighbourhood(tree=tree, nbr=np.ascontiguousarray(idx), lengths=dist,
+                         spacing=float(np.median(dist[:, 0])), local=dist[:, k // 2 - 1],
+                         noise=float(np.median(np.sqrt(np.maximum(w[:, 0], 0.0)))),
+                         normals=normals)
+
+
+def estimate_normals(points, k: int = K_NORMALS, viewpoint=None) -> np.ndarray:
+    """Unit normals ``(N, 3)`` of a cloud ``(N, 3)`` by principal component analysis of
+    each point's ``k`` nearest neighbours, turned towards ``viewpoint`` ``(3,)`` when
+    given (a single-view scan: the sensor position), else of arbitrary sign.
+
+    Raises:
+        CsdfError: points not ``(N, 3)``, not finite, or fewer than three.
+    """
+    p = points_arg(points)
+    return neighbourhood(p, k, viewpoint).normals
+
+
+def linked_edges(nb: Neighbourhood, radius: float | None = None, strict: bool = False
+                 ) -> np.ndarray:
+    """``(N, k)`` which neighbour edges link their ends: no longer than ``radius``
+    (scene units), or, when None, than ``LINK`` times the local sampling scale of either
+    end (so that sparse and dense parts of a scan both hold together); ``strict``: of
+    both ends (so that an isolated outlier, whose own scale is large, links nothing)."""
+    if radius is not None:
+        return nb.lengths <= radius
+    pick = np.minimum if strict else np.maximum
+    return nb.lengths <= LINK * pick(nb.local[:, None], nb.local[nb.nbr])
+
+
+def components(nb: Neighbourhood, mask: np.ndarray, linked: np.ndarray) -> np.ndarray:
+    """Connected components of the points where ``mask`` ``(N,)`` is true, joined by the
+    neighbour edges marked in ``linked`` ``(N, k)`` (:func:`linked_edges`; the graph is
+    undirected). Returns a ``(N,)`` int label per point, -1 where ``mask`` is false;
+    labels are numbered by decreasing size (0 the largest; ties by lowest point)."""
+    from .kernels import component_roots
+
+    lab = np.full(len(mask), -1, dtype=np.int64)
+    sel = np.flatnonzero(mask)
+    if not len(sel):
+        return lab
+    roots = component_roots(sel, nb.nbr, linked, mask)
+    ids, inv, counts = np.unique(roots, return_inverse=True, return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    rank = np.empty(len(ids), dtype=np.int64)
+    rank[order] = np.arange(len(ids))
+    lab[sel] = rank[inv]
+    return lab

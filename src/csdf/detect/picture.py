@@ -1,0 +1,69 @@
+"""A picture of detections: the scan's points seen from the sensor, each detection's
+model drawn over them in its own colour (surface samples of the posed model that face
+the sensor), with its name. For ``csdf detect --picture``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["detections_picture", "PICTURE_SAMPLES"]
+
+#: surface samples drawn per detection
+PICTURE_SAMPLES = 4000
+
+
+def _project(P: np.ndarray, vp: np.ndarray | None) -> np.ndarray:
+    """2D image coordinates ``(N, 2)``: a pinhole at ``vp`` looking along +z (the
+    camera-frame convention of :func:`csdf.scan`: x right, y down) when every point is
+    in front of it, else an orthographic view down -z."""
+    if vp is not None:
+        z = P[:, 2] - vp[2]
+        if len(P) and np.all(z > 1e-9):
+            return np.stack([(P[:, 0] - vp[0]) / z, -(P[:, 1] - vp[1]) / z], axis=1)
+    return P[:, :2].copy()
+
+
+def detections_picture(points, detections, viewpoint=None, size: tuple[int, int] = (960, 720)
+                       ) -> np.ndarray:
+    """An RGB image ``(H, W, 3)`` uint8 of the scan ``points`` ``(N, 3)`` (grey; the
+    points a detection explains in its colour) and each :class:`Detection`'s posed model
+    (surface samples facing ``viewpoint``, ``(3,)`` or None) with its name."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..sample import sample_surface
+
+    P = np.asarray(points, dtype=float)
+    vp = None if viewpoint is None else np.asarray(viewpoint, dtype=float)
+    w, h = size
+    fig = plt.figure(figsize=(w / 100, h / 100), dpi=100)
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.set_facecolor("white")
+    uv = _project(P, vp)
+    ax.scatter(uv[:, 0], uv[:, 1], s=0.6, c="0.7", linewidths=0)
+    colours = plt.get_cmap("tab10")
+    for k, d in enumerate(detections):
+        col = colours(k % 10)
+        if len(d.inliers):
+            q = _project(P[d.inliers], vp)
+            ax.scatter(q[:, 0], q[:, 1], s=0.8, color=col, alpha=0.35, linewidths=0)
+        S, N = sample_surface(d.shape, PICTURE_SAMPLES, seed=k, params=d.params,
+                              check_ranges=False)
+        S, N = d.pose.apply(S), d.pose.apply_dirs(N)
+        if vp is not None:
+            S = S[np.einsum("ij,ij->i", N, vp - S) > 0]
+        if not len(S):
+            continue
+        q = _project(S, vp)
+        ax.scatter(q[:, 0], q[:, 1], s=1.2, color=col, linewidths=0)
+        top = q[np.argmax(q[:, 1])]
+        ax.text(top[0], top[1], f" {d.model} {d.score:.2f}", color=col, fontsize=11,
+                va="bottom", ha="center", weight="bold")
+    ax.set_aspect("equal")
+    ax.axis("off")
+    fig.canvas.draw()
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    plt.close(fig)
+    return img

@@ -1,0 +1,244 @@
+"""Detection in point clouds (csdf.detect): primitives by Efficient RANSAC scored with
+exact distances, known models in a cluttered scan, the scene they make, the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import csdf
+from csdf.detect import surfaces as S
+from csdf.detect.neighbours import components, linked_edges, neighbourhood
+
+# -- the minimal-set solvers, on exact data -------------------------------------------
+
+
+def _frame(a):
+    return S.frame_z(np.asarray(a, float))
+
+
+def test_sphere_and_cylinder_from_two_oriented_points():
+    rng = np.random.default_rng(1)
+    c = np.array([0.1, 0.2, 0.3])
+    u = rng.normal(size=(2, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    H, ok = S.spheres_from((c + 0.2 * u)[None], (u * [[1], [-1]])[None], 1e-9, 10.0)
+    assert ok[0] and np.allclose(H[0], [0.1, 0.2, 0.3, 0.2])
+    R = _frame([0.3, 0.4, 0.5])
+    ang = np.array([0.3, 2.0])
+    loc = np.stack([0.15 * np.cos(ang), 0.15 * np.sin(ang), [0.2, -0.4]], 1)
+    nl = np.stack([np.cos(ang), np.sin(ang), [0, 0]], 1)
+    H, ok = S.cylinders_from((loc @ R.T + c)[None], (nl @ R.T)[None], 1e-9, 10.0)
+    assert ok[0] and math.isclose(H[0, 6], 0.15)
+    assert abs(abs(H[0, 3:6] @ R[:, 2]) - 1) < 1e-12
+    d, cos = S.surface_distance("cylinder", H, loc @ R.T + c, nl @ R.T)
+    assert np.allclose(d, 0, atol=1e-12) and np.allclose(cos, 1)
+
+
+def test_cone_and_torus_from_oriented_points():
+    rng = np.random.default_rng(2)
+    c = np.array([0.1, -0.2, 0.3])
+    R = _frame([0.3, -0.4, 0.5])
+    th = math.radians(30)
+    hs, ang = rng.uniform(0.1, 0.5, 3), rng.uniform(0, 6.28, 3)
+    loc = np.stack([hs * math.tan(th) * np.cos(ang), hs * math.tan(th) * np.sin(ang), hs], 1)
+    nl = np.stack([math.cos(th) * np.cos(ang), math.cos(th) * np.sin(ang),
+                   -math.sin(th) * np.ones(3)], 1)
+    H, ok = S.cones_from((loc @ R.T + c)[None], (nl @ R.T)[None], 1e-9, 10.0)
+    assert ok[0] and np.allclose(H[0, :3], c) and math.isclose(H[0, 6], th)
+    assert np.allclose(H[0, 3:6], R[:, 2])
+    # a torus from four nearby oriented points (one normal flipped: signs are unknown)
+    phi, psi = rng.uniform(0, 0.5, 4), rng.uniform(0, 0.9, 4)
+    nl = np.stack([np.cos(psi) * np.cos(phi), np.cos(psi) * np.sin(phi), np.sin(psi)], 1)
+    loc = np.stack([0.3 * np.cos(phi), 0.3 * np.sin(phi), 0 * phi], 1) + 0.08 * nl
+    n = nl @ R.T
+    n[2] *= -1
+    H, ok = S.tori_from((loc @ R.T + c)[None], n[None], 1e-9, 10.0)
+    good = H[ok]
+    assert len(good) == 1 and np.allclose(good[0, [0, 1, 2, 6, 7]], [*c, 0.3, 0.08])
+
+
+def test_normals_and_components():
+    rng = np.random.default_rng(0)
+    a = np.c_[rng.uniform(0, 1, (400, 2)), np.zeros(400)]
+    b = a + [3.0, 0, 0]
+    P = np.concatenate([a, b])
+    nb = neighbourhood(P, viewpoint=np.array([0.0, 0.0, 5.0]))
+    assert np.allclose(nb.normals, [0, 0, 1], atol=1e-9)
+    lab = components(nb, np.ones(len(P), bool), linked_edges(nb))
+    assert set(lab[:400]) == {lab[0]} and set(lab[400:]) == {lab[400]} and lab[0] != lab[400]
+    n2 = csdf.estimate_normals(P)
+    assert np.allclose(np.abs(n2[:, 2]), 1)
+
+
+# -- detect_primitives ----------------------------------------------------------------
+
+def _primitive_scene(seed=0, n=12_000, noise=0.001):
+    rng = np.random.default_rng(seed)
+    shapes = [
+        ("sphere", csdf.sphere(0.1).translate((0.3, 0.3, 0.2))),
+        ("cylinder", csdf.cylinder(0.08, 0.3).rotate(0.7, (1, 0, 0)).translate((-0.3, 0.3, 0.25))),
+        ("cone", csdf.cone(0.1, 0.2).rotate(0.4, (0, 1, 0)).translate((0.3, -0.3, 0.1))),
+        ("torus", csdf.torus(0.12, 0.04).rotate(0.5, (1, 1, 0)).translate((-0.3, -0.3, 0.2))),
+        ("box", csdf.box((0.2, 0.15, 0.25)).rotate(0.3, (0, 0, 1)).translate((0, 0, 0.3))),
+    ]
+    per = n // 6
+    pts, nrm, lab = [], [], []
+    for i, (_, s) in enumerate(shapes):
+        p, q = csdf.sample_surface(s, per, seed=i)
+        pts.append(p), nrm.append(q), lab.append(np.full(len(p), i))
+    pts.append(np.c_[rng.uniform(-0.5, 0.5, (per, 2)), np.zeros(per)])
+    nrm.append(np.tile([0, 0, 1.0], (per, 1)))
+    lab.append(np.full(per, 5))
+    P = np.concatenate(pts)
+    return P + rng.normal(0, noise, P.shape), np.concatenate(nrm), np.concatenate(lab)
+
+
+@pytest.fixture(scope="module")
+def prim_scene():
+    return _primitive_scene()
+
+
+def test_detect_primitives_finds_every_kind(prim_scene):
+    P, N, L = prim_scene
+    dets = csdf.detect_primitives(P, N, seed=0)
+    kinds = ["sphere", "cylinder", "cone", "torus", "box", "plane"]
+    got = {}
+    for d in dets:
+        lab = np.bincount(L[d.inliers], minlength=6)
+        j = int(np.argmax(lab))
+        assert lab[j] >= 0.98 * len(d.inliers), d  # one primitive's points
+        got[kinds[j]] = d
+    assert {k: d.kind for k, d in got.items()} == {k: k for k in kinds}
+    assert len(dets) == 6
+    p = {k: d.params for k, d in got.items()}
+    assert abs(p["sphere"]["radius"] - 0.1) < 5e-4
+    assert np.allclose(p["sphere"]["center"], [0.3, 0.3, 0.2], atol=5e-4)
+    assert abs(p["cylinder"]["radius"] - 0.08) < 5e-4 and abs(p["cylinder"]["height"] - 0.3) < 2e-3
+    assert abs(p["torus"]["major"] - 0.12) < 5e-4 and abs(p["torus"]["minor"] - 0.04) < 5e-4
+    assert abs(p["cone"]["angle"] - math.atan(0.5)) < 0.01
+    assert np.allclose(sorted(p["box"]["size"]), [0.15, 0.2, 0.25], atol=2e-3)
+    assert abs(abs(p["plane"]["offset"])) < 5e-4 and abs(abs(p["plane"]["normal"][2]) - 1) < 1e-3
+    # the shapes are posed csdf primitives: their surfaces pass through their inliers
+    for d in dets:
+        if d.kind != "plane":
+            rms = float(np.sqrt(np.mean(np.asarray(d.shape(P[d.inliers])) ** 2)))
+            assert rms < 2e-3 and math.isclose(d.rmse, rms, rel_tol=0.05)
+    # no point is in two detections
+    allin = np.concatenate([d.inliers for d in dets])
+    assert len(allin) == len(np.unique(allin))
+
+
+def test_detect_primitives_is_deterministic_and_filters_kinds(prim_scene):
+    P, N, _ = prim_scene
+    a = csdf.detect_primitives(P, N, seed=3, kinds="plane,sphere")
+    b = csdf.detect_primitives(P, N, seed=3, kinds=("plane", "sphere"))
+    assert [d.kind for d in a] == [d.kind for d in b]
+    assert all(np.array_equal(x.inliers, y.inliers) for x, y in zip(a, b))
+    assert {d.kind for d in a} <= {"plane", "sphere"} and "sphere" in {d.kind for d in a}
+
+
+def test_detect_primitives_estimates_normals(prim_scene):
+    P, _, L = prim_scene
+    dets = csdf.detect_primitives(P, kinds=("sphere", "plane"), seed=0)
+    sph = [d for d in dets if d.kind == "sphere"]
+    assert sph and abs(sph[0].params["radius"] - 0.1) < 1e-3
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"points": np.zeros((5, 2))}, "shape"),
+    ({"points": np.array([[0, 0, np.nan]] * 5)}, "row 0"),
+    ({"kinds": ("plane", "blob")}, "unknown kind 'blob'"),
+    ({"epsilon": -1.0}, "epsilon"),
+    ({"normal_tolerance": 95}, "normal_tolerance"),
+    ({"normals": np.zeros((10, 3))}, "normals"),
+])
+def test_detect_primitives_bad_input(kw, match):
+    args = {"points": np.random.default_rng(0).random((10, 3))}
+    args.update(kw)
+    with pytest.raises(csdf.CsdfError, match=match):
+        csdf.detect_primitives(**args)
+
+
+# -- detect: known models in a scan ---------------------------------------------------
+
+@pytest.fixture(scope="module")
+def clutter():
+    scene = csdf.Scene()
+    scene.add(csdf.box((6.0, 6.0, 0.05)), pose=csdf.Pose(translation=(0, 0, -0.025)),
+              name="floor")
+    c, s = math.cos(0.4), math.sin(0.4)
+    stool_pose = csdf.Pose([[c, -s, 0], [s, c, 0], [0, 0, 1]], (0.1, 0.0, 0.0))
+    params = {"height": 0.6, "seat_radius": 0.17}
+    scene.add("stool", pose=stool_pose, params=params, name="stool")
+    scene.add(csdf.sphere(0.15), pose=csdf.Pose(translation=(-0.7, 0.3, 0.15)), name="ball")
+    cam = csdf.Camera.look_at(eye=(0.0, -2.6, 1.6), target=(-0.2, 0.1, 0.3), fov=50,
+                              width=200, height=150)
+    P, N, inst = csdf.scan(scene, cam, noise=0.004, outliers=0.005, seed=1)
+    return P, N, inst, cam, stool_pose, params
+
+
+def _camera_pose(cam, pose):
+    """The object-to-camera pose of an object-to-world one."""
+    R = cam.R.T @ pose.rotation
+    t = cam.R.T @ (pose.translation - cam.t)
+    return csdf.Pose(R, t)
+
+
+def test_detect_finds_the_model_and_rejects_the_distractor(clutter):
+    P, N, inst, cam, pose, params = clutter
+    dets = csdf.detect(P, ["stool", "table"], viewpoint=(0, 0, 0), seed=0)
+    assert [d.model for d in dets] == ["stool"], dets
+    d = dets[0]
+    gt = _camera_pose(cam, pose)
+    pts = csdf.metrics.model_points(csdf.zoo.load("stool"), 300, params=params)
+    syms = csdf.metrics.symmetries(csdf.zoo.load("stool"), params=params)
+    diam = csdf.metrics.diameter(pts)
+    assert csdf.metrics.mssd(pts, d.pose, gt, syms) < 0.05 * diam
+    assert abs(d.params["height"] - 0.6) < 0.03
+    assert 0.8 <= d.score <= 1.0
+    assert np.mean(inst[d.inliers] == 1) > 0.95  # the stool's own points
+    again = csdf.detect(P, "stool,table", viewpoint=(0, 0, 0), seed=0)
+    assert np.array_equal(again[0].pose.matrix, d.pose.matrix)
+    sc = csdf.detections_to_scene(dets)
+    assert len(sc) == 1
+    q = sc.query(gt.apply(pts[:50]))
+    assert np.all(np.abs(q.distance) < 0.05)
+
+
+def test_detect_bad_models():
+    P = np.random.default_rng(0).random((100, 3))
+    with pytest.raises(csdf.CsdfError, match="unknown zoo model 'chiar'"):
+        csdf.detect(P, ["chiar"])
+    with pytest.raises(csdf.CsdfError, match="no models"):
+        csdf.detect(P, [])
+    with pytest.raises(csdf.CsdfError, match="viewpoint"):
+        csdf.detect(P, ["stool"], viewpoint=(0, 0))
+    with pytest.raises(csdf.CsdfError, match="twice"):
+        csdf.detect(P, ["stool", "stool"])
+
+
+def test_cli_detect(clutter, tmp_path):
+    from typer.testing import CliRunner
+
+    from csdf.cli import app
+    from csdf.io import write_points
+
+    P, N, *_ = clutter
+    ply = tmp_path / "scan.ply"
+    write_points(ply, P, N, viewpoint=(0.0, 0.0, 0.0))
+    out = tmp_path / "scene.json"
+    png = tmp_path / "det.png"
+    r = CliRunner().invoke(app, ["detect", str(ply), "--models", "stool,table", "-o",
+                                 str(out), "--picture", str(png)])
+    assert r.exit_code == 0, r.output
+    data = json.loads(out.read_text())
+    assert "stool" in json.dumps(data)
+    sc = csdf.Scene.load(out)
+    assert len(sc) == 1
+    assert png.stat().st_size > 10_000
+    r = CliRunner().invoke(app, ["detect", str(ply), "--models", "nosuch", "-o", str(out)])
+    assert r.exit_code != 0 and "nosuch" in r.output

@@ -435,15 +435,7 @@ def fit(
         init_params = _checked_params(m, param, no_check_ranges)
         cloud = read_point_cloud(scan)
         pts = cloud.points
-        if viewpoint is not None and viewpoint.strip().lower() == "none":
-            vp, source = None, "none (--viewpoint none)"
-        elif viewpoint is not None:
-            vp, source = _vec3(viewpoint, "--viewpoint"), "--viewpoint"
-        elif cloud.viewpoint is not None:
-            vp, source = tuple(float(v) for v in cloud.viewpoint), f"{scan}'s header"
-        else:
-            vp, source = None, f"none ({scan} records no viewpoint; give --viewpoint for " \
-                "a single-view scan)"
+        vp, source = _cloud_viewpoint(viewpoint, cloud, scan)
         # solver='scipy' has no visibility term: the viewpoint then serves the success
         # test only
         fit_vp = vp if solver != "scipy" or source == "--viewpoint" else None
@@ -485,13 +477,9 @@ def fit(
                           "end in a wrong minimum; try --multistart", soft_wrap=True,
                           markup=False)
         if overlay is not None:
-            from PIL import Image
-
             from .render.overlay import fit_overlay
 
-            img = fit_overlay(m, pts, res, check_ranges=not no_check_ranges)
-            with atomic_path(overlay) as tmp:
-                Image.fromarray(img).save(tmp, format="PNG")
+            _write_png(overlay, fit_overlay(m, pts, res, check_ranges=not no_check_ranges))
             out.print(f"{overlay}: overlay of the fit", soft_wrap=True)
 
     _run(go)
@@ -831,19 +819,14 @@ def detect(
     def go():
         from .detect import detect as detect_fn
         from .detect import detections_to_scene
-        from .io import atomic_path, read_point_cloud
+        from .io import read_point_cloud
 
         if output.suffix.lower() != ".json":
             raise CsdfError(f"{output}: the output must end in .json")
         if picture is not None and picture.suffix.lower() != ".png":
             raise CsdfError(f"{picture}: the picture must end in .png")
         cloud = read_point_cloud(scan)
-        if viewpoint is not None and viewpoint.strip().lower() == "none":
-            vp = None
-        elif viewpoint is not None:
-            vp = _vec3(viewpoint, "--viewpoint")
-        else:
-            vp = None if cloud.viewpoint is None else tuple(float(v) for v in cloud.viewpoint)
+        vp, _ = _cloud_viewpoint(viewpoint, cloud, scan)
         t0 = time.perf_counter()
         dets = detect_fn(cloud.points, models, normals=cloud.normals, viewpoint=vp,
                          max_instances=max_instances, seed=seed, noise=noise)
@@ -858,13 +841,9 @@ def detect(
                   + ("" if vp is not None else " (no viewpoint: free space not checked; "
                      "give --viewpoint for a single-view scan)"), soft_wrap=True)
         if picture is not None:
-            from PIL import Image
-
             from .detect.picture import detections_picture
 
-            img = detections_picture(cloud.points, dets, vp)
-            with atomic_path(picture) as tmp:
-                Image.fromarray(img).save(tmp, format="PNG")
+            _write_png(picture, detections_picture(cloud.points, dets, vp))
             out.print(f"{picture}: the scan with the detections", soft_wrap=True)
 
     _run(go)
@@ -982,6 +961,30 @@ def metrics(
             out.print(f"{output}: errors and recalls", soft_wrap=True)
 
     _run(go)
+
+
+def _cloud_viewpoint(viewpoint: str | None, cloud, scan: Path
+                     ) -> tuple[tuple[float, float, float] | None, str]:
+    """The sensor position of a scan and where it came from: ``--viewpoint x,y,z``,
+    ``--viewpoint none`` (ignored), else the position the PLY header records."""
+    if viewpoint is not None and viewpoint.strip().lower() == "none":
+        return None, "none (--viewpoint none)"
+    if viewpoint is not None:
+        return _vec3(viewpoint, "--viewpoint"), "--viewpoint"
+    if cloud.viewpoint is not None:
+        return tuple(float(v) for v in cloud.viewpoint), f"{scan}'s header"
+    return None, (f"none ({scan} records no viewpoint; give --viewpoint for a "
+                  "single-view scan)")
+
+
+def _write_png(path: Path, img) -> None:
+    """Write an RGB image ``(H, W, 3)`` uint8 as PNG (a temporary file, then renamed)."""
+    from PIL import Image
+
+    from .io import atomic_path
+
+    with atomic_path(path) as tmp:
+        Image.fromarray(img).save(tmp, format="PNG")
 
 
 def _size(text: str) -> tuple[int, int]:

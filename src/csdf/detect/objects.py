@@ -294,6 +294,7 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
     rng = np.random.default_rng(seed)
     run = _Run(P, N, nb, vp, sigma, mp, rng, ms)
     run.estimate_noise = noise is None
+    run.upright = bool(upright)
     run.find_supports()
     run.find_clusters()
     out: list[Detection] = []
@@ -320,12 +321,12 @@ class _Run:
         self.sigma, self.mp, self.rng, self.models = sigma, mp, rng, models
         self.support = np.zeros(len(P), dtype=bool)
         self.claimed = np.zeros(len(P), dtype=bool)
-        self.up: np.ndarray | None = None
         self.plane: tuple[np.ndarray, float] | None = None
         self.clusters: list[np.ndarray] = []
         self.label = np.full(len(P), -1)  # cluster of each point (-1: none)
         self.sizes = np.zeros(0, dtype=int)
         self.estimate_noise = True
+        self.upright = True
         if vp is not None:
             d = P - vp
             self.dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
@@ -347,7 +348,7 @@ class _Run:
                 continue
             off = float(pl.params["offset"])
             d = self.P @ nrm - off
-            if self.up is None and self.estimate_noise:
+            if self.plane is None and self.estimate_noise:
                 # the noise level from the support's residuals (the neighbourhoods'
                 # estimate is low when the noise is not small against the spacing)
                 band = np.abs(d) <= 8.0 * self.sigma
@@ -357,8 +358,8 @@ class _Run:
             # the plane's slab: its points and every point within three noise levels
             self.support |= np.abs(d) <= 3.0 * self.sigma
             self.support[pl.inliers] = True
-            if self.up is None:
-                self.up, self.plane = nrm, (nrm, off)
+            if self.plane is None:  # the largest support: its normal is up
+                self.plane = (nrm, off)
 
     def find_clusters(self) -> None:
         mask = ~self.support
@@ -540,7 +541,7 @@ class _Run:
         sub = idx if len(idx) <= SCREEN_POINTS else np.sort(
             self.rng.choice(idx, SCREEN_POINTS, replace=False))
         S = self.P[sub]
-        if self.plane is not None and self.up is not None:
+        if self.plane is not None and self.upright:
             placed = [(*self._placed(m, idx, S), i) for i, m in enumerate(fits)]
             ranked = sorted(placed, key=lambda x: (x[0], x[2]))[:MODELS_REFINED]
             tries = [(fits[i], init) for _, init, i in ranked]

@@ -416,13 +416,19 @@ def _initial_solid(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray
     return frame_z(a), h[:3].copy(), {"major": float(h[6]), "minor": float(h[7])}
 
 
+def _on_solid(ctx: _Ctx, kind: str, R, t, values, idx: np.ndarray) -> np.ndarray:
+    """``(K,)`` which points ``idx`` are inliers of the solid: within ``epsilon`` of it,
+    their normals within the tolerance of its gradient."""
+    d, g = solid_values(kind, R, t, values, ctx.P[idx])
+    return (np.abs(d) <= ctx.eps) & (np.abs(np.einsum("ij,ij->i", g, ctx.N[idx]))
+                                     >= ctx.cos_tol)
+
+
 def _near_solid(ctx: _Ctx, kind: str, R, t, values, cand: np.ndarray, seedset: np.ndarray
                 ) -> np.ndarray:
     """Indices among ``cand`` within ``epsilon`` of the solid with agreeing normals,
     in the connected components that hold points of ``seedset``."""
-    d, g = solid_values(kind, R, t, values, ctx.P[cand])
-    ok = (np.abs(d) <= ctx.eps) & (np.abs(np.einsum("ij,ij->i", g, ctx.N[cand]))
-                                   >= ctx.cos_tol)
+    ok = _on_solid(ctx, kind, R, t, values, cand)
     good = np.zeros(len(ctx.P), dtype=bool)
     good[cand[ok]] = True
     mask = good.copy()
@@ -519,10 +525,7 @@ def _absorb_planes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[Primitive
             continue
         for j in solids:
             kind, R, t, vals = out[j].solid
-            dist, g = solid_values(kind, R, t, vals, ctx.P[d.inliers])
-            ok = (np.abs(dist) <= ctx.eps) & (
-                np.abs(np.einsum("ij,ij->i", g, ctx.N[d.inliers])) >= ctx.cos_tol)
-            if ok.mean() >= 0.9:
+            if _on_solid(ctx, kind, R, t, vals, d.inliers).mean() >= 0.9:
                 pts = np.union1d(out[j].inliers, d.inliers)
                 try:
                     R2, t2, v2 = _fit_solid(ctx, kind, R, t, vals, pts)
@@ -601,8 +604,6 @@ def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection]) -> PrimitiveDetection | 
         R, t, vals = _fit_solid(ctx, "box", R, t, vals, idx)
     except CsdfError:
         return None
-    d, g = solid_values("box", R, t, vals, ctx.P[idx])
-    ok = (np.abs(d) <= ctx.eps) & (np.abs(np.einsum("ij,ij->i", g, ctx.N[idx])) >= ctx.cos_tol)
-    if ok.mean() < 0.9 or min(vals.values()) <= 2 * ctx.eps:
+    if _on_solid(ctx, "box", R, t, vals, idx).mean() < 0.9 or min(vals.values()) <= 2 * ctx.eps:
         return None
     return _solid_detection(ctx, "box", R, t, vals, idx)

@@ -54,7 +54,6 @@ _FOV = 60.0             # clutter camera: a first vertical field of view (degree
 _FOV_RANGE = (30.0, 75.0)  # ... then the one that frames all objects, within these
 _FOV_MARGIN = 1.1       # ... with this margin on the tangent of the half angle
 _MIN_VISIBLE_320 = 300  # least scan points per object at 320 x 240 (scaled with pixels)
-_SYMMETRY_BUDGET = 1.0  # s: symmetries slower than this (per object) are given as None
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -478,7 +477,7 @@ def clutter_scene(seed: int, models: tuple[str, ...] = CLUTTER_MODELS,
           ``'params'`` ``{name: value}``, ``'instance'`` (scene id), ``'diameter'``
           (m, :func:`csdf.metrics.diameter` of :func:`csdf.metrics.model_points`),
           ``'symmetries'`` (``(K, 4, 4)`` from :func:`csdf.metrics.symmetries`, model
-          frame; None where it failed or took over 1 s), ``'visible_points'`` (scan
+          frame; None where it failed), ``'visible_points'`` (scan
           points with its id), ``'world_pose'`` (object to world).
         * ``'distractors'``: one dict per distractor: ``'kind'``, ``'pose'`` (object to
           camera; the shape's own frame: centred, axis z), ``'instance'``, ``'params'``
@@ -607,12 +606,9 @@ def clutter_scene(seed: int, models: tuple[str, ...] = CLUTTER_MODELS,
     world_to_cam = csdf.Pose(cam.R, cam.t).inverse()
     truth = []
     for o, n_seen in zip(objects, seen):
-        t0 = time.perf_counter()
         try:
             sym = csdf.metrics.symmetries(base_shapes[o["model"]], params=o["params"])
         except csdf.CsdfError:
-            sym = None
-        if time.perf_counter() - t0 > _SYMMETRY_BUDGET:
             sym = None
         truth.append({
             "model": o["model"], "pose": world_to_cam @ o["world_pose"],

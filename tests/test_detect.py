@@ -11,7 +11,8 @@ import pytest
 
 import csdf
 from csdf.detect import surfaces as S
-from csdf.detect.neighbours import components, linked_edges, neighbourhood
+from csdf.detect.neighbours import components, linked_edges, neighbourhood, sparse_points
+from csdf.fit.quality import VIEW_RAYS, _edge_rays
 
 # -- the minimal-set solvers, on exact data -------------------------------------------
 
@@ -72,6 +73,44 @@ def test_normals_and_components():
     assert set(lab[:400]) == {lab[0]} and set(lab[400:]) == {lab[400]} and lab[0] != lab[400]
     n2 = csdf.estimate_normals(P)
     assert np.allclose(np.abs(n2[:, 2]), 1)
+
+
+def test_frustum_outliers_are_sparse_and_do_not_join_surfaces():
+    # two patches 3 m from the sensor, 0.6 m apart, and outliers scattered through the
+    # frustum between them: linked by their own scale they would chain the patches
+    rng = np.random.default_rng(0)
+    g = np.stack(np.meshgrid(np.linspace(-0.3, 0.3, 40), np.linspace(-0.3, 0.3, 40)),
+                 -1).reshape(-1, 2)
+    a = np.c_[g[:, 0] - 0.5, g[:, 1], np.full(len(g), 3.0)]
+    b = np.c_[g[:, 0] + 0.5, g[:, 1], np.full(len(g), 3.0)]
+    z = rng.uniform(1.0, 4.0, 300)
+    out = np.c_[rng.uniform(-0.3, 0.3, 300) * z, rng.uniform(-0.15, 0.15, 300) * z, z]
+    P = np.concatenate([a, b, out])
+    vp = np.zeros(3)
+    nb = neighbourhood(P, viewpoint=vp)
+    sp = sparse_points(nb, P, vp)
+    assert sp[-300:].mean() > 0.8 and not sp[:-300].any()
+    lab = components(nb, ~sp, linked_edges(nb, strict=True))
+    n = len(g)
+    assert len(set(lab[:n])) == 1 and len(set(lab[n:2 * n])) == 1 and lab[0] != lab[n]
+    # without a viewpoint the expected scale is the cloud's median
+    assert not sparse_points(nb, P)[:-300].any()
+
+
+def test_edge_rays_of_the_visibility_check():
+    v = VIEW_RAYS
+    D = np.full((v, v), 2.0)
+    D[:, v // 2:] = 2.5  # a step of 0.5 m between two columns
+    D[:3, :3] = np.inf  # no hit: its neighbours are edge rays
+    tan = np.zeros(v * v)
+    e = _edge_rays(D.reshape(-1), tan, 0.01, 0.01).reshape(v, v)
+    assert e[:, v // 2 - 1].all() and e[:, v // 2].all()  # both sides of the step
+    assert e[:3, :3].all() and e[3, 0] and e[0, 3]
+    assert not e[10:, 5:v // 2 - 1].any() and not e[10:, v // 2 + 1:].any()
+    # a slanted plane (depth changing smoothly across the grid) has no edges
+    slope = np.linspace(2.0, 2.6, v)[None, :].repeat(v, 0)
+    tan_s = np.full(v * v, 0.6 / (2.3 * 0.01 * (v - 1)) * 1.01)
+    assert not _edge_rays(slope.reshape(-1), tan_s, 0.0, 0.01).any()
 
 
 # -- detect_primitives ----------------------------------------------------------------
@@ -242,3 +281,19 @@ def test_cli_detect(clutter, tmp_path):
     assert png.stat().st_size > 10_000
     r = CliRunner().invoke(app, ["detect", str(ply), "--models", "nosuch", "-o", str(out)])
     assert r.exit_code != 0 and "nosuch" in r.output
+
+
+def test_feet_split_a_cluster_wider_than_the_model():
+    from csdf.detect.objects import FEET_SPLIT, _feet
+
+    rng = np.random.default_rng(0)
+    F = np.concatenate([rng.normal((0, 0, 0), 0.05, (200, 3)),
+                        rng.normal((1, 0, 0), 0.05, (200, 3))])
+    F[:, 2] = 0
+    one = _feet(F, foot=2.0)  # the model is wider than the cluster: its centre only
+    assert len(one) == 1 and np.allclose(one[0], F.mean(0))
+    feet = _feet(F, foot=0.3)
+    assert len(feet) == 1 + sum(range(2, FEET_SPLIT + 1))
+    two = np.array(sorted(feet[1:3], key=lambda c: c[0]))
+    assert np.allclose(two, [[0, 0, 0], [1, 0, 0]], atol=0.02)
+    assert all(np.array_equal(a, b) for a, b in zip(feet, _feet(F, foot=0.3)))

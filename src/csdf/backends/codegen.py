@@ -76,7 +76,16 @@ _VALUE = {
 
 
 def structure_key(low, mode: str) -> str:
-    """Hash of everything the generated source depends on."""
+    """Hash of everything the generated source depends on (kept on ``low`` per mode: a
+    lowering does not change)."""
+    keys = low.__dict__.setdefault("_structure_keys", {})
+    key = keys.get(mode)
+    if key is None:
+        key = keys[mode] = _structure_key(low, mode)
+    return key
+
+
+def _structure_key(low, mode: str) -> str:
     h = hashlib.blake2b(digest_size=16)
     h.update(f"v{CODEGEN_VERSION}|{mode}|{low.n_params}|{low.n_consts}|{low.n_uniform_rows}|"
              f"{low.out_row}|".encode())  # (n_consts: which rows are constants, for ties)

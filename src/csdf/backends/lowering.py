@@ -126,7 +126,7 @@ class Lowered:
     def _uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
         prog = self.prog
         P = self.n_params
-        vals, dparams = uniform_prefix(prog, pvals, self.n_prefix)
+        vals, dparams = uniform_prefix(prog, pvals, self.n_prefix, tangents=wrt_params)
         U = self.n_uniform_rows
         uvals = np.empty(U, dtype=np.float64)
         uvals[:P] = pvals

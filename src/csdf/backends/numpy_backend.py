@@ -195,12 +195,13 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
     return res
 
 
-def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int):
+def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int, tangents: bool = True):
     """Values and parameter derivatives of the first ``n_prefix`` instructions, which
     must read only parameters, constants and earlier prefix results (float64).
 
     Returns:
-        ``(values, dparams)``: lists indexed by instruction; ``dparams[k]`` is ``(P,)``.
+        ``(values, dparams)``: lists indexed by instruction; ``dparams[k]`` is ``(P,)``
+        (``dparams`` is empty when ``tangents`` is False: values only, faster).
     """
     P = len(prog.params)
     lay = prog.layout
@@ -219,9 +220,12 @@ def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int):
             info = OPS_BY_CODE[op]
             va, vb = vals[a], (vals[b] if info.arity == 2 else None)
             v = numpy_impl(info.name)(va, vb) if info.arity == 2 else numpy_impl(info.name)(va)
+            vals[dst] = v
+            out_v.append(float(v))
+            if not tangents:
+                continue
             t = _tangent(info.name, va, vb, v, tans[a], tans[b] if info.arity == 2 else None,
                          1, P, dtype, lay.is_const(a))
-            vals[dst], tans[dst] = v, t
-            out_v.append(float(v))
+            tans[dst] = t
             out_d.append(np.zeros(P) if t is None else np.asarray(t, dtype=np.float64))
     return out_v, out_d

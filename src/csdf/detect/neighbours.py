@@ -17,13 +17,17 @@ from ..errors import CsdfError
 
 __all__ = ["Neighbourhood", "neighbourhood", "estimate_normals", "points_arg", "viewpoint_arg",
            "normals_arg", "components",
-           "linked_edges", "K_NORMALS", "MAX_DETECT_POINTS", "LINK"]
+           "linked_edges", "sparse_points", "K_NORMALS", "MAX_DETECT_POINTS", "LINK",
+           "SPARSE"]
 
 #: neighbours per point for normals and the neighbour graph
 K_NORMALS = 12
 #: an edge links two points when no longer than this times the local sampling scale of
 #: either end (see :func:`components`)
 LINK = 2.0
+#: a point is isolated (an outlier) when its local sampling scale is more than this
+#: times the scale expected where it lies (see :func:`sparse_points`)
+SPARSE = 4.0
 #: points whose neighbourhoods estimate the noise level when normals are given
 NOISE_SAMPLE = 4000
 #: the most points detection accepts in one cloud
@@ -153,6 +157,23 @@ def linked_edges(nb: Neighbourhood, radius: float | None = None, strict: bool = 
         return nb.lengths <= radius
     pick = np.minimum if strict else np.maximum
     return nb.lengths <= LINK * pick(nb.local[:, None], nb.local[nb.nbr])
+
+
+def sparse_points(nb: Neighbourhood, points: np.ndarray, viewpoint=None) -> np.ndarray:
+    """``(N,)`` which points are isolated: their local sampling scale (``nb.local``) is
+    more than ``SPARSE`` times the one expected where they lie. With a ``viewpoint``
+    ``(3,)`` (a single-view scan, whose spacing grows with the range) the expected
+    scale is the median of ``local / range`` times the point's range; without one it is
+    the median of ``local``.
+
+    Outliers scattered through a sensor's frustum are far from everything but each
+    other, so a linking rule relative to each point's own scale would chain them into
+    one web that joins every object; against the expected scale they stand out."""
+    if viewpoint is None:
+        return nb.local > SPARSE * float(np.median(nb.local))
+    rng = np.linalg.norm(points - np.asarray(viewpoint, float), axis=1)
+    ratio = nb.local / np.maximum(rng, 1e-300)
+    return ratio > SPARSE * float(np.median(ratio))
 
 
 def components(nb: Neighbourhood, mask: np.ndarray, linked: np.ndarray) -> np.ndarray:

@@ -61,6 +61,7 @@ from .neighbours import (
     neighbourhood,
     normals_arg,
     points_arg,
+    sparse_points,
     viewpoint_arg,
 )
 from .primitives import PrimitiveDetection, detect_primitives
@@ -87,8 +88,9 @@ MAX_UNEXPLAINED = 0.25
 MAX_MODELS = 64
 #: a cluster is searched (again) while at least this fraction of it is unclaimed
 CLUSTER_LEFT = 0.3
-#: the least fraction of the fitted points (the free points within the placed model's
-#: bounding sphere) within three noise levels of the fitted model
+#: the least fraction of the free points inside the fitted model's box (its bounds at
+#: the fitted parameters, padded by three noise levels) within three noise levels of
+#: its surface
 MIN_INLIER_FRACTION = 0.75
 #: another cluster joins a fit when at least this fraction of it lies inside the placed
 #: model's bounding sphere
@@ -108,8 +110,21 @@ PARAM_STARTS = 4
 #: models refined per cluster: those whose best upright hypothesis costs least
 MODELS_REFINED = 3
 #: a fit whose up axis is within this many degrees of the support's normal is stood
-#: upright on the support
+#: upright on the support; one tilted more is rejected (``upright=True``)
 UPRIGHT_SNAP = 15.0
+#: a cluster reaching farther than this times a model's footprint radius from its
+#: centroid also gets hypotheses at the centres of k-means groups of its footprint
+FEET_REACH = 1.2
+#: the most k-means groups tried (k = 2 .. FEET_SPLIT)
+FEET_SPLIT = 3
+#: the winner is also fitted from its turns by 360 / TURNS degrees about the support's
+#: normal
+TURNS = 4
+#: the most failed models (ranked above the winner by the screen) whose placements
+#: are turned
+TURN_MODELS = 2
+#: verification scores within this of the best tie (the lower fit cost wins)
+TURN_TIE = 0.02
 #: points of the final fit at most (a seeded subsample)
 FIT_POINTS = 1200
 
@@ -168,6 +183,7 @@ class _Model:
     surface: np.ndarray  # (K, 3) surface samples at the defaults (model frame)
     normals: np.ndarray  # (K, 3) their outward unit normals
     starts: list  # parameter sets the hypotheses start from (None: the defaults)
+    foot: float  # radius of the footprint (model xy) about the centre, at the defaults
 
 
 def _model(name: str, shape: Any, source: Any) -> _Model:
@@ -191,7 +207,8 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
                                                  p.hi - 0.2 * (p.hi - p.lo)))
                        for p in ranged})
     return _Model(name, shape, source, b, c, float(np.linalg.norm(v - c, axis=1).max()),
-                  fld, fld.backend, surf, g, starts)
+                  fld, fld.backend, surf, g, starts,
+                  float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()))
 
 
 def _load(spec: Any, what: str) -> tuple[str, Any, Any]:
@@ -237,6 +254,30 @@ def _models_arg(models: Any) -> list[_Model]:
     if dup is not None:
         raise CsdfError(f"detect: model name {dup!r} is given twice")
     return [_model(n, s, src) for n, s, src in items]
+
+
+def _feet(F: np.ndarray, foot: float) -> list[np.ndarray]:
+    """Where a model of footprint radius ``foot`` may stand among the points ``F``
+    ``(N, 3)`` (a cluster dropped onto the support plane): the centroid, and when the
+    cluster reaches farther than ``foot`` from it (two objects touching, an object and
+    clutter) also the centres of ``k = 2 .. FEET_SPLIT`` k-means groups (deterministic:
+    farthest-point starts, a few Lloyd steps)."""
+    c0 = F.mean(axis=0)
+    feet = [c0]
+    if len(F) < 2 or float(np.linalg.norm(F - c0, axis=1).max()) <= FEET_REACH * foot:
+        return feet
+    for k in range(2, FEET_SPLIT + 1):
+        centres = [F[int(np.argmax(np.linalg.norm(F - c0, axis=1)))]]
+        for _ in range(1, k):
+            d = np.min([np.linalg.norm(F - c, axis=1) for c in centres], axis=0)
+            centres.append(F[int(np.argmax(d))])
+        C = np.array(centres)
+        for _ in range(8):
+            lab = np.argmin(((F[:, None, :] - C[None]) ** 2).sum(axis=2), axis=1)
+            C = np.array([F[lab == j].mean(axis=0) if (lab == j).any() else C[j]
+                          for j in range(k)])
+        feet += list(C)
+    return feet
 
 
 def _rz(yaw: float) -> np.ndarray:
@@ -354,7 +395,14 @@ class _Run:
                 band = np.abs(d) <= 8.0 * self.sigma
                 off += float(np.median(d[band]))
                 d = self.P @ nrm - off
-                self.sigma = max(self.sigma, 1.4826 * float(np.median(np.abs(d[band]))))
+                r = np.abs(d[band])
+                if self.vp is not None:
+                    # a range sensor's noise lies along its rays: a point on a plane
+                    # seen at incidence theta is off it by the range error times
+                    # cos(theta), and frontal surfaces get the whole range error
+                    cos = np.abs(self.dirs[band] @ nrm)
+                    r = r[cos >= 0.2] / cos[cos >= 0.2] if (cos >= 0.2).sum() >= 20 else r
+                self.sigma = max(self.sigma, 1.4826 * float(np.median(r)))
             # the plane's slab: its points and every point within three noise levels
             self.support |= np.abs(d) <= 3.0 * self.sigma
             self.support[pl.inliers] = True
@@ -362,7 +410,7 @@ class _Run:
                 self.plane = (nrm, off)
 
     def find_clusters(self) -> None:
-        mask = ~self.support
+        mask = ~self.support & ~sparse_points(self.nb, self.P, self.vp)
         if self.plane is not None:  # below the support is not an object on it
             nrm, off = self.plane
             mask &= self.P @ nrm - off > 0
@@ -379,23 +427,22 @@ class _Run:
         """Upright poses ``(R, t)`` of model ``m`` on the support near points ``Q``."""
         nrm, off = self.plane
         Rup = frame_z(nrm)
-        foot = Q.mean(axis=0)
-        foot = foot - (foot @ nrm - off) * nrm
         poses = []
-        away = None
-        if self.vp is not None:
-            a = foot - self.vp
-            a = a - (a @ nrm) * nrm
-            if np.linalg.norm(a) > 0:
-                away = a / np.linalg.norm(a)
-        shifts = [np.zeros(3)] + ([away * m.radius / 3.0] if away is not None else [])
-        for k in range(YAWS):
-            R = Rup @ _rz(2.0 * math.pi * k / YAWS)
-            c = R @ m.centre
-            for sh in shifts:
-                t = foot + sh - (c - (c @ nrm) * nrm)  # footprint centre over the foot
-                t = t - (t @ nrm - off + m.bounds[0, 2]) * nrm  # lowest point on the plane
-                poses.append((R, t))
+        for foot in _feet(Q - np.outer(Q @ nrm - off, nrm), m.foot):
+            away = None
+            if self.vp is not None:
+                a = foot - self.vp
+                a = a - (a @ nrm) * nrm
+                if np.linalg.norm(a) > 0:
+                    away = a / np.linalg.norm(a)
+            shifts = [np.zeros(3)] + ([away * m.radius / 3.0] if away is not None else [])
+            for k in range(YAWS):
+                R = Rup @ _rz(2.0 * math.pi * k / YAWS)
+                c = R @ m.centre
+                for sh in shifts:
+                    t = foot + sh - (c - (c @ nrm) * nrm)  # footprint centre over the foot
+                    t = t - (t @ nrm - off + m.bounds[0, 2]) * nrm  # lowest point on plane
+                    poses.append((R, t))
         return poses
 
     def _two_sided(self, m: _Model, poses, S: np.ndarray, params: dict | None = None
@@ -452,22 +499,31 @@ class _Run:
                 best = (c, r)
         return best
 
-    def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | None
+    def _gather(self, m: _Model, idx: np.ndarray, init: FitResult | dict) -> np.ndarray:
+        """The points a fit of ``m`` placed at ``init`` (a result or a dict of
+        ``rotation`` and ``translation``) uses: the free points of the clusters the
+        placed model covers: its own (those of ``idx``), and any other that lies mostly
+        inside its bounding sphere (a piece of the same object cut off by an occluder),
+        not a neighbour that only reaches into it."""
+        if isinstance(init, dict):
+            c = init["rotation"] @ m.centre + init["translation"]
+        else:
+            c = init.pose.apply(m.centre[None])[0]
+        inside = ~self.claimed & (self.label >= 0) & (
+            np.linalg.norm(self.P - c, axis=1) <= 1.1 * m.radius)
+        labs, counts = np.unique(self.label[inside], return_counts=True)
+        own = set(np.unique(self.label[idx]).tolist())
+        keep = [lab for lab, k in zip(labs, counts)
+                if lab in own or k >= PIECE_INSIDE * self.sizes[lab]]
+        return np.flatnonzero(inside & np.isin(self.label, keep))
+
+    def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | dict | None
                    ) -> FitResult | None:
         """Step 5: the refined fit of model ``m`` to the points ``idx`` from the placed
-        hypothesis ``init`` (None: :func:`csdf.fit`'s multistart search)."""
+        hypothesis ``init`` (a result or a dict of ``rotation``, ``translation`` and
+        ``params``; None: :func:`csdf.fit`'s multistart search)."""
         if init is not None:
-            # the free points of the clusters the placed model covers: its own, and any
-            # other that lies mostly inside its bounding sphere (a piece of the same
-            # object cut off by an occluder), not a neighbour that only reaches into it
-            c = init.pose.apply(m.centre[None])[0]
-            inside = ~self.claimed & (self.label >= 0) & (
-                np.linalg.norm(self.P - c, axis=1) <= 1.1 * m.radius)
-            labs, counts = np.unique(self.label[inside], return_counts=True)
-            own = set(np.unique(self.label[idx]).tolist())
-            keep = [lab for lab, k in zip(labs, counts)
-                    if lab in own or k >= PIECE_INSIDE * self.sizes[lab]]
-            idx = np.flatnonzero(inside & np.isin(self.label, keep))
+            idx = self._gather(m, idx, init)
         F = idx if len(idx) <= FIT_POINTS else np.sort(
             self.rng.choice(idx, FIT_POINTS, replace=False))
         try:
@@ -480,12 +536,17 @@ class _Run:
             return None
         if init is None or self.plane is None:
             return res
-        # stand it on the support: upright, its lowest point on the plane; then the
-        # parameters again with that pose held
+        return self._upright_fit(m, F, res)
+
+    def _upright_fit(self, m: _Model, F: np.ndarray, res: FitResult) -> FitResult | None:
+        """``res`` stood on the support (upright, the model's floor on the plane), then
+        its parameters fitted again with that pose held. None when ``res`` tilts more
+        than ``UPRIGHT_SNAP`` degrees (it fell over: not an object standing on the
+        support)."""
         nrm, off = self.plane
         R = res.rotation
         if R[:, 2] @ nrm < math.cos(math.radians(UPRIGHT_SNAP)):
-            return res
+            return None
         x = R[:, 0] - (R[:, 0] @ nrm) * nrm
         x /= np.linalg.norm(x)
         R = np.stack([x, np.cross(nrm, x), nrm], axis=1)
@@ -510,8 +571,18 @@ class _Run:
         near = np.flatnonzero(free & (np.linalg.norm(self.P - c, axis=1)
                                       <= 1.2 * m.radius + 3 * self.sigma))
         d = np.abs(np.asarray(fld.value(self.P[near]), dtype=float))
-        inl = near[(d <= 3.0 * self.sigma) & ~self.support[near]]
+        close = d <= 3.0 * self.sigma
+        inl = near[close & ~self.support[near]]
         if len(inl) < self.mp:
+            return False, 0.0, inl, res
+        # of the free points inside the fitted model's box (a neighbour's points outside
+        # it are not the model's business), enough must lie on its surface
+        b = as_field(m.shape, res.params, backend=m.backend, what="detect",
+                     check_ranges=False).bounds
+        q = (self.P[near] - pose.translation) @ pose.rotation
+        pad = 3.0 * self.sigma
+        boxed = np.all((q >= b[0] - pad) & (q <= b[1] + pad), axis=1) & ~self.support[near]
+        if close[boxed].sum() < MIN_INLIER_FRACTION * boxed.sum():
             return False, 0.0, inl, res
         if self.vp is None:
             frac = len(inl) / max(len(near[~self.support[near]]), 1)
@@ -547,21 +618,76 @@ class _Run:
             tries = [(fits[i], init) for _, init, i in ranked]
         else:
             tries = [(m, None) for m in fits]
-        best = None
+        done = []  # per model tried: (model, init, base result or None, verified fits)
         for m, init in tries:
+            found = []
             res = self._candidate(m, idx, init)
-            if res is None or res.inlier_fraction < MIN_INLIER_FRACTION:
+            if res is not None:
+                ok, score, inl, checked = self._verify(m, res)
+                if ok:
+                    found.append((score, float(res.cost), res, inl, checked))
+            done.append((m, init, res, found))
+        if self.plane is not None and self.upright:
+            # the winner's quarter turns, and those of the placements of models the
+            # screen ranked higher but whose fits failed (at most TURN_MODELS)
+            win = [d for d in done if d[3]]
+            turn = []
+            if win:
+                w = max(win, key=lambda d: (len(d[3][0][3]), -d[3][0][1]))
+                turn = [w]
+                ranked_above = done[:next(i for i, d in enumerate(done) if d is w)]
+            else:
+                ranked_above = done
+            # models the screen ranked above the winner (or all, when none passed)
+            turn += [d for d in ranked_above if d[1] is not None][:TURN_MODELS]
+            for m, init, res, found in turn:
+                # a verified fit is checked against its half turn (front and back
+                # alike from one view); a failed placement tries every quarter turn
+                steps = (TURNS // 2,) if found else range(1, TURNS)
+                self._turns(m, idx, res if found else init, found, steps)
+        best = None
+        for m, _, _, found in done:
+            if not found:
                 continue
-            ok, score, inl, checked = self._verify(m, res)
-            if not ok:
-                continue
-            key = (len(inl), -float(res.cost))
+            score, cost, res, inl, checked = _pick(found)
+            key = (len(inl), -cost)
             if best is None or key > best[0]:
                 best = (key, Detection(model=m.name, pose=Pose(res.rotation, res.translation),
-                                       params=dict(res.params), score=score,
-                                       inliers=inl, shape=m.shape, source=m.source,
-                                       fit=checked))
+                                       params=dict(res.params), score=score, inliers=inl,
+                                       shape=m.shape, source=m.source, fit=checked))
         return None if best is None else best[1]
+
+    def _turns(self, m: _Model, idx: np.ndarray, base: FitResult, found: list,
+               steps=range(1, TURNS)) -> list:
+        """``found`` with the fits from ``base`` turned about the support's normal by
+        ``steps`` times ``360 / TURNS`` degrees (through the model's centre) that pass verification
+        (items ``(score, cost, result, inliers, checked)``). A single view often leaves
+        a box-like object's front and back, or its sides, nearly alike, and the screen's
+        pick among them is a close call."""
+        nrm = self.plane[0]
+        cw = base.rotation @ m.centre + base.translation
+        X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
+        for k in steps:
+            th = 2.0 * math.pi * k / TURNS
+            Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
+                nrm, nrm)
+            init = {"rotation": Rt @ base.rotation,
+                    "translation": Rt @ (base.translation - cw) + cw,
+                    "params": dict(base.params)}
+            r = self._candidate(m, idx, init)
+            if r is None:
+                continue
+            ok, sc, il, ch = self._verify(m, r)
+            if ok:
+                found.append((sc, float(r.cost), r, il, ch))
+        return found
+
+
+def _pick(found: list) -> tuple:
+    """The best of verified fits ``(score, cost, result, inliers, checked)``: scores
+    within ``TURN_TIE`` of the best tie, and the lower cost wins."""
+    top = max(f[0] for f in found)
+    return min((f for f in found if f[0] >= top - TURN_TIE), key=lambda f: f[1])
 
 
 def detections_to_scene(detections, scene=None):

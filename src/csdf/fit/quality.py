@@ -23,6 +23,11 @@ the model's bottom face). A fit is a **success** when all of these hold:
    where the model says a surface is: the back-face solution), and *empty* when no
    measured point lies in that direction (the model shows a surface where the sensor
    returned nothing).
+   Rays on a depth edge of the model (a 4-neighbour on the grid misses the model or
+   hits it at a depth beyond both rays' tolerances) are not judged when at least
+   ``MIN_VIEW_RAYS`` others are: under a pose error of a ray or two they see another
+   surface than the model says (the background past a silhouette, the inside of a
+   shelf past a board's edge). ``quality['visible_edge_rays']`` counts them.
    The fraction of see-through and empty rays must be at most ``VISIBLE_MAX_UNEXPLAINED``.
    The depth tolerance is ``inlier_threshold`` plus the depth change across the angular
    offset on the model's (slanted) surface, ``depth * offset * min(tan(incidence),
@@ -65,6 +70,37 @@ TRACE_ITER = 64
 MIN_VIEW_RAYS = 20
 #: model hits with ``|normal . ray| <`` this are grazing and not judged (as csdf.scan)
 GRAZING = 0.05
+
+
+def _edge_rays(depth: np.ndarray, tan: np.ndarray, thr: float, step: float) -> np.ndarray:
+    """``(V*V,)`` which rays of the ``VIEW_RAYS x VIEW_RAYS`` grid lie on a depth edge of
+    the model: a 4-neighbour misses the model, or its depth differs by more than the two
+    rays' tolerances (``thr`` plus the depth change across one grid ``step``, in tangent
+    units, on each ray's slanted surface). Under a pose error of a ray or two such rays
+    see another surface than the model says (the background past a silhouette, the
+    inside of a shelf past a board's edge), so they are not evidence either way.
+
+    ``depth`` ``(V*V,)`` is the model's depth along each ray (non-finite: no hit),
+    ``tan`` ``(V*V,)`` the tangent of each hit's incidence."""
+    v = VIEW_RAYS
+    D = depth.reshape(v, v)
+    with np.errstate(invalid="ignore"):
+        tol = (thr + np.abs(D) * step * np.minimum(np.nan_to_num(tan.reshape(v, v),
+                                                                 nan=TAN_MAX), TAN_MAX))
+    ok = np.isfinite(D)
+    edge = ~ok
+    for axis in (0, 1):
+        a = [slice(None)] * 2
+        b = [slice(None)] * 2
+        a[axis], b[axis] = slice(1, None), slice(None, -1)
+        a, b = tuple(a), tuple(b)
+        with np.errstate(invalid="ignore"):
+            jump = ~(ok[a] & ok[b]) | (np.abs(D[a] - D[b]) > tol[a] + tol[b])
+        edge[a] |= jump
+        edge[b] |= jump
+    # the grid's border rays have no neighbour outside: they lie past the bounding
+    # sphere's silhouette anyway
+    return edge.reshape(-1)
 
 
 def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -146,6 +182,13 @@ def _visibility(prog, pvals: dict, backend: str, R: np.ndarray, t: np.ndarray, s
     except (QhullError, ValueError):  # degenerate (collinear) directions: no view area
         inside = np.zeros(len(idx), dtype=bool)
     idx, h2 = idx[inside], h2[inside]
+    d_all = s * tm
+    tan_all = (np.sqrt(np.maximum(1.0 - cosi ** 2, 0.0))
+               / np.maximum(cosi, GRAZING))
+    edge = _edge_rays(d_all, tan_all, thr, 2.0 * half / (VIEW_RAYS - 1))[idx]
+    if int((~edge).sum()) >= MIN_VIEW_RAYS:  # judge the rays away from depth edges
+        idx, h2 = idx[~edge], h2[~edge]
+    out["visible_edge_rays"] = int(edge.sum())
     out["visible_rays"] = int(len(idx))
     if len(idx) < MIN_VIEW_RAYS:
         out["visible_note"] = (f"only {len(idx)} model rays within the cloud's view "

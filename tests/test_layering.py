@@ -30,6 +30,7 @@ LAYERS: dict[str, int] = {
     "csdf.shapes": 1, "csdf.lang": 1, "csdf.zoo": 1,
     "csdf.shapes.exprfield": 1, "csdf.lang.vm": 1,  # a field from an expression; .vm in
     "csdf.lang.source": 1,  # checks shared by the text readers
+    "csdf.lang.csg": 1,  # OpenSCAD .csg (and .scad through openscad) in
     # 2 compiler: tape, bytecode, simplification
     "csdf.compiler": 2,
     # 3 evaluators

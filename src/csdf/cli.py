@@ -42,7 +42,8 @@ err = Console(stderr=True)
 
 
 def _load(path: Path):
-    """A Shape (from .csdf or Fidget's .vm) or a Program (from .csdfb/.csdft)."""
+    """A Shape (from .csdf, Fidget's .vm, OpenSCAD's .csg/.scad) or a Program (from
+    .csdfb/.csdft)."""
     from .io.model import load_model
 
     return load_model(path)
@@ -322,6 +323,35 @@ def mesh(
         out.print(f"{output}: {len(result.faces):,} triangles, {len(result.vertices):,} "
                   f"vertices, watertight={result.is_watertight}, {dt:.2f} s "
                   f"(voxel {result.metadata['csdf']['voxel_size']:.4g})", soft_wrap=True)
+
+    _run(go)
+
+
+@app.command(name="import")
+def import_(
+    model: Path = typer.Argument(..., help="An OpenSCAD .scad (needs the openscad program) "
+                                 "or .csg file."),
+    output: Path = typer.Option(..., "-o", "--output", help="The .csdf model to write."),
+):
+    """Convert an OpenSCAD model to a readable .csdf model (shapes used more than once
+    bound with let)."""
+
+    def go():
+        from .io import atomic_path
+        from .lang import dumps
+        from .lang.csg import load_csg, load_scad
+
+        suffix = model.suffix.lower()
+        if suffix not in (".scad", ".csg"):
+            raise CsdfError(f"{model}: csdf import reads .scad or .csg files")
+        if output.suffix.lower() != ".csdf":
+            raise CsdfError(f"{output}: the output must end in .csdf")
+        shape = load_scad(model) if suffix == ".scad" else load_csg(model)
+        text = f"# imported from {model.name} by csdf import\n" + dumps(shape)
+        with atomic_path(output) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+        out.print(f"{output}: {shape.exactness} distance, "
+                  f"{len(shape.compile())} instructions", soft_wrap=True)
 
     _run(go)
 

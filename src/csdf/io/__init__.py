@@ -5,9 +5,11 @@ never leaves a half-written file behind.
 Modules: ``atomic`` (the temporary-file-and-rename helper), ``mesh`` (triangle meshes:
 STL, OBJ, PLY, GLB), ``points`` (point clouds as PLY files), ``vm`` (fields in Fidget's
 ``.vm`` text format, read and written), ``bop`` (depth sequences in the BOP scene
-layout, written and read).
+layout, written and read); OpenSCAD's ``.csg`` and ``.scad`` are read by
+:mod:`csdf.lang.csg` (``load_csg``, ``loads_csg``, ``load_scad`` here too).
 """
 
+from ..lang.csg import load_csg, load_scad, loads_csg
 from .atomic import atomic_path
 from .bop import DepthClipWarning, read_bop, read_frames, write_bop
 from .mesh import MESH_FORMATS, write_mesh
@@ -16,4 +18,5 @@ from .vm import dumps_vm, load_vm, loads_vm, save_vm
 
 __all__ = ["atomic_path", "write_mesh", "MESH_FORMATS", "read_points", "write_points",
            "read_point_properties", "read_point_cloud", "PointCloud", "load_vm", "loads_vm",
-           "save_vm", "dumps_vm", "write_bop", "read_bop", "read_frames", "DepthClipWarning"]
+           "save_vm", "dumps_vm", "write_bop", "read_bop", "read_frames", "DepthClipWarning",
+           "load_csg", "loads_csg", "load_scad"]

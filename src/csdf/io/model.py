@@ -1,5 +1,6 @@
-"""Reading a model file of any kind csdf writes: ``.csdf`` and Fidget's ``.vm`` as
-shapes, ``.csdfb`` bytecode and ``.csdft`` text as programs."""
+"""Reading a model file of any kind csdf reads: ``.csdf``, Fidget's ``.vm`` and
+OpenSCAD's ``.csg`` and ``.scad`` as shapes, ``.csdfb`` bytecode and ``.csdft`` text as
+programs."""
 
 from __future__ import annotations
 
@@ -9,12 +10,12 @@ from ..errors import CsdfError
 
 __all__ = ["load_model", "MODEL_SUFFIXES"]
 
-MODEL_SUFFIXES = (".csdf", ".vm", ".csdfb", ".csdft")
+MODEL_SUFFIXES = (".csdf", ".vm", ".csdfb", ".csdft", ".csg", ".scad")
 
 
 def load_model(path: str | Path):
-    """A :class:`csdf.Shape` (from ``.csdf`` or ``.vm``) or a :class:`csdf.Program`
-    (from ``.csdfb`` or ``.csdft``).
+    """A :class:`csdf.Shape` (from ``.csdf``, ``.vm``, ``.csg`` or ``.scad``) or a
+    :class:`csdf.Program` (from ``.csdfb`` or ``.csdft``).
 
     Raises:
         CsdfError: an unreadable file, another suffix, or the reader's error, naming the
@@ -25,7 +26,7 @@ def load_model(path: str | Path):
 
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in (".csdf", ".vm"):
+    if suffix in (".csdf", ".vm", ".csg", ".scad"):
         return load(path)
     try:
         data = path.read_bytes()
@@ -49,4 +50,5 @@ def load_model(path: str | Path):
         except TypeError:  # (an error class with another constructor)
             named = CsdfError(f"{path}: {exc}")
         raise named from None
-    raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .vm, .csdfb or .csdft")
+    raise CsdfError(f"{path}: unknown model type {suffix!r}; use .csdf, .vm, .csg, .scad, "
+                    ".csdfb or .csdft")

@@ -35,7 +35,7 @@ from .. import expr as E
 from ..errors import CsdfError, ModelError
 from ..expr import Expr
 from ..shapes.base import REGISTRY, Shape
-from .source import check_source
+from .source import check_source, read_source
 
 __all__ = ["load", "loads", "parser", "MAX_FILE_BYTES", "MAX_DEPTH", "MAX_CALLS",
            "MAX_INSTRUCTIONS"]
@@ -661,23 +661,23 @@ def _pretty(t: str) -> str:
 
 def load(path: str | os.PathLike) -> Shape:
     """Load a ``.csdf`` model file (see :func:`loads`); a ``.vm`` file (Fidget's text
-    format) is read by :func:`csdf.lang.vm.load_vm`."""
+    format) is read by :func:`csdf.lang.vm.load_vm`, an OpenSCAD ``.csg`` file by
+    :func:`csdf.lang.csg.load_csg` and a ``.scad`` file (through the ``openscad``
+    program) by :func:`csdf.lang.csg.load_scad`."""
     p = Path(path)
     if p.suffix.lower() == ".vm":
         from .vm import load_vm
 
         return load_vm(p)
-    try:
-        size = p.stat().st_size
-    except OSError as exc:
-        raise ModelError(f"cannot read model: {exc.strerror}", file=str(p)) from None
-    if size > MAX_FILE_BYTES:
-        raise ModelError(f"model is {size} bytes; the limit is {MAX_FILE_BYTES}", file=str(p))
-    try:
-        text = p.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"model is not UTF-8 text ({exc.reason} at byte {exc.start})",
-                         file=str(p)) from None
+    if p.suffix.lower() == ".csg":
+        from .csg import load_csg
+
+        return load_csg(p)
+    if p.suffix.lower() == ".scad":
+        from .csg import load_scad
+
+        return load_scad(p)
+    text = read_source(p, MAX_FILE_BYTES, "model")
     return loads(text, file=str(p))
 
 

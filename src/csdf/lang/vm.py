@@ -70,7 +70,7 @@ from ..errors import CsdfError, ModelError
 from ..expr import Expr
 from ..shapes.base import MAX_EXPR_NODES, Shape
 from ..shapes.exprfield import expr_shape
-from .source import check_source
+from .source import check_source, read_source
 
 __all__ = ["load_vm", "loads_vm", "OPCODES", "VmOp", "MAX_VM_BYTES", "MAX_VM_NODES"]
 
@@ -265,18 +265,5 @@ def loads_vm(text: str, name: str = "<string>") -> Shape:
 def load_vm(path: str | os.PathLike) -> Shape:
     """Load a Fidget ``.vm`` file (see :func:`loads_vm`; UTF-8 or ASCII text)."""
     p = Path(path)
-    try:
-        size = p.stat().st_size
-    except OSError as exc:
-        raise ModelError(f"cannot read the file: {exc.strerror}", file=str(p)) from None
-    if size > MAX_VM_BYTES:
-        raise ModelError(f"the file is {size} bytes; the limit is {MAX_VM_BYTES}",
-                         file=str(p))
-    try:
-        text = p.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"the file is not UTF-8 text ({exc.reason} at byte {exc.start})",
-                         file=str(p)) from None
-    except OSError as exc:
-        raise ModelError(f"cannot read the file: {exc.strerror}", file=str(p)) from None
+    text = read_source(p, MAX_VM_BYTES)
     return loads_vm(text, name=str(p))

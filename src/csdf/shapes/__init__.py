@@ -12,6 +12,7 @@ from .domain import (
     repeat_polar,
     rotate,
     scale,
+    transform,
     translate,
 )
 from .primitives2d import (
@@ -63,6 +64,6 @@ __all__ = [
     "equilateral_triangle", "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse",
     "extrude", "revolve",
     "union", "intersection", "difference", "complement",
-    "translate", "rotate", "orient", "scale", "mirror", "repeat", "repeat_mirrored",
-    "repeat_polar",
+    "translate", "rotate", "orient", "transform", "scale", "mirror", "repeat",
+    "repeat_mirrored", "repeat_polar",
 ]

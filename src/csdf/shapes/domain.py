@@ -28,7 +28,7 @@ from .base import (
 )
 
 __all__ = [
-    "translate", "rotate", "orient", "scale", "mirror", "repeat", "repeat_mirrored",
+    "translate", "rotate", "orient", "transform", "scale", "mirror", "repeat", "repeat_mirrored",
     "repeat_polar", "axis_vector",
 ]
 
@@ -188,6 +188,60 @@ def orient(shape: Shape, axis) -> Shape:
         shape, "orient", lambda p, ctx: shape.sdf(_apply_inverse(Rl, p), ctx), args=(axis,),
         keeps_exact=True, bounds=_rotated_bounds(shape.bounds, R),
     )
+
+
+@register("method")
+def transform(shape: Shape, matrix) -> Shape:
+    """Apply the affine map ``p -> A p + t`` given as a homogeneous matrix ``[[A, t],
+    [0, 1]]`` (``(d+1, d+1)``, or its first ``d`` rows; ``d`` the shape's dimension),
+    as OpenSCAD's ``multmatrix``: ``f(A^-1 (p - t)) * s_min`` with ``s_min`` the
+    smallest singular value of ``A``. **Exact** when ``A`` is a rotation or reflection
+    times a uniform scale (distances then scale by it); otherwise a **bound** (never
+    overestimates; Lipschitz unchanged). ``A`` must be invertible."""
+    _check(shape, "transform")
+    d = shape.dim
+    try:
+        M = np.asarray(matrix, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ShapeError("transform: matrix must be numbers") from None
+    if M.shape not in ((d + 1, d + 1), (d, d + 1)) or not np.all(np.isfinite(M)):
+        raise ShapeError(f"transform: matrix must be {d + 1}x{d + 1} (or {d}x{d + 1}) "
+                         f"finite numbers for a {d}D shape, got shape {M.shape}")
+    if M.shape[0] == d + 1 and not np.allclose(M[d], [0.0] * d + [1.0]):
+        raise ShapeError("transform: the last row must be (0, ..., 0, 1) (no projection)")
+    A, t = M[:d, :d], M[:d, d]
+    sv = np.linalg.svd(A, compute_uv=False)
+    if not sv[-1] > 1e-12 * max(sv[0], 1e-300):
+        raise ShapeError("transform: the matrix is singular")
+    smin = float(sv[-1])
+    uniform = bool(sv[0] - sv[-1] <= 1e-12 * sv[0])
+    inv = np.linalg.inv(A)
+    # exact zeros and ones where they were meant (a rotation by 90 degrees in floats)
+    inv = np.where(np.abs(inv) < 1e-15 * np.abs(inv).max(), 0.0, inv)
+    rows, tl = inv.tolist(), t.tolist()
+
+    def f(p: Vec, ctx) -> Expr:
+        q = [c - tl[i] if tl[i] != 0.0 else c for i, c in enumerate(p.c)]
+        out = []
+        for row in rows:
+            terms = [q[j] * a if a != 1.0 else q[j] for j, a in enumerate(row) if a != 0.0]
+            e = terms[0]
+            for term in terms[1:]:
+                e = e + term
+            out.append(e)
+        v = shape.sdf(Vec(tuple(out)), ctx)
+        return v * smin if smin != 1.0 else v
+
+    b = shape.bounds
+    if b is not None and np.all(np.isfinite(b)):
+        corners = np.array(np.meshgrid(*[b[:, i] for i in range(d)], indexing="ij")
+                           ).reshape(d, -1).T
+        w = corners @ A.T + t
+        b = np.array([w.min(0), w.max(0)])
+    else:
+        b = None
+    return _derived(shape, "transform", f, args=(M.tolist(),), keeps_exact=uniform,
+                    bounds=b)
 
 
 @register("method")

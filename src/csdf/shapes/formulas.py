@@ -75,13 +75,14 @@ def segment_distance(p: Vec, a: Vec, b: Vec) -> Expr:
     return length(pa - ba * h)
 
 
-def polygon2(p: Vec, verts: list[Vec]) -> Expr:
-    """Exact signed distance to a simple polygon (either winding), crossing-number sign."""
-    d2 = length2(p - verts[0])
+def polygon2(p: Vec, verts: list[Vec] | list[list[Vec]]) -> Expr:
+    """Exact signed distance to a simple polygon (either winding), crossing-number sign;
+    or, given a list of loops, to their even-odd combination (holes)."""
+    loops = verts if isinstance(verts[0], list) else [verts]
+    d2 = length2(p - loops[0][0])
     parity: Expr | float = 0.0
-    n = len(verts)
-    for i in range(n):
-        vi, vj = verts[i], verts[i - 1]
+    edges = [(lp[i], lp[i - 1]) for lp in loops for i in range(len(lp))]
+    for vi, vj in edges:
         e = vj - vi
         w = p - vi
         t = minimum(maximum(dot(w, e) / length2(e), 0.0), 1.0)

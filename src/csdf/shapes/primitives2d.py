@@ -129,12 +129,42 @@ def _poly_bounds(vs) -> np.ndarray:
 
 
 @register("primitive2d")
-def polygon(vertices=((0.0, 0.5), (-0.5, -0.5), (0.5, -0.5))) -> Shape:
-    """Simple polygon with ``vertices`` ``(K, 2)`` in either winding. **Exact.**"""
-    vs = _vertices(vertices, "polygon: vertices")
+def polygon(vertices=((0.0, 0.5), (-0.5, -0.5), (0.5, -0.5)), paths=None) -> Shape:
+    """Simple polygon with ``vertices`` ``(K, 2)`` in either winding. **Exact.**
+
+    With ``paths`` (a list of index lists into ``vertices``, each a closed loop of at
+    least 3), the region is the loops combined even-odd (OpenSCAD's ``polygon``: an inner
+    loop is a hole): the distance to the nearest edge of any loop, negative where a ray
+    crosses the loops an odd number of times. **Exact.**"""
+    if paths is None:
+        vs = _vertices(vertices, "polygon: vertices")
+        return _prim2(
+            "polygon", lambda p: polygon2(p, [Vec(v) for v in vs]), (vertices,),
+            tuple(c for v in vs for c in v), _poly_bounds(vs),
+        )
+    if isinstance(vertices, np.ndarray):
+        vertices = vertices.tolist()
+    if isinstance(paths, np.ndarray):
+        paths = paths.tolist()
+    if not isinstance(paths, (list, tuple)) or not paths:
+        raise ShapeError("polygon: paths must be a list of index lists")
+    if not isinstance(vertices, (list, tuple)):
+        raise ShapeError("polygon: vertices must be a list of (x, y) vertices")
+    loops = []
+    for k, path in enumerate(paths):
+        if not isinstance(path, (list, tuple)) or not all(
+                isinstance(i, (int, float)) and float(i) == int(i) and 0 <= i < len(vertices)
+                for i in path):
+            raise ShapeError(f"polygon: paths[{k}] must hold indices of vertices "
+                             f"(0..{len(vertices) - 1})")
+        loops.append(_vertices([vertices[int(i)] for i in path], f"polygon: paths[{k}]"))
+    if sum(len(lp) for lp in loops) > 1000:
+        raise ShapeError("polygon: the paths have more than 1000 vertices in all")
+    every = [v for lp in loops for v in lp]
     return _prim2(
-        "polygon", lambda p: polygon2(p, [Vec(v) for v in vs]), (vertices,),
-        tuple(c for v in vs for c in v), _poly_bounds(vs),
+        "polygon", lambda p: polygon2(p, [[Vec(v) for v in lp] for lp in loops]),
+        (vertices, [[int(i) for i in path] for path in paths]),
+        tuple(c for v in every for c in v), _poly_bounds(every),
     )
 
 

@@ -1,0 +1,669 @@
+"""Reading OpenSCAD's ``.csg`` files (the evaluated node tree that ``openscad -o
+model.csg model.scad`` writes) as csdf shapes, and ``.scad`` files through the
+``openscad`` program.
+
+The format: ``name(arg = value, ...)`` followed by ``;`` or a ``{ ... }`` block of
+children; values are numbers (``inf``, ``-inf`` and ``nan`` included), ``true``,
+``false``, ``undef``, strings and nested ``[ ... ]`` vectors; the top level is an
+implicit group. A statement may carry a modifier: ``%`` (background) and ``*``
+(disabled) are not part of the model, ``#`` (highlight) is, and ``!`` makes its
+statement the whole model.
+
+How the nodes become csdf shapes (``facets='ideal'``: true curves), with the distance
+contract each keeps:
+
+=======================================  ================================================
+``group``, ``union``, ``render``,        the union of the children (exact where the
+``color``                                children do not overlap; else a bound)
+``difference``, ``intersection``         csdf's ``-`` and ``&`` (a bound, as in csdf)
+``multmatrix``                           :meth:`csdf.Shape.transform` of the matrix:
+                                         **exact** for a rotation or reflection times a
+                                         uniform scale, a **bound** otherwise (shear,
+                                         non-uniform scale); on a 2D child its x-y part
+``cube``, ``sphere``, ``cylinder``       ``box``, ``sphere``, ``cylinder`` /
+                                         ``capped_cone`` / ``cone``: **exact**
+``square``, ``circle``, ``polygon``      ``rectangle``, ``circle``, ``polygon`` (paths
+                                         combined even-odd: holes): **exact**
+``linear_extrude``                       ``extrude`` (**exact**); with ``twist`` a
+                                         **bound** (:meth:`csdf.Shape.twist`)
+``rotate_extrude`` (full turn)           ``revolve``: **exact**
+``offset(r = R)``                        the 2D child offset by ``R``: **exact** for
+                                         ``R > 0`` on an exact child
+``offset(delta = D)``                    the same (rounded where OpenSCAD mitres): a
+                                         **bound**
+``minkowski`` with a sphere or circle    the other child rounded by its radius (moved
+                                         by its centre): **exact** on an exact child
+``hull`` of two spheres                 their round cone: **exact**
+=======================================  ================================================
+
+Not yet read (a :class:`~csdf.errors.ModelError` naming the node, the file, line and
+column): ``facets='openscad'`` (the faceted curves), ``polyhedron``, ``hull`` of other
+shapes, ``minkowski`` without a sphere or circle, ``resize``, partial
+``rotate_extrude``, scaled ``linear_extrude``, ``projection`` — these need
+the exact distance to a triangle mesh (``csdf.from_mesh``, issue 20) — and, as in
+OpenSCAD's own CSG export, ``import``, ``surface``, ``text``, ``roof`` and ``fill``
+(external data).
+
+Limits: :data:`MAX_CSG_BYTES` of text, :data:`MAX_CSG_NODES` nodes.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lark import Lark, Token, Transformer, UnexpectedInput, v_args
+from lark.exceptions import VisitError
+
+from ..errors import CsdfError, ModelError
+from .source import check_source, read_source
+
+__all__ = ["load_csg", "loads_csg", "load_scad", "MAX_CSG_BYTES", "MAX_CSG_NODES",
+           "SCAD_TIMEOUT", "FACETS"]
+
+#: largest ``.csg`` text read (bytes)
+MAX_CSG_BYTES = 16 * 1024 * 1024
+#: most nodes in one file
+MAX_CSG_NODES = 20_000
+#: seconds the ``openscad`` program may take to flatten a ``.scad`` file
+SCAD_TIMEOUT = 120.0
+#: the faceting modes
+FACETS = ("ideal", "openscad")
+
+_GRAMMAR = r"""
+start: item*
+?item: statement
+     | ";"                                      -> empty
+statement: [MODIFIER] NAME "(" [args] ")" body
+body: ";"                                       -> leaf
+     | "{" item* "}"                            -> block
+     | statement                                -> single
+args: arg ("," arg)*
+arg: NAME "=" value                             -> named
+   | value                                      -> positional
+?value: NUMBER                                  -> number
+      | NAME                                    -> word
+      | STRING                                  -> string
+      | "[" [value ("," value)*] "]"            -> vector
+MODIFIER: /[%#!*]/
+NAME: /\$?[A-Za-z_][A-Za-z0-9_]*/
+NUMBER.2: /[-+]?((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf\b|nan\b)/
+STRING: /"(\\.|[^"\\])*"/
+COMMENT: /\/\/[^\n]*/ | /\/\*(.|\n)*?\*\//
+%import common.WS
+%ignore WS
+%ignore COMMENT
+"""
+
+
+@lru_cache(maxsize=1)
+def _parser() -> Lark:
+    return Lark(_GRAMMAR, parser="lalr", propagate_positions=True, maybe_placeholders=True)
+
+
+@dataclass
+class _Node:
+    name: str
+    args: dict[str, Any]
+    pos: list[Any]
+    children: list[_Node] = field(default_factory=list)
+    modifier: str | None = None
+    line: int = 0
+    column: int = 0
+
+
+_UNDEF = object()
+
+
+class _Build(Transformer):
+    """Parse tree -> :class:`_Node` list."""
+
+    def __init__(self, where):
+        super().__init__()
+        self.where = where
+        self.count = 0
+
+    def start(self, items):
+        return [i for i in items if i is not None]
+
+    def empty(self, _items):
+        return None
+
+    @v_args(meta=True)
+    def statement(self, meta, items):
+        mod, name, args, block = items
+        self.count += 1
+        if self.count > MAX_CSG_NODES:
+            raise self.where(f"more than {MAX_CSG_NODES} nodes", meta.line, meta.column)
+        named, pos = {}, []
+        for kind, k, v in args or []:
+            if kind == "named":
+                named[k] = v
+            else:
+                pos.append(v)
+        return _Node(str(name), named, pos, block or [], str(mod) if mod else None,
+                     meta.line, meta.column)
+
+    def block(self, items):
+        return [i for i in items if i is not None]
+
+    def leaf(self, _items):
+        return []
+
+    def single(self, items):
+        return [i for i in items if i is not None]
+
+    def args(self, items):
+        return items
+
+    def named(self, items):
+        return ("named", str(items[0]), items[1])
+
+    def positional(self, items):
+        return ("positional", None, items[0])
+
+    def number(self, items):
+        return float(items[0])
+
+    def word(self, items):
+        w = str(items[0])
+        return {"true": True, "false": False, "undef": _UNDEF}.get(w, ("word", w))
+
+    def string(self, items):
+        return bytes(str(items[0])[1:-1], "utf-8").decode("unicode_escape")
+
+    def vector(self, items):
+        return [i for i in items if i is not None] if items != [None] else []
+
+
+def loads_csg(text: str, file: str = "<string>", facets: str = "ideal"):
+    """The csdf shape of OpenSCAD ``.csg`` text (see the module documentation).
+
+    Raises:
+        ModelError: a syntax error, an unsupported node or bad arguments, with the file,
+            line and column; an empty model.
+    """
+    if facets not in FACETS:
+        raise CsdfError(f"facets must be one of {', '.join(map(repr, FACETS))}; "
+                        f"got {facets!r}")
+    check_source(text, file, MAX_CSG_BYTES, "OpenSCAD CSG text")
+    lines = text.splitlines()
+
+    def where(msg: str, line: int, col: int) -> ModelError:
+        src = lines[line - 1] if 0 < line <= len(lines) else ""
+        return ModelError(msg, file=file, line=line, column=col, source_line=src)
+
+    try:
+        tree = _parser().parse(text)
+    except UnexpectedInput as exc:
+        tok = getattr(exc, "token", None)
+        what = f"unexpected {str(tok)!r}" if isinstance(tok, Token) else "unexpected input"
+        raise where(f"CSG syntax: {what}", exc.line, exc.column) from None
+    try:
+        nodes = _Build(where).transform(tree)
+    except VisitError as exc:
+        if isinstance(exc.orig_exc, ModelError):
+            raise exc.orig_exc from None
+        raise
+    if facets == "openscad":
+        raise where("facets='openscad' (OpenSCAD's faceted curves) is not read yet: it "
+                    "needs csdf.from_mesh; use facets='ideal'", 1, 1)
+    roots = _roots(nodes)
+    shape = _Converter(where).group(roots, "the file")
+    if shape is None:
+        raise ModelError("the CSG file holds no geometry", file=file)
+    return shape
+
+
+def _roots(nodes: list[_Node]) -> list[_Node]:
+    """The statements that make the model: the ``!`` one if any, else all but the
+    background (``%``) and disabled (``*``) ones."""
+    def find(ns):
+        for n in ns:
+            if n.modifier == "!":
+                return n
+            got = find(n.children)
+            if got is not None:
+                return got
+        return None
+
+    root = find(nodes)
+    if root is not None:
+        root.modifier = None
+        return [root]
+    return nodes
+
+
+class _Converter:
+    """:class:`_Node` trees -> csdf shapes (``facets='ideal'``)."""
+
+    def __init__(self, where):
+        self.where = where
+
+    # -- helpers ----------------------------------------------------------------------
+    def err(self, n: _Node, msg: str) -> ModelError:
+        return self.where(f"{n.name}: {msg}", n.line, n.column)
+
+    def num(self, n: _Node, key: str, default: float | None = None, index: int | None = None,
+            finite: bool = True) -> float:
+        v = n.args.get(key, _UNDEF)
+        if v is _UNDEF and index is not None and index < len(n.pos):
+            v = n.pos[index]
+        if v is _UNDEF or v is None:
+            if default is None:
+                raise self.err(n, f"missing {key}")
+            return default
+        if isinstance(v, bool) or not isinstance(v, float):
+            raise self.err(n, f"{key} must be a number, got {_show(v)}")
+        if finite and not math.isfinite(v):
+            raise self.err(n, f"{key} must be finite, got {v}")
+        return v
+
+    def flag(self, n: _Node, key: str, default: bool = False) -> bool:
+        v = n.args.get(key, default)
+        if v is _UNDEF:
+            return default
+        if not isinstance(v, bool):
+            raise self.err(n, f"{key} must be true or false, got {_show(v)}")
+        return v
+
+    def vec(self, n: _Node, key: str, size: int, default=None, index: int | None = None
+            ) -> np.ndarray:
+        v = n.args.get(key, _UNDEF)
+        if v is _UNDEF and index is not None and index < len(n.pos):
+            v = n.pos[index]
+        if v is _UNDEF:
+            if default is None:
+                raise self.err(n, f"missing {key}")
+            v = default
+        if isinstance(v, float):
+            v = [v] * size
+        a = _array(v)
+        if a is None or a.shape != (size,) or not np.all(np.isfinite(a)):
+            raise self.err(n, f"{key} must be {size} finite numbers, got {_show(v)}")
+        return a
+
+    def positive(self, n: _Node, key: str, v: float) -> float:
+        if not v > 0:
+            raise self.err(n, f"{key} must be > 0, got {v}")
+        return v
+
+    # -- nodes ------------------------------------------------------------------------
+    def group(self, children: list[_Node], what: str):
+        shapes = [s for s in (self.node(c) for c in children
+                              if c.modifier not in ("%", "*")) if s is not None]
+        if not shapes:
+            return None
+        dims = {s.dim for s in shapes}
+        if len(dims) > 1:
+            c = children[0]
+            raise self.where(f"{what} mixes 2D and 3D children (OpenSCAD ignores one kind; "
+                             "csdf does not guess which)", c.line, c.column)
+        from ..shapes.csg import union
+
+        return shapes[0] if len(shapes) == 1 else union(*shapes)
+
+    def node(self, n: _Node):
+        fn = getattr(self, "n_" + n.name, None)
+        if fn is None:
+            if n.name in _EXTERNAL:
+                raise self.err(n, f"not supported ({_EXTERNAL[n.name]})")
+            raise self.err(n, "unknown node")
+        return fn(n)
+
+    def n_group(self, n):
+        return self.group(n.children, n.name)
+
+    n_union = n_render = n_color = n_group
+
+    def n_difference(self, n):
+        kids = [s for s in (self.node(c) for c in n.children if c.modifier not in ("%", "*"))
+                if s is not None]
+        if not kids:
+            return None
+        first, rest = kids[0], kids[1:]
+        if any(k.dim != first.dim for k in rest):
+            raise self.err(n, "mixes 2D and 3D children")
+        for k in rest:
+            first = first - k
+        return first
+
+    def n_intersection(self, n):
+        kids = [s for s in (self.node(c) for c in n.children if c.modifier not in ("%", "*"))
+                if s is not None]
+        if not kids:
+            return None
+        if any(k.dim != kids[0].dim for k in kids):
+            raise self.err(n, "mixes 2D and 3D children")
+        from ..shapes.csg import intersection
+
+        return kids[0] if len(kids) == 1 else intersection(*kids)
+
+    def n_multmatrix(self, n):
+        child = self.group(n.children, n.name)
+        if child is None:
+            return None
+        m = n.args.get("m", n.pos[0] if n.pos else _UNDEF)
+        M = _array(m)
+        if M is None or M.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(M)):
+            raise self.err(n, f"the matrix must be 4x4 finite numbers, got {_show(m)}")
+        if M.shape == (4, 4) and not np.allclose(M[3], [0, 0, 0, 1]):
+            raise self.err(n, "a projective matrix (last row not 0, 0, 0, 1) is not "
+                              "supported")
+        A, t = M[:3, :3], M[:3, 3]
+        if child.dim == 2:
+            if np.any(np.abs(A[2, :2]) > 1e-12) or np.any(np.abs(A[:2, 2]) > 1e-12):
+                raise self.err(n, "turns a 2D child out of its plane")
+            A, t = A[:2, :2], t[:2]
+        if abs(np.linalg.det(A)) < 1e-12 * max(np.abs(A).max(), 1e-300) ** len(A):
+            raise self.err(n, "the matrix is singular (a zero scale)")
+        from ..errors import ShapeError
+
+        if np.array_equal(A, np.eye(len(A))):  # a plain move: readable as such
+            return child.translate(t.tolist()) if np.any(t != 0) else child
+        try:
+            return child.transform(np.vstack([np.c_[A, t], [0.0] * len(A) + [1.0]]))
+        except ShapeError as exc:
+            raise self.err(n, str(exc)) from None
+
+    def n_cube(self, n):
+        from ..shapes.primitives3d import box
+
+        return self.block(n, box, 3)
+
+    def block(self, n, make, dim: int):
+        """``cube`` or ``square``: ``make(size)`` centred, or with a corner at 0."""
+        s = self.vec(n, "size", dim, default=[1.0] * dim, index=0)
+        for i in range(dim):
+            self.positive(n, f"size[{i}]", s[i])
+        b = make(s.tolist())
+        return b if self.flag(n, "center") else b.translate((s / 2).tolist())
+
+    def n_sphere(self, n):
+        from ..shapes.primitives3d import sphere
+
+        return sphere(self.positive(n, "r", self.num(n, "r", 1.0, index=0)))
+
+    def n_cylinder(self, n):
+        from ..shapes.primitives3d import capped_cone, cone, cylinder
+
+        h = self.positive(n, "h", self.num(n, "h", 1.0))
+        r = self.num(n, "r", 1.0)
+        r1, r2 = self.num(n, "r1", r), self.num(n, "r2", r)
+        if r1 < 0 or r2 < 0 or not (r1 > 0 or r2 > 0):
+            raise self.err(n, f"radii r1 = {r1}, r2 = {r2} must be >= 0 and not both 0")
+        centre = self.flag(n, "center")
+        if r1 == r2:
+            s = cylinder(r1, h)
+            return s if centre else s.translate((0.0, 0.0, h / 2))
+        if r2 == 0:
+            s = cone(r1, h)
+        elif r1 == 0:  # apex down: the cone reflected through z = h / 2
+            s = cone(r2, h).transform([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, h],
+                                       [0, 0, 0, 1]])
+        else:
+            s = capped_cone(r1, r2, h)
+        return s.translate((0.0, 0.0, -h / 2)) if centre else s
+
+    def n_square(self, n):
+        from ..shapes.primitives2d import rectangle
+
+        return self.block(n, rectangle, 2)
+
+    def n_circle(self, n):
+        from ..shapes.primitives2d import circle
+
+        return circle(self.positive(n, "r", self.num(n, "r", 1.0, index=0)))
+
+    def n_polygon(self, n):
+        from ..shapes.primitives2d import polygon
+
+        pts = _array(n.args.get("points", n.pos[0] if n.pos else _UNDEF))
+        if pts is None or pts.ndim != 2 or pts.shape[1] < 2 or len(pts) < 3 \
+                or not np.all(np.isfinite(pts)):
+            raise self.err(n, "points must be at least 3 finite [x, y] pairs")
+        pts = pts[:, :2]
+        paths = n.args.get("paths", _UNDEF)
+        if paths is _UNDEF or paths is None:
+            loops = [list(range(len(pts)))]
+        else:
+            if not isinstance(paths, list) or not all(isinstance(p, list) for p in paths):
+                raise self.err(n, f"paths must be a list of index lists, got {_show(paths)}")
+            loops = []
+            for k, p in enumerate(paths):
+                idx = _array(p)
+                if idx is None or idx.ndim != 1 or np.any(idx != np.round(idx)) or \
+                        np.any(idx < 0) or np.any(idx >= len(pts)):
+                    raise self.err(n, f"paths[{k}] must hold indices of points "
+                                      f"(0..{len(pts) - 1})")
+                if len(idx) >= 3:
+                    loops.append([int(i) for i in idx])
+            if not loops:
+                return None
+        if len(loops) == 1:
+            return polygon(pts[loops[0]].tolist())
+        return polygon(pts.tolist(), paths=loops)
+
+    def n_linear_extrude(self, n):
+        from ..shapes.primitives2d import extrude
+
+        child = self.group(n.children, n.name)
+        if child is None:
+            return None
+        if child.dim != 2:
+            raise self.err(n, "needs 2D children")
+        h = self.positive(n, "height", self.num(n, "height", 100.0))
+        sc = n.args.get("scale", 1.0)
+        sc_a = _array(sc)
+        if sc_a is None or not np.allclose(sc_a, 1.0):
+            raise self.err(n, f"scale = {_show(sc)} is not read yet (needs csdf.from_mesh)")
+        v = n.args.get("v", _UNDEF)
+        if v is not _UNDEF and not np.allclose(_array(v), [0, 0, 1]):
+            raise self.err(n, f"an extrusion direction v = {_show(v)} is not read yet")
+        s = extrude(child, h).translate((0.0, 0.0, h / 2))
+        twist = self.num(n, "twist", 0.0)
+        if twist != 0.0:
+            # OpenSCAD turns clockwise (seen from +z) by `twist` degrees over the height
+            s = s.twist(-math.radians(twist) / h)
+        return s.translate((0.0, 0.0, -h / 2)) if self.flag(n, "center") else s
+
+    def n_rotate_extrude(self, n):
+        from ..shapes.primitives2d import revolve
+
+        child = self.group(n.children, n.name)
+        if child is None:
+            return None
+        if child.dim != 2:
+            raise self.err(n, "needs 2D children")
+        angle = self.num(n, "angle", 360.0)
+        if abs(angle) < 360.0:
+            raise self.err(n, f"angle = {angle:g} (a partial turn) is not read yet")
+        b = child.bounds
+        if b is not None and b[0, 0] < -1e-9 and b[1, 0] > 1e-9:
+            raise self.err(n, "the 2D child crosses the axis (x < 0 and x > 0), which "
+                              "OpenSCAD refuses too")
+        if b is not None and b[1, 0] <= 1e-9:  # all on the negative side: mirror it
+            child = child.transform([[-1, 0, 0], [0, 1, 0], [0, 0, 1]])
+        return revolve(child)
+
+    def n_offset(self, n):
+        child = self.group(n.children, n.name)
+        if child is None:
+            return None
+        if child.dim != 2:
+            raise self.err(n, "needs 2D children")
+        if "r" in n.args and n.args["r"] is not _UNDEF:
+            d = self.num(n, "r")
+        else:
+            d = self.num(n, "delta", 0.0)
+        if d == 0.0:
+            return child
+        return child.offset(d)
+
+    def n_minkowski(self, n):
+        kids = [c for c in n.children if c.modifier not in ("%", "*")]
+        balls = [(i, _ball(c)) for i, c in enumerate(kids)]
+        balls = [(i, b) for i, b in balls if b is not None]
+        if len(kids) < 2:
+            return self.group(kids, n.name)
+        if len(balls) != 1 or len(kids) != 2:
+            raise self.err(n, "only a shape with one sphere or circle is read yet (the "
+                              "general sum needs csdf.from_mesh)")
+        i, (radius, centre, dim) = balls[0]
+        other = self.node(kids[1 - i])
+        if other is None:
+            return None
+        if other.dim != dim:
+            raise self.err(n, "mixes 2D and 3D children")
+        if np.any(centre != 0):
+            other = other.translate(centre.tolist())
+        return other.round(radius)
+
+    def n_hull(self, n):
+        kids = [c for c in n.children if c.modifier not in ("%", "*")]
+        balls = [_ball(c) for c in kids]
+        if len(kids) == 1:
+            return self.node(kids[0])
+        if len(kids) == 2 and all(b is not None and b[2] == 3 for b in balls):
+            return _ball_hull(balls[0], balls[1])
+        raise self.err(n, "only the hull of two spheres is read yet (the general hull "
+                          "needs csdf.from_mesh)")
+
+    def n_projection(self, n):
+        child = self.group(n.children, n.name)
+        if child is None:
+            return None
+        if child.dim != 3:
+            raise self.err(n, "needs 3D children")
+        raise self.err(n, "not read yet")
+
+    def n_polyhedron(self, n):
+        raise self.err(n, "not read yet (needs csdf.from_mesh, the exact distance to a "
+                          "triangle mesh)")
+
+    def n_resize(self, n):
+        raise self.err(n, "not read yet")
+
+
+#: nodes that read external data
+_EXTERNAL = {"import": "reads an external file", "surface": "reads a heightmap file",
+             "text": "needs fonts", "roof": "a straight skeleton",
+             "fill": "hole filling of an outline"}
+
+
+def _ball(n: _Node) -> tuple[float, np.ndarray, int] | None:
+    """``(radius, centre, dim)`` when ``n`` is a sphere or circle, possibly moved by
+    pure translations (``multmatrix`` with an identity 3x3 part) and groups of one."""
+    offset = np.zeros(3)
+    while True:
+        if n.name == "multmatrix":
+            M = _array(n.args.get("m", n.pos[0] if n.pos else None))
+            if M is None or M.shape not in ((4, 4), (3, 4)) or not np.allclose(
+                    M[:3, :3], np.eye(3)):
+                return None
+            offset = offset + M[:3, 3]
+        elif n.name not in ("group", "union", "render", "color"):
+            break
+        kids = [c for c in n.children if c.modifier not in ("%", "*")]
+        if len(kids) != 1:
+            return None
+        n = kids[0]
+    if n.name not in ("sphere", "circle"):
+        return None
+    r = n.args.get("r", n.pos[0] if n.pos else 1.0)
+    if not isinstance(r, float) or not r > 0 or not math.isfinite(r):
+        return None
+    dim = 3 if n.name == "sphere" else 2
+    if dim == 2 and offset[2] != 0:
+        return None
+    return r, offset[:dim], dim
+
+
+def _ball_hull(a, b):
+    """The convex hull of two spheres ``(radius, centre, 3)``."""
+    (ra, ca, _), (rb, cb, _) = a, b
+    from ..shapes.primitives3d import round_cone, sphere
+
+    d = cb - ca
+    L = float(np.linalg.norm(d))
+    if L <= abs(ra - rb):  # one holds the other
+        r, c = (ra, ca) if ra >= rb else (rb, cb)
+        s = sphere(r)
+        return s.translate(c.tolist()) if np.any(c != 0) else s
+    # round_cone: r1 at z = 0, r2 at z = height; orient its +z along d
+    return round_cone(ra, rb, L).orient((d / L).tolist()).translate(ca.tolist())
+
+
+def _array(v) -> np.ndarray | None:
+    if v is _UNDEF or isinstance(v, (bool, str, tuple)) or v is None:
+        return None
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    return a
+
+
+def _show(v) -> str:
+    if v is _UNDEF:
+        return "undef"
+    if isinstance(v, tuple) and len(v) == 2 and v[0] == "word":
+        return v[1]
+    s = repr(v)
+    return s if len(s) <= 60 else s[:57] + "..."
+
+
+def load_csg(path: str | os.PathLike, facets: str = "ideal"):
+    """The csdf shape of an OpenSCAD ``.csg`` file (see :func:`loads_csg`).
+
+    Raises:
+        ModelError: an unreadable file, a syntax error or an unsupported node, naming the
+            file, line and column.
+    """
+    p = Path(path)
+    text = read_source(p, MAX_CSG_BYTES)
+    return loads_csg(text, str(p), facets)
+
+
+def scad_to_csg_text(path: str | os.PathLike, timeout: float = SCAD_TIMEOUT) -> str:
+    """Flatten a ``.scad`` file to ``.csg`` text with the ``openscad`` program.
+
+    Raises:
+        CsdfError: ``openscad`` not on PATH (with how to install it), a missing file, a
+            failure (its message) or a run longer than ``timeout`` seconds.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise CsdfError(f"{p}: no such .scad file")
+    exe = shutil.which("openscad")
+    if exe is None:
+        raise CsdfError(f"{p}: reading .scad needs the openscad program on PATH (Debian: "
+                        "apt-get install openscad); or export a .csg from OpenSCAD "
+                        "(File > Export > Export as CSG) and load that")
+    with tempfile.TemporaryDirectory(prefix="csdf-scad-") as tmp:
+        out = Path(tmp) / "model.csg"
+        try:
+            run = subprocess.run([exe, "-o", str(out), str(p.resolve())], cwd=str(p.parent),
+                                 capture_output=True, text=True, timeout=timeout,
+                                 stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            raise CsdfError(f"{p}: openscad took longer than {timeout:g} s") from None
+        if run.returncode != 0 or not out.exists():
+            msg = " ".join((run.stderr or run.stdout or "").strip().splitlines()[-3:])
+            raise CsdfError(f"{p}: openscad failed (exit {run.returncode}): {msg}")
+        return out.read_text(encoding="utf-8")
+
+
+def load_scad(path: str | os.PathLike, facets: str = "ideal",
+              timeout: float = SCAD_TIMEOUT):
+    """The csdf shape of an OpenSCAD ``.scad`` file: flattened by the ``openscad``
+    program (:func:`scad_to_csg_text`), then read as ``.csg`` (:func:`loads_csg`)."""
+    return loads_csg(scad_to_csg_text(path, timeout), f"{path} (as CSG)", facets)

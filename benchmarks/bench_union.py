@@ -20,6 +20,7 @@ the reference mesher). Run: ``python benchmarks/bench_union.py [--runs 3]``.
 from __future__ import annotations
 
 import argparse
+import importlib
 import statistics
 import sys
 import time
@@ -57,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--voxel", type=float, default=0.05, help="voxel size (model units)")
     args = p.parse_args(argv)
     import csdf
-    import csdf.field as F
+    F = importlib.import_module("csdf.field")  # (csdf.field is the user-field function)
 
     print("\n".join(f"* {k}: {v}" for k, v in machine_info().items()))
     rows = []

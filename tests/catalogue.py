@@ -64,6 +64,20 @@ def operators() -> dict:
         "rotate_2d": lambda: csdf.extrude(csdf.rectangle((1, 0.4)).rotate(0.3), 0.5),
         "polar_2d": lambda: csdf.extrude(
             csdf.circle(0.1).translate((0.5, 0)).repeat_polar(5), 0.3),
+        "transform": lambda: csdf.box((0.8, 0.5, 0.4)).transform(
+            [[1.0, 0.4, 0.0, 0.1], [0.0, 1.2, 0.0, 0.0], [0.0, 0.0, 0.8, -0.1],
+             [0.0, 0.0, 0.0, 1.0]]),
+        "polygon_holes": lambda: csdf.extrude(csdf.polygon(
+            [[-0.6, -0.6], [0.6, -0.6], [0.6, 0.6], [-0.6, 0.6], [-0.2, -0.2], [0.2, -0.2],
+             [0.2, 0.2], [-0.2, 0.2]], paths=[[0, 1, 2, 3], [4, 5, 6, 7]]), 0.4),
+        "field_param": lambda: csdf.field(
+            csdf.sqrt(csdf.x * csdf.x + csdf.y * csdf.y + csdf.z * csdf.z) - r(),
+            exact=True, bounds=((-0.9, -0.9, -0.9), (0.9, 0.9, 0.9))),
+        "normalized": lambda: csdf.field(
+            csdf.x * csdf.x / 0.5 + csdf.y * csdf.y + csdf.z * csdf.z - 0.4,
+            bounds=((-1, -1, -1), (1, 1, 1))).normalized(),
+        "remap": lambda: csdf.box((0.8, 0.5, 0.4)).remap(
+            x=csdf.x + 0.3 * csdf.sin(2.0 * csdf.y)) & csdf.box(1.2),
     }
     for blend in (None, *csdf.BLENDS):
         for op in ("union", "intersection"):

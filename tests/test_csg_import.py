@@ -152,6 +152,12 @@ def test_extrusions_offset_minkowski_and_hull():
     # OpenSCAD turns clockwise seen from +z: at the top the long side lies along y
     assert _f(tw, [[0, 1.8, 9.9]])[0] < 0 and _f(tw, [[1.8, 0, 9.9]])[0] > 0
     assert _f(tw, [[1.8, 0, 0.1]])[0] < 0
+    cone = loads_csg("linear_extrude(height = 10, scale = 0.5) { circle(r = 2); }")
+    assert cone.exactness == "neither"
+    assert _f(cone, [[1.9, 0, 0.1]])[0] < 0 and _f(cone, [[1.9, 0, 9.9]])[0] > 0
+    assert _f(cone, [[0.9, 0, 9.9]])[0] < 0
+    with pytest.raises(ModelError, match="non-uniform scale"):
+        loads_csg("linear_extrude(height = 1, scale = [1, 2]) { circle(r = 1); }")
 
 
 @pytest.mark.parametrize("text, where, match", [

@@ -9,13 +9,15 @@ that are not pruned, or posed, offer no cells.
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 
 import csdf
-import csdf.field as F
 from csdf.render.trace import _empty_run, sphere_trace, trace_frame
 
+F = importlib.import_module("csdf.field")  # (csdf.field is the user-field function)
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
 

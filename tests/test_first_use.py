@@ -75,7 +75,8 @@ def test_from_csdf_import_and_star_in_a_fresh_process():
 
 def test_submodules_as_attributes_after_import_csdf():
     r = _python("import csdf\n"
-                "print(csdf.field.Field is csdf.Field, callable(csdf.backends.select),"
+                "print(csdf.Field.__module__ == 'csdf.field' and callable(csdf.field),"
+                " callable(csdf.backends.select),"
                 " csdf.lang.loads is csdf.loads, csdf.sample.sample_surface is"
                 " csdf.sample_surface)\n"
                 "try:\n"
@@ -89,13 +90,13 @@ def test_submodules_as_attributes_after_import_csdf():
 def test_function_names_survive_a_later_subpackage_import():
     # the subpackage imported first (as the CLI does), the public name read afterwards:
     # csdf.mesh is still the function, not the package
-    r = _python("import csdf.mesh.api, csdf.fit, csdf.render, csdf.scan, csdf\n"
+    r = _python("import csdf.mesh.api, csdf.fit, csdf.render, csdf.scan, csdf.field, csdf\n"
                 "print(csdf.mesh.__module__, csdf.fit.__module__, csdf.render.__module__,"
-                " csdf.scan.__module__)")
+                " csdf.scan.__module__, csdf.field.__module__)")
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["csdf.mesh.api", "csdf.fit.api", "csdf.render.image",
-                                "csdf.scan"]
-    for name in ("mesh", "fit", "render", "scan"):
+                                "csdf.scan", "csdf.shapes.userfield"]
+    for name in ("mesh", "fit", "render", "scan", "field"):
         assert callable(getattr(csdf, name))
 
 

@@ -54,6 +54,9 @@ CASES = {
     "complement": ("complement(sphere(1))", lambda: C.complement(C.sphere(1))),
     "extrude": ("extrude(circle(1), 2)", lambda: C.extrude(C.circle(1), 2)),
     "revolve": ("revolve(circle(0.2), 1)", lambda: C.revolve(C.circle(0.2), 1)),
+    "normalized": ("field(x * x + y * y + z * z - 1).normalized()",
+                   lambda: C.field(C.x * C.x + C.y * C.y + C.z * C.z - 1).normalized()),
+    "remap": ("box(1).remap(x = x + 0.3 * y)", lambda: C.box(1).remap(x=C.x + 0.3 * C.y)),
 }
 for _name, _e in csdf.REGISTRY.items():
     if _e.kind == "primitive3d":

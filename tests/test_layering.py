@@ -25,7 +25,7 @@ LAYERS: dict[str, int] = {
     "csdf.errors": 0, "csdf.ops": 0, "csdf.interval": 0, "csdf.layout": 0,
     "csdf.expr": 0, "csdf.vec": 0, "csdf.points": 0, "csdf.version": 0,
     "csdf.parallel": 0, "csdf.memory": 0, "csdf.cache": 0, "csdf.pose": 0,
-    "csdf.opformula": 0,
+    "csdf.opformula": 0, "csdf.bvh": 0, "csdf.exprgrad": 0,
     # 1 shapes: primitives, operators, and the text language that builds them
     "csdf.shapes": 1, "csdf.lang": 1, "csdf.zoo": 1,
     "csdf.shapes.exprfield": 1, "csdf.lang.vm": 1,  # a field from an expression; .vm in
@@ -34,7 +34,7 @@ LAYERS: dict[str, int] = {
     # 2 compiler: tape, bytecode, simplification
     "csdf.compiler": 2,
     # 3 evaluators
-    "csdf.backends": 3,
+    "csdf.backends": 3, "csdf.backends.meshdist": 3,  # exact distance to a mesh
     # 4 the field layer
     "csdf.field": 4, "csdf.fieldset": 4,
     # 5 consumers

@@ -26,7 +26,33 @@ from typing import TYPE_CHECKING, Any
 
 from .compiler import Call, Program
 from .errors import BytecodeError, CsdfError, MeshWarning, ModelError, ParamError, ShapeError
-from .expr import Expr, Param, param
+from .expr import (
+    Expr,
+    Param,
+    acos,
+    asin,
+    atan,
+    atan2,
+    clamp,
+    cos,
+    exp,
+    floor,
+    log,
+    maximum,
+    minimum,
+    mix,
+    mod,
+    param,
+    sign,
+    sin,
+    sqrt,
+    square,
+    step,
+    tan,
+)
+from .expr import X as x
+from .expr import Y as y
+from .expr import Z as z
 from .pose import Pose
 from .shapes import *  # noqa: F403
 from .shapes import REGISTRY, Shape
@@ -116,7 +142,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
 #: function ``csdf.mesh.mesh``): the import system's binding of the subpackage on this
 #: package is refused, so the name always means the function
 _FUNCTION_OVER_MODULE = frozenset(
-    name for name, (mod, attr) in _LAZY.items() if attr is not None and mod == "." + name)
+    [name for name, (mod, attr) in _LAZY.items() if attr is not None and mod == "." + name]
+    + ["field"])  # csdf.field is the user-field function; the field layer is csdf.Field
 
 
 def compile(shape: Shape) -> Program:  # noqa: A001 - public API name
@@ -148,9 +175,11 @@ def __dir__() -> list[str]:
 
 
 class _Namespace(types.ModuleType):
-    """This package's module type: keeps ``csdf.mesh``, ``csdf.fit``, ``csdf.render``
-    and ``csdf.scan`` the functions when their subpackages are first imported (the import
-    system then sets the subpackage as an attribute of its parent)."""
+    """This package's module type: keeps ``csdf.mesh``, ``csdf.fit``, ``csdf.render``,
+    ``csdf.scan``, ``csdf.detect`` and ``csdf.field`` the functions when their
+    subpackages or modules are first imported (the import system then sets the module
+    as an attribute of its parent; the field layer's module stays
+    ``sys.modules['csdf.field']``, its classes ``csdf.Field``, ``csdf.as_field``)."""
 
     def __setattr__(self, name: str, value: Any) -> None:
         if (name in _FUNCTION_OVER_MODULE and isinstance(value, types.ModuleType)
@@ -170,5 +199,7 @@ __all__ = [
     "SceneQuery", "fit_depth", "fit_silhouette", "track", "Tracker", "TrackFrame",
     "TrackResult", "synth", "Sequence", "metrics", "detect", "detect_primitives",
     "detections_to_scene", "Detection", "PrimitiveDetection", "estimate_normals",
+    "x", "y", "z", "sqrt", "square", "sin", "cos", "tan", "asin", "acos", "atan", "atan2",
+    "exp", "log", "floor", "step", "sign", "mod", "minimum", "maximum", "clamp", "mix",
     *_shape_names,
 ]

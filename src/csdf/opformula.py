@@ -133,6 +133,13 @@ class Formula:
         ``np.errstate(all='ignore')`` to silence NumPy's warnings."""
         return self._np(env, dtype)
 
+    def evaluate(self, env: Mapping[str, Any], functions: Mapping[str, Callable]) -> Any:
+        """The formula's value with the names bound by ``env`` and the functions
+        (``sin``, ``sqrt``, ``pos_div``, ...) by ``functions``; ``+ - * /`` and unary
+        ``-`` are Python's operators on the values (so any type with arithmetic works:
+        floats, arrays, expressions)."""
+        return _evaluate(self._tree, env, functions)
+
     def render(self, target: Target, *, atom: bool = False) -> str:
         """The formula as source text for ``target`` (evaluation order preserved);
         ``atom``: parenthesised unless it is a name, literal or call, so that it can
@@ -158,6 +165,29 @@ def _check(node: ast.AST, text: str) -> None:
             _check(arg, text)
     else:
         raise ValueError(f"formula {text!r}: {ast.unparse(node)!r} is outside the language")
+
+
+def _evaluate(node: ast.AST, env: Mapping[str, Any], functions: Mapping[str, Callable]
+              ) -> Any:
+    if isinstance(node, ast.Constant):
+        return float(node.value)
+    if isinstance(node, ast.Name):
+        return env[node.id]
+    if isinstance(node, ast.UnaryOp):
+        return -_evaluate(node.operand, env, functions)
+    if isinstance(node, ast.BinOp):
+        a = _evaluate(node.left, env, functions)
+        b = _evaluate(node.right, env, functions)
+        op = type(node.op)
+        if op is ast.Add:
+            return a + b
+        if op is ast.Sub:
+            return a - b
+        if op is ast.Mult:
+            return a * b
+        return a / b
+    assert isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+    return functions[node.func.id](*(_evaluate(x, env, functions) for x in node.args))
 
 
 def _numpy_closure(node: ast.AST) -> Callable[[Mapping[str, Any], np.dtype], Any]:

@@ -24,8 +24,9 @@ contract each keeps:
                                          ``capped_cone`` / ``cone``: **exact**
 ``square``, ``circle``, ``polygon``      ``rectangle``, ``circle``, ``polygon`` (paths
                                          combined even-odd: holes): **exact**
-``linear_extrude``                       ``extrude`` (**exact**); with ``twist`` a
-                                         **bound** (:meth:`csdf.Shape.twist`)
+``linear_extrude``                       ``extrude`` (**exact**); with ``twist`` or a
+                                         uniform ``scale``, ``twist`` / ``taper``
+                                         (**neither**, with a Lipschitz bound)
 ``rotate_extrude`` (full turn)           ``revolve``: **exact**
 ``offset(r = R)``                        the 2D child offset by ``R``: **exact** for
                                          ``R > 0`` on an exact child
@@ -39,7 +40,8 @@ contract each keeps:
 Not yet read (a :class:`~csdf.errors.ModelError` naming the node, the file, line and
 column): ``facets='openscad'`` (the faceted curves), ``polyhedron``, ``hull`` of other
 shapes, ``minkowski`` without a sphere or circle, ``resize``, partial
-``rotate_extrude``, scaled ``linear_extrude``, ``projection`` — these need
+``rotate_extrude``, ``linear_extrude`` with a non-uniform scale, ``projection`` —
+these need
 the exact distance to a triangle mesh (``csdf.from_mesh``, issue 20) — and, as in
 OpenSCAD's own CSG export, ``import``, ``surface``, ``text``, ``roof`` and ``fill``
 (external data).
@@ -463,12 +465,18 @@ class _Converter:
         h = self.positive(n, "height", self.num(n, "height", 100.0))
         sc = n.args.get("scale", 1.0)
         sc_a = _array(sc)
-        if sc_a is None or not np.allclose(sc_a, 1.0):
-            raise self.err(n, f"scale = {_show(sc)} is not read yet (needs csdf.from_mesh)")
+        if sc_a is None or sc_a.size not in (1, 2) or not np.all(np.isfinite(sc_a)) or \
+                np.any(sc_a < 0):
+            raise self.err(n, f"scale must be a number or [sx, sy] >= 0, got {_show(sc)}")
+        sc_a = np.broadcast_to(sc_a.reshape(-1), (2,))
+        if sc_a[0] != sc_a[1]:
+            raise self.err(n, f"a non-uniform scale = {_show(sc)} is not read yet")
         v = n.args.get("v", _UNDEF)
         if v is not _UNDEF and not np.allclose(_array(v), [0, 0, 1]):
             raise self.err(n, f"an extrusion direction v = {_show(v)} is not read yet")
         s = extrude(child, h).translate((0.0, 0.0, h / 2))
+        if sc_a[0] != 1.0:  # the section scaled from 1 at the bottom to sc at the top
+            s = s.taper((float(sc_a[0]) - 1.0) / h)
         twist = self.num(n, "twist", 0.0)
         if twist != 0.0:
             # OpenSCAD turns clockwise (seen from +z) by `twist` degrees over the height

@@ -68,6 +68,9 @@ MATH: dict[str, Any] = {
     "div": lambda a, b: E.make("div", a, b),
 }
 CONSTANTS: dict[str, float] = {"pi": math.pi, "tau": 2 * math.pi, "inf": math.inf}
+#: the coordinates, named only inside the arguments of these calls
+_COORDS = {"x": E.X, "y": E.Y, "z": E.Z}
+_COORD_CALLS = ("field", "remap")
 KEYWORDS = ("param", "let", "def", "export", "in")
 
 
@@ -136,6 +139,7 @@ class _Loader:
         self.lines = _lines(text)
         self.globals: dict[str, _Global] = {}  # top-level bindings, in order
         self.locals: dict[str, Any] = {}  # the arguments of the def being evaluated
+        self.coords = 0  # > 0 inside field(...) / .remap(...): x, y, z are coordinates
         self.limit = sys.maxsize  # globals with seq < limit are "before" this point
         self.func_line = 0  # the line of the def being evaluated (0 at top level)
         self.params: dict[str, Expr] = {}
@@ -280,6 +284,8 @@ class _Loader:
     def ex_name(self, node: Tree, depth: int) -> Any:
         tok = node.children[0]
         name = str(tok)
+        if self.coords and name in _COORDS:
+            return _COORDS[name]
         v, _ = self.lookup(name)
         if v is _BUILTIN:
             if name in CONSTANTS:
@@ -390,11 +396,23 @@ class _Loader:
                 pos.append(self.eval(a, depth))
         return pos, kw
 
+    def _coord_args(self, node: Tree | None, depth: int) -> tuple[list, dict]:
+        """The arguments of ``field(...)`` or ``.remap(...)``: ``x``, ``y``, ``z`` are
+        the coordinates there (and only there)."""
+        self.coords += 1
+        try:
+            return self._args(node, depth)
+        finally:
+            self.coords -= 1
+
     def ex_call(self, node: Tree, depth: int) -> Any:
         name_tok, argnode = node.children
         name = str(name_tok)
-        pos, kw = self._args(argnode, depth)
         f, line = self.lookup(name)
+        if name in _COORD_CALLS and f is _BUILTIN:
+            pos, kw = self._coord_args(argnode, depth)
+        else:
+            pos, kw = self._args(argnode, depth)
         if isinstance(f, _Func):
             return self._call_def(node, f, pos, kw, depth)
         if f is _UNKNOWN:
@@ -427,7 +445,10 @@ class _Loader:
                              hint=self.suggest(name, methods) or f"methods: {', '.join(methods)}")
         if not isinstance(obj, Shape):
             raise self.error(f".{name}() applies to shapes, not to {_kind(obj)}", node)
-        pos, kw = self._args(argnode, depth)
+        if name in _COORD_CALLS:
+            pos, kw = self._coord_args(argnode, depth)
+        else:
+            pos, kw = self._args(argnode, depth)
         return self._api(node, name, REGISTRY[name].fn, [obj, *pos], kw)
 
     def _count(self, node) -> None:

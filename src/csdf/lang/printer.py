@@ -27,6 +27,8 @@ from .loader import CONSTANTS, KEYWORDS, MATH
 __all__ = ["dumps"]
 
 _INFIX = {"add": "+", "sub": "-", "mul": "*", "div": "/"}
+#: calls whose arguments may use the coordinates x, y, z (see csdf.lang.loader)
+_COORD_CALLS = ("field",)
 _INFIX_CSG = {"union": "|", "intersection": "&", "difference": "-"}
 
 
@@ -60,6 +62,13 @@ class _Printer:
         """The text of a call of the built-in ``name`` with printed arguments: direct,
         or through a wrapper ``def`` (printed before the parameters) when a parameter
         shadows ``name``."""
+        if name in self.shadowed and name in _COORD_CALLS:
+            # its arguments may use x, y, z, which mean the coordinates only inside its
+            # parentheses: the wrapper holds the whole call, arguments and all
+            w = self.fresh(f"builtin_{name}_")
+            parts = pos + [f"{k}={v}" for k, v in kw]
+            self.defs.append(f"def {w}() = {name}({', '.join(parts)})")
+            return f"{w}()"
         if name in self.shadowed:
             key = (name, len(pos), tuple(k for k, _ in kw))
             a = [f"a{i + 1}" for i in range(len(pos))]
@@ -96,13 +105,13 @@ class _Printer:
         return f"({r})" if r.startswith("-") else r
 
     def expr(self, e: Expr) -> str:
-        """A parameter expression, fully parenthesised."""
+        """A parameter expression (or a field's, in x, y, z), fully parenthesised."""
         if e.op == "const":
             return self.num(float(e.value))  # type: ignore[arg-type]
         if e.op == "param":
             return e.value.name  # type: ignore[union-attr]
         if e.op in ("x", "y", "z"):
-            raise CsdfError("a shape argument depends on x, y or z; it cannot be printed")
+            return e.op  # (only a field's or a remap's arguments hold coordinates)
         if e.op in _INFIX:
             return f"({self.expr(e.args[0])} {_INFIX[e.op]} {self.expr(e.args[1])})"
         if e.op == "neg":

@@ -54,6 +54,7 @@ from .primitives3d import (
     torus,
     tri_prism,
 )
+from .userfield import field, gyroid, normalized, remap, superquadric, tanglecube
 
 __all__ = [
     "Shape", "REGISTRY", "ApiEntry", "BLENDS",
@@ -66,4 +67,5 @@ __all__ = [
     "union", "intersection", "difference", "complement",
     "translate", "rotate", "orient", "transform", "scale", "mirror", "repeat",
     "repeat_mirrored", "repeat_polar",
+    "field", "normalized", "remap", "gyroid", "superquadric", "tanglecube",
 ]

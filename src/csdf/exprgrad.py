@@ -1,0 +1,97 @@
+"""Symbolic derivatives of expressions: :func:`gradient`.
+
+Forward mode over the DAG, children before parents (:func:`csdf.expr.walk`), with every
+op's rule from its specification (:data:`csdf.ops.OPS`): the same factored form
+``outer * (ca * da + cb * db)`` (:func:`csdf.ops.chain_tangent`) that the evaluators
+run, with the coefficient formulas evaluated on expressions
+(:meth:`csdf.opformula.Formula.evaluate`), so the derivative expression means what the
+evaluators compute, and a structurally zero tangent stays absent (``None``). ``min`` and
+``max`` select the winner's tangent with the tie rule (:func:`csdf.ops.tie_comparison`)
+as a step function; ``floor``, ``step`` and ``sign`` have none. Shared subexpressions stay
+shared: each node's tangent is built once.
+
+The result is an expression like any other: it compiles, evaluates on every backend and
+has intervals (``csdf.Shape.normalized`` is ``f / |grad f|`` built from it, and the
+Lipschitz bound of a user's field comes from the intervals of its gradient).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from .expr import Expr, X, Y, Z, as_expr, cos, floor, sign, sin, sqrt, step, walk
+from .ops import OPS, chain_tangent, tie_comparison
+
+__all__ = ["gradient"]
+
+Tangent = tuple  # one expression (or None) per variable
+
+
+def _pos_div(n: Expr, d: Expr) -> Expr:
+    """``n / d`` where ``d > 0``, else 0, as an expression: the quotient is taken with
+    a denominator of 1 where ``d <= 0`` (so no infinity or NaN is made there)."""
+    gt = 1.0 - step(-d)  # 1 where d > 0 (step(0) = 1)
+    return n * gt / (d + (1.0 - gt) * (1.0 + abs(d)))
+
+
+_FUNCS = {"sin": sin, "cos": cos, "sqrt": sqrt, "floor": floor, "sign": sign,
+          "pos_div": _pos_div}
+
+
+class _Alg:
+    """Tangent algebra on tuples of expressions (``None`` entries: structurally 0)."""
+
+    def scale(self, f, t):
+        return tuple(None if c is None else f * c for c in t)
+
+    def add(self, u, v):
+        return tuple(b if a is None else (a if b is None else a + b) for a, b in zip(u, v))
+
+    def sub(self, u, v):
+        return tuple((None if b is None else -b) if a is None else (a if b is None else a - b)
+                     for a, b in zip(u, v))
+
+    def neg(self, t):
+        return tuple(None if c is None else -c for c in t)
+
+
+def gradient(e: Expr, wrt: Sequence[Expr] = (X, Y, Z)) -> tuple[Expr, ...]:
+    """The partial derivatives of ``e`` with respect to the leaves ``wrt`` (the
+    coordinates by default; parameters work too), as expressions (the constant 0 where
+    ``e`` does not depend on one)."""
+    e = as_expr(e)
+    k = len(wrt)
+    seeds = {id(w): i for i, w in enumerate(wrt)}
+    alg = _Alg()
+    tan: dict[int, Tangent | None] = {}
+    for node in walk(e):
+        if not node.args:
+            i = seeds.get(id(node))
+            tan[id(node)] = None if i is None else tuple(
+                as_expr(1.0) if j == i else None for j in range(k))
+            continue
+        a = node.args[0]
+        b = node.args[1] if len(node.args) > 1 else None
+        ta, tb = tan[id(a)], (tan[id(b)] if b is not None else None)
+        if ta is None and tb is None:
+            tan[id(node)] = None
+            continue
+        rule = OPS[node.op].derivative
+        if rule.kind == "zero":
+            tan[id(node)] = None
+        elif rule.kind == "select":
+            cmp = tie_comparison(node.op, a.op == "const")
+            d = {"<=": b - a, "<": a - b, ">=": a - b, ">": b - a}[cmp]
+            w = step(d) if cmp in ("<=", ">=") else 1.0 - step(d)  # 1 where a wins
+            zero = (None,) * k
+            tan[id(node)] = alg.add(alg.scale(w, ta or zero), alg.scale(1.0 - w, tb or zero))
+        else:
+            env = {"a": a, "b": b, "v": node}
+            for name, f in rule.let:
+                env[name] = f.evaluate(env, _FUNCS)
+            tan[id(node)] = chain_tangent(
+                rule, ta, tb, lambda f, env=env: f.evaluate(env, _FUNCS), alg)
+    t = tan[id(e)]
+    zero = as_expr(0.0)
+    return tuple(zero for _ in range(k)) if t is None else tuple(
+        zero if c is None else c for c in t)

@@ -137,3 +137,21 @@ def test_catalogue_fields():
     assert m.is_watertight and m.euler_number == 2 - 2 * 5  # genus 5
     sample = m.vertices[:200]
     assert np.abs(_v(tc, sample)).max() < 0.05  # on the surface, to the mesh's voxel
+
+
+def test_fit_recovers_a_superquadrics_pose_and_exponents():
+    e1 = csdf.param("e1", 1.0, 0.1, 2.0)
+    e2 = csdf.param("e2", 1.0, 0.1, 2.0)
+    sq = csdf.superquadric((0.3, 0.2, 0.1), e1, e2)
+    P = csdf.sample_surface(sq, 3000, params={"e1": 0.5, "e2": 0.8}, seed=0)[0]
+    c, s = math.cos(0.5), math.sin(0.5)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    t = np.array([0.1, -0.2, 0.05])
+    Q = P @ R.T + t + RNG.normal(0, 0.001, P.shape)
+    r = csdf.fit(sq, Q, estimate=("pose", "params"), init={"translation": Q.mean(0)},
+                 f_scale=0.001, seed=0)
+    assert r.success
+    assert abs(r.params["e1"] - 0.5) < 0.01 and abs(r.params["e2"] - 0.8) < 0.01
+    dR = r.rotation.T @ R
+    assert math.degrees(math.acos(np.clip((np.trace(dR) - 1) / 2, -1, 1))) < 0.2
+    assert np.linalg.norm(r.translation - t) < 1e-3

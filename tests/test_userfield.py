@@ -155,3 +155,32 @@ def test_fit_recovers_a_superquadrics_pose_and_exponents():
     dR = r.rotation.T @ R
     assert math.degrees(math.acos(np.clip((np.trace(dR) - 1) / 2, -1, 1))) < 0.2
     assert np.linalg.norm(r.translation - t) < 1e-3
+
+
+def test_a_field_that_is_not_a_distance_traces_like_its_mesh():
+    # the tangle cube is a polynomial, not a distance: the sphere tracer steps by its
+    # Lipschitz bound over the box, found by interval arithmetic of its gradient, and
+    # must neither overstep nor miss
+    import trimesh
+
+    tc = csdf.tanglecube()
+    assert tc.exactness == "neither" and 5.0 < tc.lipschitz < 20.0
+    cam = csdf.Camera.look_at(eye=(6.0, 4.5, 3.5), target=(0, 0, 0), fov=40, width=48,
+                              height=36)
+    P, _ = csdf.scan(tc, cam)
+    m = csdf.mesh(tc, resolution=128, progress=False)
+    tm = trimesh.Trimesh(m.vertices, m.faces, process=False)
+    o, d = cam.rays()
+    loc, ri, _ = tm.ray.intersects_location(o, d, multiple_hits=False)
+    depth = np.full(len(d), np.inf)
+    depth[ri] = np.linalg.norm(loc - o[ri], axis=1)
+    Pw = cam.camera_to_world(P)
+    # the scanned points are on the surface (a ray out of iterations within 16 tracer
+    # tolerances of it counts as a hit, as for any field) and at the mesh's first hit
+    f = np.abs(_v(tc, Pw))
+    assert np.median(f) < 1e-9 and f.max() / tc.lipschitz < 0.02
+    u = (Pw - o[0]) / np.linalg.norm(Pw - o[0], axis=1, keepdims=True)
+    hit_ray = np.argmax(u @ d.T, axis=1)
+    assert np.allclose(np.linalg.norm(Pw - o[0], axis=1), depth[hit_ray], atol=0.05)
+    # and it misses no ray that the mesh hits (up to the mesh's grazing rays)
+    assert len(P) >= 0.98 * len(ri)

@@ -51,7 +51,8 @@ from .errors import CsdfError, ParamError
 from .layout import N_COORDS, SlotLayout
 
 __all__ = [
-    "RULES", "SAME_OPERAND_RULES", "Interval", "Step", "expr_range", "magnitude",
+    "RULES", "SAME_OPERAND_RULES", "Interval", "Step", "expr_range", "expr_box_ranges",
+    "magnitude",
     "tape_steps", "run_tape", "init_slots", "check_boxes", "param_bounds",
 ]
 
@@ -569,34 +570,59 @@ def expr_range(root: _Node) -> Interval:
         ``(lo, hi)``; ``(-inf, inf)`` when nothing better is known (also when the
         expression is NaN for every parameter value).
     """
-    ranges: dict[int, Pair] = {}
-    for n in _postorder(root):
-        if n.op == "const":
-            v = np.array([float(n.value)])  # type: ignore[arg-type]
-            r = (v, v)
-        elif n.op == "param":
-            p: Any = n.value
-            if math.isfinite(p.lo) and math.isfinite(p.hi):
-                r = (np.array([float(p.lo)]), np.array([float(p.hi)]))
-            else:
-                d = np.array([float(p.default)])
-                r = (d, d)
-        elif n.op in ("x", "y", "z"):
-            r = (np.array([-_INF]), np.array([_INF]))
-        else:
-            a = ranges[id(n.args[0])]
-            with np.errstate(all="ignore"):
-                if n.op in _UNARY:
-                    r = _UNARY[n.op](*a)
-                elif n.args[1] is n.args[0] and n.op in SAME_OPERAND_RULES:
-                    r = SAME_OPERAND_RULES[n.op](*a)
-                else:
-                    r = _BINARY[n.op](*a, *ranges[id(n.args[1])])
-        ranges[id(n)] = r
-    lo, hi = (float(v[0]) for v in ranges[id(root)])
+    inf = np.array([_INF])
+    coords = {c: (-inf, inf) for c in ("x", "y", "z")}
+    lo_a, hi_a = _ranges([root], coords, 1)[0]
+    lo, hi = float(lo_a[0]), float(hi_a[0])
     if math.isnan(lo) or math.isnan(hi):
         return _FULL
     return (lo, hi)
+
+
+def expr_box_ranges(roots: Sequence[_Node], lo: Arr, hi: Arr) -> list[Pair]:
+    """Intervals of expressions in x, y, z over ``M`` boxes at once: for each root, two
+    ``(M,)`` arrays bounding its values over the box ``[lo[m], hi[m]]`` (``(M, 3)``
+    each; a 2D box ``(M, 2)`` leaves z over the whole line), parameters over their
+    ranges as in :func:`expr_range`. NaN bounds mean nothing is known there (an
+    expression NaN over the whole box)."""
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    m = len(lo)
+    full = (np.full(m, -_INF), np.full(m, _INF))
+    coords = {c: ((lo[:, i].copy(), hi[:, i].copy()) if i < lo.shape[1] else full)
+              for i, c in enumerate(("x", "y", "z"))}
+    return _ranges(list(roots), coords, m)
+
+
+def _ranges(roots: list[_Node], coords: dict[str, Pair], m: int) -> list[Pair]:
+    ranges: dict[int, Pair] = {}
+    for root in roots:
+        for n in _postorder(root):
+            if id(n) in ranges:
+                continue
+            if n.op == "const":
+                v = np.full(m, float(n.value))  # type: ignore[arg-type]
+                r = (v, v)
+            elif n.op == "param":
+                p: Any = n.value
+                if math.isfinite(p.lo) and math.isfinite(p.hi):
+                    r = (np.full(m, float(p.lo)), np.full(m, float(p.hi)))
+                else:
+                    d = np.full(m, float(p.default))
+                    r = (d, d)
+            elif n.op in ("x", "y", "z"):
+                r = coords[n.op]
+            else:
+                a = ranges[id(n.args[0])]
+                with np.errstate(all="ignore"):
+                    if n.op in _UNARY:
+                        r = _UNARY[n.op](*a)
+                    elif n.args[1] is n.args[0] and n.op in SAME_OPERAND_RULES:
+                        r = SAME_OPERAND_RULES[n.op](*a)
+                    else:
+                        r = _BINARY[n.op](*a, *ranges[id(n.args[1])])
+            ranges[id(n)] = r
+    return [ranges[id(r)] for r in roots]
 
 
 def magnitude(root: _Node) -> float:

@@ -17,10 +17,13 @@ so no other argument can depend on the position)::
     param r = 1 in [0.5, 2]
     export field(sqrt(x * x + y * y + z * z) - r, exact = 1)
 
-**Contracts.** A field is ``'neither'`` with an unknown Lipschitz bound (``inf``)
-unless its author vouches: ``exact=True`` (the exact distance), or ``lipschitz=L``
-(``|grad f| <= L``; a ``'bound'`` when ``L <= 1``, since then ``f`` never
-overestimates the distance). :func:`normalized` and :func:`remap` are ``'neither'``.
+**Contracts.** A field is ``'neither'`` unless its author vouches: ``exact=True`` (the
+exact distance), or ``lipschitz=L`` (``|grad f| <= L``; a ``'bound'`` when ``L <= 1``,
+since then ``f`` never overestimates the distance). Without a declared bound its
+Lipschitz bound is found by interval arithmetic of its symbolic gradient over its
+``bounds`` (:func:`interval_lipschitz`; ``inf`` without bounds), so that sphere tracing
+steps safely. :func:`normalized` and :func:`remap` are ``'neither'`` with an unknown
+bound.
 """
 
 from __future__ import annotations
@@ -33,16 +36,45 @@ import numpy as np
 from ..errors import ShapeError
 from ..expr import Expr, X, Y, Z, as_expr, cos, maximum, minimum, sin, sqrt, walk
 from ..exprgrad import gradient
+from ..interval import expr_box_ranges
 from ..vec import Vec
 from .base import Shape, register
 from .exprfield import expr_dim, expr_shape, substitute
 
 __all__ = ["field", "normalized", "remap", "gyroid", "superquadric", "tanglecube",
-           "GRAD_FLOOR"]
+           "interval_lipschitz", "GRAD_FLOOR", "LIPSCHITZ_CELLS"]
 
 #: ``normalized`` divides by ``max(|grad f|, GRAD_FLOOR)`` (where the gradient
 #: vanishes the result is ``f / GRAD_FLOOR``: large, with the sign of ``f``)
 GRAD_FLOOR = 1e-12
+
+
+#: the bounds box is cut into this many cells a side for :func:`interval_lipschitz`
+LIPSCHITZ_CELLS = 8
+
+
+def interval_lipschitz(e: Expr, bounds: np.ndarray, cells: int = LIPSCHITZ_CELLS
+                       ) -> float:
+    """An upper bound of ``|grad e|`` over the box ``bounds`` (``(2, dim)``): the
+    gradient built symbolically (:func:`csdf.exprgrad.gradient`) and bounded by
+    interval arithmetic on each of ``cells ** dim`` cells of the box (parameters over
+    their ranges); ``inf`` where an interval is unbounded or unknown. A bound over the
+    box only, which is where meshing and ray casting evaluate a field."""
+    b = np.asarray(bounds, dtype=np.float64)
+    dim = b.shape[1]
+    g = gradient(e, (X, Y, Z)[:dim])
+    edges = [np.linspace(b[0, i], b[1, i], cells + 1) for i in range(dim)]
+    idx = np.stack(np.meshgrid(*[np.arange(cells)] * dim, indexing="ij"), -1).reshape(-1, dim)
+    lo = np.stack([edges[i][idx[:, i]] for i in range(dim)], axis=1)
+    hi = np.stack([edges[i][idx[:, i] + 1] for i in range(dim)], axis=1)
+    sq = np.zeros(len(lo))
+    for glo, ghi in expr_box_ranges(g, lo, hi):
+        with np.errstate(invalid="ignore", over="ignore"):
+            m = np.maximum(np.abs(glo), np.abs(ghi))
+            if np.any(np.isnan(m)):
+                return math.inf
+            sq += m * m
+    return float(np.sqrt(sq.max()))
 
 
 def _coords_expr(expr: Any, what: str) -> Expr:
@@ -102,8 +134,11 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None) -> Shape:
         ex = bool(exact)  # (the language has no booleans: 0 or 1)
     else:
         raise ShapeError(f"field: exact must be true or false (1 or 0), got {exact!r}")
+    b = _bounds_arg(bounds, dim, "field")
     if lipschitz is None:
         lip, label = (1.0, "exact") if ex else (math.inf, "neither")
+        if not ex and b is not None:  # the bound over the box, by intervals
+            lip = interval_lipschitz(e, b)
     else:
         if isinstance(lipschitz, bool) or not isinstance(lipschitz, (int, float)) or \
                 not lipschitz > 0 or math.isnan(lipschitz):
@@ -115,7 +150,6 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None) -> Shape:
         kwargs["exact"] = 1
     if lipschitz is not None:
         kwargs["lipschitz"] = lip
-    b = _bounds_arg(bounds, dim, "field")
     if b is not None:
         kwargs["bounds"] = [list(map(float, b[0])), list(map(float, b[1]))]
     return expr_shape(e, dim=dim, name="field", args=(e,), kwargs=kwargs, exactness=label,
@@ -181,6 +215,8 @@ def remap(shape: Shape, x=None, y=None, z=None) -> Shape:
 
 def _catalogue(name: str, e: Expr, args: tuple, lipschitz: float, bounds, label: str
                ) -> Shape:
+    if math.isinf(lipschitz) and bounds is not None:
+        lipschitz = interval_lipschitz(e, bounds)
     return expr_shape(e, dim=3, name=name, args=args, exactness=label, lipschitz=lipschitz,
                       bounds=bounds)
 

@@ -69,7 +69,7 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
         detections_to_scene,
         estimate_normals,
     )
-    from .field import Field, as_field, glsl_params, shadertoy, to_glsl
+    from .field import Field, as_field, glsl_params, shadertoy, to_c, to_glsl, to_numpy
     from .fit import (
         FitResult,
         Tracker,
@@ -106,6 +106,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "glsl_params": (".field", "glsl_params"),
     "shadertoy": (".field", "shadertoy"),
     "to_glsl": (".field", "to_glsl"),
+    "to_c": (".field", "to_c"),
+    "to_numpy": (".field", "to_numpy"),
     "FitResult": (".fit", "FitResult"),
     "fit": (".fit", "fit"),
     "icp": (".fit", "icp"),
@@ -199,7 +201,8 @@ __all__ = [
     "SceneQuery", "fit_depth", "fit_silhouette", "track", "Tracker", "TrackFrame",
     "TrackResult", "synth", "Sequence", "metrics", "detect", "detect_primitives",
     "detections_to_scene", "Detection", "PrimitiveDetection", "estimate_normals",
-    "x", "y", "z", "sqrt", "square", "sin", "cos", "tan", "asin", "acos", "atan", "atan2",
-    "exp", "log", "floor", "step", "sign", "mod", "minimum", "maximum", "clamp", "mix",
+    "to_c", "to_numpy", "x", "y", "z", "sqrt", "square", "sin", "cos", "tan", "asin",
+    "acos", "atan", "atan2", "exp", "log", "floor", "step", "sign", "mod", "minimum",
+    "maximum", "clamp", "mix",
     *_shape_names,
 ]

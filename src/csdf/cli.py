@@ -391,27 +391,39 @@ def compile(  # noqa: A001 - the verb users type
 def export(
     model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
     glsl: bool = typer.Option(False, "--glsl", help="A Shadertoy-ready GLSL image shader."),
+    c: bool = typer.Option(False, "--c", help="A self-contained C header: value, and value "
+                           "with gradient and parameter derivatives, in double and float."),
+    numpy: bool = typer.Option(False, "--numpy", help="A Python module that needs NumPy "
+                               "only: value(points) and value_and_grad(points)."),
+    name: str = typer.Option("sdf", "--name", help="With --c/--numpy: the function and "
+                             "type name prefix (a C identifier)."),
     snippet: bool = typer.Option(False, "--snippet", help="With --glsl: only the sdf "
                                  "function and its uniforms, for your own shader."),
     output: Path | None = typer.Option(None, "-o", "--output", help="File (default: "
                                           "standard output)."),
 ):
-    """Export a model for other tools (--glsl: Shadertoy)."""
+    """Export a model for other tools (--glsl: Shadertoy; --c: a C header; --numpy: a
+    NumPy module)."""
 
     def go():
-        from .field import shadertoy, to_glsl
+        from .field import shadertoy, to_c, to_glsl, to_numpy
         from .io import atomic_path
 
-        if not glsl:
-            raise CsdfError("choose an export format: --glsl")
+        if sum((glsl, c, numpy)) != 1:
+            raise CsdfError("choose one export format: --glsl, --c or --numpy")
         m = _load(model)
-        text = to_glsl(m) if snippet else shadertoy(m)
+        if glsl:
+            text, what = (to_glsl(m) if snippet else shadertoy(m)), "GLSL"
+        elif c:
+            text, what = to_c(m, name), "C"
+        else:
+            text, what = to_numpy(m, name), "Python (NumPy)"
         if output is None:
             sys.stdout.write(text)
             return
         with atomic_path(output) as tmp:
             tmp.write_text(text)
-        err.print(f"{output}: {len(text.splitlines())} lines of GLSL", soft_wrap=True)
+        err.print(f"{output}: {len(text.splitlines())} lines of {what}", soft_wrap=True)
 
     _run(go)
 

@@ -48,6 +48,7 @@ import numpy as np
 
 from .backends import BACKENDS
 from .backends import fast as _fast_backend
+from .backends.cexport import to_c, to_numpy
 from .backends.glsl import glsl_float, glsl_params, shadertoy, to_glsl
 from .backends.interval_eval import evaluate_intervals
 from .cache import memo
@@ -59,6 +60,7 @@ from .pose import as_pose
 __all__ = [
     "Field", "as_field", "field_bounds", "planar_bounds", "auto_bounds", "choose_backend",
     "check_bounds", "params_in_ranges", "AUTO_FAST_POINTS", "to_glsl", "shadertoy", "glsl_params",
+    "to_c", "to_numpy",
     "glsl_float", "numba_available", "kernel_cache_dir", "evaluate_intervals",
 ]
 

@@ -61,6 +61,16 @@ def test_eq11_algebraic_sphere_is_exact_on_the_surface_and_errs_as_predicted():
     assert np.all(np.diff(err[far]) > 0)  # the error grows away from the surface
     # where the gradient vanishes (the centre) the value is f / GRAD_FLOOR: large, signed
     assert _v(n, [[0, 0, 0]])[0] < -1e6
+    # normalize=True is the same shape; far= takes the bounding shape's value outside it
+    same = csdf.field(x * x + y * y + z * z - R * R, normalize=True)
+    P = RNG.uniform(-2, 2, (100, 3))
+    assert np.array_equal(_v(same, P), _v(n, P))
+    clamped = alg.normalized(far=csdf.sphere(1.5))
+    assert _v(clamped, [[3.0, 0, 0]])[0] == pytest.approx(1.5)
+    assert _v(clamped, [[1.2, 0, 0]])[0] == pytest.approx((1.44 - R * R) / 2.4)
+    assert np.allclose(_v(csdf.loads(csdf.dumps(clamped)), P), _v(clamped, P))
+    with pytest.raises(csdf.ShapeError, match="far"):
+        alg.normalized(far=csdf.circle(1.0))
 
 
 def test_field_contracts_callables_and_checks():

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ShapeError
-from ..expr import Expr, X, Y, Z, as_expr, cos, maximum, minimum, sin, sqrt, walk
+from ..expr import Expr, X, Y, Z, as_expr, cos, maximum, minimum, select_ge, sin, sqrt, walk
 from ..exprgrad import gradient
 from ..interval import expr_box_ranges
 from ..vec import Vec
@@ -111,7 +111,7 @@ def _bounds_arg(bounds: Any, dim: int, what: str) -> np.ndarray | None:
 
 
 @register("primitive3d")
-def field(expr=None, exact=False, lipschitz=None, bounds=None) -> Shape:
+def field(expr=None, exact=False, lipschitz=None, bounds=None, normalize=False) -> Shape:
     """The field given by ``expr``, an expression in ``x``, ``y``, ``z`` (a 2D field
     when it does not use ``z``), or a function ``f(x, y, z)`` returning one; parameters
     (``csdf.param``) may appear in it.
@@ -123,6 +123,7 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None) -> Shape:
             ``<= 1``, else ``'neither'``); default unknown (``inf``).
         bounds: ``((lo...), (hi...))`` a box holding the surface, or None (unknown:
             meshing and rendering then ask for ``bounds=``).
+        normalize: return :func:`normalized` of the field (Eq. 11: ``f / |grad f|``).
 
     **Neither** unless declared (see the module documentation).
     """
@@ -152,29 +153,45 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None) -> Shape:
         kwargs["lipschitz"] = lip
     if b is not None:
         kwargs["bounds"] = [list(map(float, b[0])), list(map(float, b[1]))]
-    return expr_shape(e, dim=dim, name="field", args=(e,), kwargs=kwargs, exactness=label,
-                      lipschitz=lip, bounds=b)
+    out = expr_shape(e, dim=dim, name="field", args=(e,), kwargs=kwargs, exactness=label,
+                     lipschitz=lip, bounds=b)
+    if isinstance(normalize, bool) or normalize in (0, 1):
+        return normalized(out) if normalize else out
+    raise ShapeError(f"field: normalize must be true or false (1 or 0), got {normalize!r}")
 
 
 @register("method")
-def normalized(shape: Shape) -> Shape:
+def normalized(shape: Shape, far=None) -> Shape:
     """The first-order distance of the paper's Eq. 11: ``f / |grad f|``, with the
     gradient built from the same expression (forward mode, :func:`csdf.exprgrad.
     gradient`), so it is exact on the surface wherever ``grad f != 0`` and its error
     grows with the distance as the curvature of the level sets dictates. Where the
-    gradient vanishes it divides by :data:`GRAD_FLOOR` instead. **Neither**."""
+    gradient vanishes it divides by :data:`GRAD_FLOOR` instead.
+
+    ``far``: a shape holding this one (a bounding sphere or box); outside it (where
+    its field is >= 0) its value is used instead, as the paper suggests: far from the
+    surface Eq. 11 is unreliable, and the distance to a shape around the object is a
+    lower bound of the distance to the object. **Neither**."""
     if not isinstance(shape, Shape):
         raise ShapeError(f"normalized is a shape method; got {type(shape).__name__}")
+    if far is not None and (not isinstance(far, Shape) or far.dim != shape.dim):
+        raise ShapeError(f"normalized: far must be a {shape.dim}D shape around this one")
     e = shape.expr
     g = gradient(e, (X, Y, Z)[: shape.dim])
     norm = sqrt(sum((c * c for c in g[1:]), g[0] * g[0]))
     out = e / maximum(norm, GRAD_FLOOR)
 
     def fn(p: Vec, ctx) -> Expr:
-        return substitute(out, p.c)
+        v = substitute(out, p.c)
+        if far is None:
+            return v
+        fv = far.sdf(p, ctx)
+        return select_ge(fv, fv, v)
 
+    bounds = shape.bounds if far is None else far.bounds
     return Shape("normalized", fn, dim=shape.dim, exactness="neither", lipschitz=math.inf,
-                 bounds=shape.bounds, children=(shape,))
+                 bounds=bounds, args=(), kwargs={} if far is None else {"far": far},
+                 children=(shape,) if far is None else (shape, far))
 
 
 @register("method")

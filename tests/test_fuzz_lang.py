@@ -44,6 +44,8 @@ SMALL = [
     "export extrude(polygon([(0, 0), (1, 0), (0.5, 1)]), 0.2).twist(1).repeat(3, count=2)",
     "let n = 6\nexport sphere(0.2).translate((1, 0, 0)).repeat_polar(n)",
     "export revolve(circle(0.2), 1) | ~box((1, 2, 3)).round(0.1)",
+    "param r = 1 in [0.5, 2]\nexport field(sqrt(x * x + y * y + z * z) - r, exact = 1)"
+    " | box(1).remap(x = x + 0.2 * sin(4 * y)) | field(x * x - y + z, normalize = 1)",
 ]
 ZOO = [zoo.source(n) for n in zoo.names()]
 _PTS = np.array([[0.0, 0.0, 0.0], [0.1, -0.2, 0.3], [1.0, 1.0, 1.0], [-0.5, 0.25, 2.0]])
@@ -58,6 +60,7 @@ TOKENS = KEYWORDS + NAMES + NUMBERS + STRINGS + [
     "(", ")", "[", "]", ",", "=", ".", "|", "&", "+", "-", "*", "/", "~", "#", "\n",
     " in [0, 1]", "count=", "k=", "blend=", "r", "h", "a", "x", "(1, 2, 3)", "(0, 0)",
     "box(1)", "sphere(1)", ".translate((1, 0, 0))", "let a = ", "export ", "def f(a) = ",
+    "y", "z", "field(", ".remap(x = ", ".normalized()", "exact = 1", "sqrt(x * x + y * y)",
 ]
 
 
@@ -128,7 +131,25 @@ class _Gen:
             out.append(f"{self.pick(KWARGS)}={self.any(depth)}")
         return ", ".join(out)
 
+    def coord_expr(self, depth: int) -> str:
+        """An expression in x, y, z (for field(...) and .remap(...))."""
+        r = self.rng.random()
+        if depth <= 0 or r < 0.4:
+            return self.pick(["x", "y", "z"]) if self.chance(0.6) else self.num(0)
+        if r < 0.7:
+            op = self.pick(["+", "-", "*", "/"])
+            return f"{self.coord_expr(depth - 1)} {op} {self.coord_expr(depth - 1)}"
+        fn = self.pick(["sqrt", "sin", "cos", "abs", "exp", "log", "floor", "min", "max"])
+        n = 2 if fn in ("min", "max") else 1
+        return f"{fn}({', '.join(self.coord_expr(depth - 1) for _ in range(n))})"
+
     def shape(self, depth: int) -> str:
+        if self.chance(0.06):
+            extra = f", exact = {self.pick(['0', '1'])}" if self.chance(0.3) else ""
+            return f"field({self.coord_expr(3)}{extra})"
+        if depth > 0 and self.chance(0.04):
+            return (f"{self.shape(depth - 1)}.remap({self.pick(['x', 'y', 'z'])} = "
+                    f"{self.coord_expr(2)})")
         r = self.rng.random()
         if depth <= 0 or r < 0.25:
             if self.shapes and self.chance(0.4):

@@ -42,7 +42,11 @@ def test_symbolic_gradient_is_the_evaluators_forward_mode():
 def test_eq11_algebraic_sphere_is_exact_on_the_surface_and_errs_as_predicted():
     R = 0.8
     alg = csdf.field(x * x + y * y + z * z - R * R)
-    assert alg.exactness == "neither" and math.isinf(alg.lipschitz)
+    assert alg.exactness == "neither"
+    # no bounds given: found by intervals (tight to a cell), and the Lipschitz bound
+    # over them (|grad| = 2 r <= 2 sqrt(3) R on the box's corners)
+    assert np.allclose(alg.bounds, [[-R] * 3, [R] * 3], atol=0.01)
+    assert 2 * math.sqrt(3) * R <= alg.lipschitz <= 2 * math.sqrt(3) * R * 1.05
     n = alg.normalized()
     assert n.exactness == "neither"
     # on the sphere: the exact distance (0) to 1e-12, and the gradient is unit
@@ -71,6 +75,22 @@ def test_eq11_algebraic_sphere_is_exact_on_the_surface_and_errs_as_predicted():
     assert np.allclose(_v(csdf.loads(csdf.dumps(clamped)), P), _v(clamped, P))
     with pytest.raises(csdf.ShapeError, match="far"):
         alg.normalized(far=csdf.circle(1.0))
+
+
+def test_bounds_by_intervals():
+    from csdf.shapes.userfield import interval_bounds
+
+    off = csdf.field(csdf.sqrt((x - 3) * (x - 3) + y * y + z * z) - 0.5)
+    b = off.bounds
+    assert np.all(b[0] <= [2.5, -0.5, -0.5]) and np.all(b[1] >= [3.5, 0.5, 0.5])
+    assert np.all(b[0] > [2.4, -0.6, -0.6]) and np.all(b[1] < [3.6, 0.6, 0.6])
+    assert csdf.mesh(off, resolution=24, progress=False).is_watertight  # no bounds= needed
+    assert interval_bounds(x + y + z, 3) is None  # a plane: unbounded
+    assert interval_bounds(x * x + y * y + z * z + 1.0, 3) is None  # no surface
+    assert csdf.field(x + y + z).bounds is None
+    assert csdf.gyroid().bounds is None
+    disk = csdf.field(lambda a, b, c: csdf.sqrt(a * a + b * b) - 2.0)
+    assert disk.dim == 2 and np.allclose(disk.bounds, [[-2, -2], [2, 2]], atol=0.1)
 
 
 def test_field_contracts_callables_and_checks():

@@ -42,7 +42,8 @@ from .base import Shape, register
 from .exprfield import expr_dim, expr_shape, substitute
 
 __all__ = ["field", "normalized", "remap", "gyroid", "superquadric", "tanglecube",
-           "interval_lipschitz", "GRAD_FLOOR", "LIPSCHITZ_CELLS"]
+           "interval_lipschitz", "interval_bounds", "GRAD_FLOOR", "LIPSCHITZ_CELLS",
+           "BOUNDS_SEARCH"]
 
 #: ``normalized`` divides by ``max(|grad f|, GRAD_FLOOR)`` (where the gradient
 #: vanishes the result is ``f / GRAD_FLOOR``: large, with the sign of ``f``)
@@ -75,6 +76,48 @@ def interval_lipschitz(e: Expr, bounds: np.ndarray, cells: int = LIPSCHITZ_CELLS
                 return math.inf
             sq += m * m
     return float(np.sqrt(sq.max()))
+
+
+#: the box (model units, +- this a side) searched for a field's surface when no bounds
+#: are given, and the search's subdivision: levels per round, rounds, most cells kept
+BOUNDS_SEARCH = 1000.0
+BOUNDS_LEVELS = 5
+BOUNDS_ROUNDS = 8
+BOUNDS_CELLS = 4096
+
+
+def interval_bounds(e: Expr, dim: int, extent: float = BOUNDS_SEARCH) -> np.ndarray | None:
+    """A box holding the zero set of ``e`` (``(2, dim)``), found by interval arithmetic:
+    the cube ``+-extent`` is cut into cells, those whose interval excludes 0 are
+    dropped, the rest cut again (:data:`BOUNDS_LEVELS` levels), and the search repeats
+    in the box of the cells kept until it stops shrinking. Conservative (intervals
+    bound the values). None when the surface reaches the search box (unbounded, like a
+    gyroid or a plane), when there is none, or when it is spread over more than
+    :data:`BOUNDS_CELLS` cells at the first level."""
+    lo, hi = np.full(dim, -float(extent)), np.full(dim, float(extent))
+    corners = np.array(np.meshgrid(*[[0.0, 1.0]] * dim, indexing="ij")).reshape(dim, -1).T
+    for rnd in range(BOUNDS_ROUNDS):
+        clo, chi = lo[None], hi[None]
+        for _ in range(BOUNDS_LEVELS):
+            half = 0.5 * (chi - clo)
+            nlo = (clo[:, None, :] + corners[None] * half[:, None, :]).reshape(-1, dim)
+            nhi = nlo + np.repeat(half, len(corners), axis=0)
+            flo, fhi = expr_box_ranges([e], nlo, nhi)[0]
+            keep = ~((flo > 0) | (fhi < 0))  # may hold the surface (NaN: unknown, kept)
+            if not keep.any():
+                return None
+            clo, chi = nlo[keep], nhi[keep]
+            if len(clo) > BOUNDS_CELLS:
+                if rnd == 0:
+                    return None
+                break
+        new_lo, new_hi = clo.min(axis=0), chi.max(axis=0)
+        if rnd == 0 and (np.any(new_lo <= lo) or np.any(new_hi >= hi)):
+            return None  # reaches the search box: unbounded as far as we can tell
+        if np.allclose(new_lo, lo) and np.allclose(new_hi, hi):
+            break
+        lo, hi = new_lo, new_hi
+    return np.array([lo, hi])
 
 
 def _coords_expr(expr: Any, what: str) -> Expr:
@@ -121,8 +164,9 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None, normalize=False) 
         exact: the author vouches that it is the exact signed distance.
         lipschitz: the author's bound of ``|grad f|`` (``'bound'`` contract when
             ``<= 1``, else ``'neither'``); default unknown (``inf``).
-        bounds: ``((lo...), (hi...))`` a box holding the surface, or None (unknown:
-            meshing and rendering then ask for ``bounds=``).
+        bounds: ``((lo...), (hi...))`` a box holding the surface; None: found by
+            interval arithmetic (:func:`interval_bounds`), or unknown when the surface
+            is unbounded (meshing and rendering then ask for ``bounds=``).
         normalize: return :func:`normalized` of the field (Eq. 11: ``f / |grad f|``).
 
     **Neither** unless declared (see the module documentation).
@@ -136,6 +180,9 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None, normalize=False) 
     else:
         raise ShapeError(f"field: exact must be true or false (1 or 0), got {exact!r}")
     b = _bounds_arg(bounds, dim, "field")
+    given = b is not None
+    if b is None:
+        b = interval_bounds(e, dim)
     if lipschitz is None:
         lip, label = (1.0, "exact") if ex else (math.inf, "neither")
         if not ex and b is not None:  # the bound over the box, by intervals
@@ -151,7 +198,7 @@ def field(expr=None, exact=False, lipschitz=None, bounds=None, normalize=False) 
         kwargs["exact"] = 1
     if lipschitz is not None:
         kwargs["lipschitz"] = lip
-    if b is not None:
+    if given:
         kwargs["bounds"] = [list(map(float, b[0])), list(map(float, b[1]))]
     out = expr_shape(e, dim=dim, name="field", args=(e,), kwargs=kwargs, exactness=label,
                      lipschitz=lip, bounds=b)

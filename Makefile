@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed-stamp
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,plan]'
+	$(PY) -m pip install --quiet -e '.[test,plan,dask]'
 	touch $(STAMP)
 
 test: $(STAMP)

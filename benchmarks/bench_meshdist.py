@@ -17,24 +17,17 @@ from __future__ import annotations
 
 import argparse
 import platform
-import statistics
-import time
 
 import numpy as np
 import trimesh
+from common import median_time
 
 import csdf
 from csdf.backends.meshdist import MeshDistance
 
 
 def _time(fn, repeat: int) -> tuple[float, object]:
-    fn()
-    ts, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts), out
+    return median_time(fn, repeat)
 
 
 def meshes() -> list[tuple[str, trimesh.Trimesh]]:

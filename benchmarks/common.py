@@ -185,3 +185,18 @@ def thread_scaling(seconds: float = 0.5) -> dict[str, str]:
             two = time.perf_counter() - t0
             res[f"thread scaling, {name}"] = f"{2 * one / two:.2f}x (2 threads, 2.00x = ideal)"
     return res
+
+
+def median_time(fn, repeat: int) -> tuple[float, object]:
+    """``(median seconds of `repeat` calls of fn(), the last result)``, after one
+    warm-up call."""
+    import statistics
+    import time
+
+    fn()
+    ts, out = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts), out

@@ -152,6 +152,10 @@ def test_random_expression_dags(backend):
             if what != "value":  # derivatives where the value is finite (NaN -> NaN)
                 assert np.isnan(g[np.isnan(ref[0])]).all()
                 g, r = g[finite], r[finite]
+                # 0 * inf: a component whose seed is zero may be 0 or NaN (csdf.ops);
+                # e.g. d/dx of acos(sin(acos(a))) at a = 0, a parameter-only part the
+                # evaluators compute once without tangents
+                r = np.where(np.isnan(r) & (g == 0), 0.0, r)
             np.testing.assert_array_equal(np.isnan(g), np.isnan(r), err_msg=what)
             ok = np.isfinite(r)
             np.testing.assert_array_equal(g[~ok & ~np.isnan(r)], r[~ok & ~np.isnan(r)])

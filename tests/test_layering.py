@@ -40,7 +40,8 @@ LAYERS: dict[str, int] = {
     # 5 consumers
     "csdf.mesh": 5, "csdf.render": 5, "csdf.sample": 5, "csdf.slicing": 5, "csdf.scan": 5,
     "csdf.raster": 5, "csdf.scene": 5, "csdf.plan": 5, "csdf.synth": 5, "csdf.metrics": 5,
-    "csdf.fit": 5, "csdf.detect": 5,
+    "csdf.fit": 5, "csdf.detect": 5, "csdf.distributed": 5,  # Dask (the dask extra)
+    "csdf.infer": 5,  # CSG trees from scans
     "csdf.io": 5, "csdf.io.vm": 5,  # .vm out (and in, from csdf.lang.vm)
     # 6 apps
     "csdf.cli": 6, "csdf.editor": 6, "csdf.demo": 6, "csdf": 6,

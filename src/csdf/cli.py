@@ -273,6 +273,29 @@ def info(model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft
     _run(go)
 
 
+_SCHEDULER_HELP = ("Run on the Dask cluster at this scheduler address (tcp://host:8786; "
+                   "needs the dask extra: pip install 'csdf[dask]').")
+_WORKERS_HELP = "Run on a local Dask cluster of N worker processes (the dask extra)."
+
+
+@contextmanager
+def _cluster(scheduler: str | None, workers: int | None):
+    """A Dask client for ``--scheduler``/``--workers`` (None when neither is given),
+    closed afterwards."""
+    if scheduler is None and workers is None:
+        yield None
+        return
+    if scheduler is not None and workers is not None:
+        raise CsdfError("give --scheduler or --workers, not both")
+    from .distributed import connect, disconnect
+
+    client = connect(scheduler=scheduler, workers=workers)
+    try:
+        yield client
+    finally:
+        disconnect(client)
+
+
 @app.command()
 def mesh(
     model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
@@ -293,6 +316,13 @@ def mesh(
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
     no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    scheduler: str | None = typer.Option(None, "--scheduler", help=_SCHEDULER_HELP + " "
+                                         "Marching cubes only; no thin-part search; .ply "
+                                         "and .stl are streamed to disk as tasks finish."),
+    workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
+    super_brick: int | None = typer.Option(None, "--super-brick", help="With --scheduler/"
+                                           "--workers: voxels along a task's cube (a power "
+                                           "of two; default: at most 96 tasks)."),
 ):
     """Mesh a model to a watertight triangle mesh."""
 
@@ -302,6 +332,9 @@ def mesh(
 
         m = _param_field(_load(model), param, no_check_ranges)  # with the --param values
         t0 = time.perf_counter()
+        if scheduler is not None or workers is not None:
+            _mesh_on_cluster(m, t0)
+            return
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", MeshWarning)
             result = mesh_fn(m, resolution=resolution, voxel_size=voxel_size,
@@ -323,6 +356,37 @@ def mesh(
         out.print(f"{output}: {len(result.faces):,} triangles, {len(result.vertices):,} "
                   f"vertices, watertight={result.is_watertight}, {dt:.2f} s "
                   f"(voxel {result.metadata['csdf']['voxel_size']:.4g})", soft_wrap=True)
+
+    def _mesh_on_cluster(m, t0):
+        from . import io
+        from .distributed import mesh as dmesh
+
+        if method != "mc":
+            raise CsdfError("--scheduler/--workers mesh with marching cubes only (--method "
+                            "mc)")
+        stream = output.suffix.lower() in (".ply", ".stl")
+        if output.suffix.lower() not in io.MESH_FORMATS:
+            raise CsdfError(f"cannot tell the mesh format of {output.name!r}; use one of "
+                            f"{', '.join(sorted(io.MESH_FORMATS))}")
+        with _cluster(scheduler, workers) as client:
+            result = dmesh(m, resolution=resolution, voxel_size=voxel_size, client=client,
+                           out=output if stream else None, super_brick=super_brick,
+                           progress=not quiet and err.is_terminal)
+        dt = time.perf_counter() - t0
+        if stream:
+            tasks, faces, verts = result.tasks, result.faces, result.vertices
+        else:
+            if len(result.faces):
+                io.write_mesh(result, output)
+            tasks = result.metadata["csdf"]["tasks"]
+            faces, verts = len(result.faces), len(result.vertices)
+        if faces == 0:
+            if stream:
+                output.unlink(missing_ok=True)
+            raise CsdfError(f"{model}: the mesh is empty (no surface inside the bounds, or "
+                            "only parts thinner than a voxel); nothing written")
+        out.print(f"{output}: {faces:,} triangles, {verts:,} vertices, {tasks} tasks, "
+                  f"{dt:.2f} s", soft_wrap=True)
 
     _run(go)
 
@@ -431,7 +495,9 @@ def export(
 @app.command()
 def fit(
     model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
-    scan: Path = typer.Argument(..., help="The point cloud (.ply)."),
+    scan: Path = typer.Argument(..., help="The point cloud (.ply), or a folder of them "
+                                "(every *.ply in it, fitted one task each; the result "
+                                "file then lists them)."),
     output: Path = typer.Option(..., "-o", "--output", help="Result file (.json)."),
     estimate: str = typer.Option("pose", "--estimate", help="pose, pose,scale or "
                                  "pose,scale,params"),
@@ -459,11 +525,70 @@ def fit(
     overlay: Path | None = typer.Option(None, "--overlay", help="Also write a PNG of the "
                                         "fitted model with the points drawn over it "
                                         "(green: inliers, red: outliers)."),
+    scheduler: str | None = typer.Option(None, "--scheduler", help=_SCHEDULER_HELP + " "
+                                         "For a folder of scans."),
+    workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
 ):
     """Recover the model's pose (and scale, parameters) from a point cloud."""
 
+    def many():
+        import json
+
+        from .distributed import FitFailure, fit_many
+        from .io import atomic_path, read_point_cloud
+
+        if overlay is not None:
+            raise CsdfError("--overlay draws one fit; give one scan, not a folder")
+        scans = sorted(p for p in scan.iterdir() if p.suffix.lower() == ".ply")
+        if not scans:
+            raise CsdfError(f"{scan}: the folder holds no .ply point clouds")
+        m = _load(model)
+        init_params = _checked_params(m, param, no_check_ranges)
+        clouds = []
+        for path in scans:  # read here: the workers need not share this file system
+            try:
+                clouds.append(read_point_cloud(path))
+            except CsdfError as exc:
+                clouds.append(exc)
+        kwargs = dict(init={"params": init_params} if param else None, estimate=estimate,
+                      multistart=multistart, loss=loss, seed=seed, solver=solver,
+                      escape=escape, debias=debias, check_ranges=not no_check_ranges)
+        if viewpoint is not None:  # else each scan's recorded viewpoint
+            kwargs["viewpoint"], _ = _cloud_viewpoint(viewpoint, None, scan)
+        good = [c for c in clouds if not isinstance(c, CsdfError)]
+        if scheduler is None and workers is None:
+            from .distributed.tasks import fit_task
+            from .field import as_field
+
+            blob = as_field(m).program.to_bytes()
+            raw = [fit_task(blob, c, kwargs) for c in good]
+            results = [FitFailure(i, "point cloud", *r) if isinstance(r, tuple) else r
+                       for i, r in enumerate(raw)]
+        else:
+            with _cluster(scheduler, workers) as client:
+                results = fit_many(m, good, client=client, progress=err.is_terminal,
+                                   **kwargs)
+        it = iter(results)
+        records, ok = [], 0
+        for path, c in zip(scans, clouds):
+            r = FitFailure(0, str(path), "CsdfError", str(c)) if isinstance(
+                c, CsdfError) else next(it)
+            if isinstance(r, FitFailure):
+                records.append({"scan": str(path), "error": r.error, "message": r.message})
+                out.print(f"{path}: failed: {r.message}", soft_wrap=True, markup=False)
+                continue
+            ok += bool(r.success)
+            records.append({"scan": str(path), **r.to_dict()})
+        with atomic_path(output) as tmp:
+            tmp.write_text(json.dumps({"model": str(model), "fits": records}, indent=2))
+        out.print(f"{output}: {len(scans)} scans, {ok} fitted with success", soft_wrap=True)
+
     def go():
         import json
+
+        if scan.is_dir():
+            many()
+            return
 
         from .field import as_field
         from .fit import check_fit
@@ -544,6 +669,12 @@ def sample(
     ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
     no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
+    scheduler: str | None = typer.Option(None, "--scheduler", help=_SCHEDULER_HELP + " "
+                                         "Tasks of --chunk points, from child seeds of "
+                                         "--seed."),
+    workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
+    chunk: int = typer.Option(1_000_000, "--chunk", help="With --scheduler/--workers: "
+                              "points per task."),
 ):
     """Sample points uniformly on a model's surface (with normals), or in its volume
     (with field values)."""
@@ -557,7 +688,23 @@ def sample(
         m = _load(model)
         params = _checked_params(m, param, no_check_ranges)
         t0 = time.perf_counter()
-        if volume:
+        if scheduler is not None or workers is not None:
+            from . import distributed as dist
+
+            with _cluster(scheduler, workers) as client:
+                if volume:
+                    a, b = dist.sample_volume(m, count, near_surface=near, sigma=sigma,
+                                              seed=seed, params=params, chunk=chunk,
+                                              check_ranges=False)
+                else:
+                    a, b = dist.sample_surface(m, count, seed=seed, params=params,
+                                               chunk=chunk, check_ranges=False)
+                pts, other = client.compute([a, b], sync=True)
+            if volume:
+                write_points(output, pts, scalars={"distance": other}, ascii=ascii_)
+            else:
+                write_points(output, pts, other, ascii=ascii_)
+        elif volume:
             pts, d = sample_volume(m, count, near_surface=near, sigma=sigma, seed=seed,
                                    params=params, check_ranges=False)  # checked above
             write_points(output, pts, scalars={"distance": d}, ascii=ascii_)

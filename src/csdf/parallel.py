@@ -14,9 +14,29 @@ from concurrent.futures import ThreadPoolExecutor
 
 __all__ = ["N_THREADS", "MIN_PER_THREAD", "executor", "run_parallel"]
 
-#: the cores this process may run on
-N_THREADS = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+
+
+def _threads() -> int:
+    """``$CSDF_THREADS`` when set to a positive integer, else the cores this process may
+    run on."""
+    cores = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                 else (os.cpu_count() or 1))
+    text = os.environ.get("CSDF_THREADS", "").strip()
+    if text:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ValueError(f"CSDF_THREADS must be a positive integer, got {text!r}")
+        return n
+    return cores
+
+
+#: the threads csdf's evaluators and meshers use in this process: the cores it may run
+#: on, or ``$CSDF_THREADS`` (read at import; a Dask worker process sharing a machine
+#: with others sets it to its own share, see :func:`csdf.distributed.connect`)
+N_THREADS = _threads()
 #: :func:`run_parallel` gives each thread at least this many items
 MIN_PER_THREAD = 8192
 _pools: dict[tuple[str, int], ThreadPoolExecutor] = {}

@@ -15,7 +15,8 @@ from .grid import BRICK, Grid
 from .reference import extract
 from .thin import MC_POINTS, ThinReport, ThinScan, thin_parts
 
-__all__ = ["mesh", "auto_bounds", "MAX_RESOLUTION", "MAX_MESH_RESOLUTION", "MAX_VOXELS"]
+__all__ = ["mesh", "auto_bounds", "mesh_grid", "prepare_field", "MAX_RESOLUTION",
+           "MAX_MESH_RESOLUTION", "MAX_VOXELS"]
 
 MAX_RESOLUTION = 4096
 _JITTER = np.array([0.3819660112501051, 0.2360679774997897, 0.1458980337503155])  # golden
@@ -171,11 +172,7 @@ def _extract(fld: Field, grid: Grid, method: str, reporter: Any, check_thin: boo
     mc = MC_POINTS if volume else 0
     serial = fld.serial_values()
     update = reporter.update if reporter else None
-    if fld.pruned():  # cells of shortened tapes on the octree's own cells
-        size, depth = BRICK, 0
-        while size < max(grid.dims):
-            size, depth = 2 * size, depth + 1
-        fld.set_region([grid.origin, grid.origin + size * grid.h], min(depth + 2, 7))
+    prepare_field(fld, grid)
     if serial is None and not fld.pruned():
         verts, faces = extract(grid, fld.value, fld.gradient, fld.intervals, method, update)
         rep = thin_parts(grid, fld.value, fld.intervals, lip, min_cell=min_feature,
@@ -197,6 +194,27 @@ def _extract(fld: Field, grid: Grid, method: str, reporter: Any, check_thin: boo
     if reporter:
         reporter.stage("checking for thin parts")
     return verts, faces, scan.report(fld.value, fld.intervals, min_feature, mc_points=mc)
+
+
+def prepare_field(fld: Field, grid: Grid) -> None:
+    """Get ``fld`` ready to mesh ``grid``: a field with pruned tapes keeps them on the
+    octree's own cells (the same cells wherever the grid is meshed, whole or in parts)."""
+    if fld.pruned():
+        size, depth = BRICK, 0
+        while size < max(grid.dims):
+            size, depth = 2 * size, depth + 1
+        fld.set_region([grid.origin, grid.origin + size * grid.h], min(depth + 2, 7))
+
+
+def mesh_grid(bounds: Any, resolution: Any = None, voxel_size: Any = None) -> Grid:
+    """The grid :func:`mesh` samples for ``bounds (2, 3)`` at ``resolution`` (voxels along
+    the longest side; default 128) or ``voxel_size``: padded by 2 voxels and shifted by
+    the jitter, every argument checked (:class:`csdf.CsdfError` naming it)."""
+    if resolution is not None and voxel_size is not None:
+        raise CsdfError("give resolution or voxel_size, not both")
+    origin, h, dims = _grid_layout(np.asarray(bounds, dtype=np.float64), resolution,
+                                   voxel_size)
+    return Grid(origin=origin, h=h, dims=dims)
 
 
 def _mesh_volume(verts: np.ndarray, faces: np.ndarray) -> float:

@@ -23,7 +23,7 @@ import numpy as np
 
 from .cases import CORNERS
 
-__all__ = ["Grid", "octree", "BRICK"]
+__all__ = ["Grid", "octree", "top_size", "BRICK"]
 
 #: edge of an octree leaf (a brick), in voxels
 BRICK = 8
@@ -43,19 +43,31 @@ class Grid:
 
 
 def octree(grid: Grid, intervals: Callable, progress: Callable | None,
-           inside: list[float] | None = None) -> np.ndarray:
+           inside: list[float] | None = None, *, stop: int = BRICK,
+           start: tuple[np.ndarray, int] | None = None) -> np.ndarray:
     """Lower corners ``(K, 3)`` (sample indices) of the bricks that may hold surface.
 
     ``intervals``: ``(lo (M, 3), hi (M, 3)) -> (flo (M,), fhi (M,))``, conservative
     bounds of the field over boxes; ``progress``: optional ``callback(size, kept)`` after
     each level (cell edge in voxels, cells kept); ``inside``: optional one-element list
     to which the volume (model units^3) of the cells dropped as wholly inside is
-    added."""
+    added.
+
+    ``stop``: the cell edge (voxels, ``BRICK`` times a power of two) at which to stop:
+    the cells kept at that level are returned (:func:`cells_at`). ``start``: ``(cells
+    (K, 3), size)``, cells kept at level ``size`` by an earlier call (with ``stop=size``),
+    to go on from: their subcells are tested down to ``stop``. A cell is kept or dropped
+    by its own box alone, so the bricks found below a super-cell are the bricks a whole
+    descent finds there (what :mod:`csdf.mesh.parts` relies on)."""
     dims = np.array(grid.dims)
-    size = BRICK
-    while size < dims.max():
-        size *= 2
-    cells = np.zeros((1, 3), dtype=np.int64)
+    if start is None:
+        size = top_size(grid)
+        cells = np.zeros((1, 3), dtype=np.int64)
+    else:
+        cells, size = np.asarray(start[0], dtype=np.int64).reshape(-1, 3), int(start[1])
+        if size == stop or len(cells) == 0:
+            return cells
+        cells, size = _split(cells, size, dims)
     while True:
         lo_idx = cells
         hi_idx = np.minimum(cells + size, dims)
@@ -69,9 +81,23 @@ def octree(grid: Grid, intervals: Callable, progress: Callable | None,
         cells = cells[keep]
         if progress:
             progress(size, len(cells))
-        if size == BRICK or len(cells) == 0:
+        if size <= stop or len(cells) == 0:
             return cells
-        size //= 2
-        offs = CORNERS * size
-        cells = (cells[:, None, :] + offs[None, :, :]).reshape(-1, 3)
-        cells = cells[np.all(cells < dims, axis=1)]
+        cells, size = _split(cells, size, dims)
+
+
+def top_size(grid: Grid) -> int:
+    """The edge (voxels) of the octree's root cell: ``BRICK`` times the smallest power
+    of two that covers the grid's longest side."""
+    size = BRICK
+    while size < max(grid.dims):
+        size *= 2
+    return size
+
+
+def _split(cells: np.ndarray, size: int, dims: np.ndarray) -> tuple[np.ndarray, int]:
+    """The 8 subcells of each cell (those starting inside the grid), and their edge."""
+    size //= 2
+    offs = CORNERS * size
+    cells = (cells[:, None, :] + offs[None, :, :]).reshape(-1, 3)
+    return cells[np.all(cells < dims, axis=1)], size

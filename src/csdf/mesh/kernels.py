@@ -29,7 +29,7 @@ from ..memory import map_array, private_map
 
 __all__ = [
     "all_points", "brick_points", "brick_points_into", "close_on_box", "mc_chunk", "new_hash",
-    "root_points", "root_start", "root_update", "clip_to_box", "edge_on_box", "fresh_array",
+    "root_points", "root_start", "root_update", "clip_to_box", "edges_on_box", "fresh_array",
     "neg_columns", "column_crossed", "voxel_case", "lowest_bit", "face_index", "face_key",
 ]
 
@@ -356,14 +356,16 @@ def mc_chunk(bricks, vals, dims, edge_origin, edge_axis, tri_table, n_tri, table
 
 
 @njit(cache=True, nogil=True)
-def edge_on_box(e_corner: np.ndarray, e_axis: np.ndarray, dims: np.ndarray) -> bool:
-    """True when some edge ``(E, 3)``/``(E,)`` touches the grid's outer faces."""
+def edges_on_box(e_corner: np.ndarray, e_axis: np.ndarray, dims: np.ndarray) -> np.ndarray:
+    """Boolean ``(E,)``: which edges ``(E, 3)``/``(E,)`` touch the grid's outer faces."""
+    out = np.zeros(e_corner.shape[0], dtype=np.bool_)
     for r in range(e_corner.shape[0]):
         for d in range(3):
             c = e_corner[r, d]
             if c <= 0 or c >= dims[d] or (e_axis[r] == d and c + 1 >= dims[d]):
-                return True
-    return False
+                out[r] = True
+                break
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -37,7 +37,7 @@ from . import kernels as K
 from .cases import COMPONENT_TABLE, EDGE_AXIS, EDGE_ORIGIN, TRI_TABLE
 from .grid import BRICK, Grid, octree
 
-__all__ = ["extract_mc", "extract_dc", "CHUNK_SAMPLES"]
+__all__ = ["extract_mc", "extract_dc", "edge_key", "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = 1 << 18  # samples evaluated per call of the field (~6 MB of points)
 ITERATIONS = 40  # root search steps at most
@@ -63,7 +63,9 @@ def extract_mc(
     chunk_samples: int = CHUNK_SAMPLES,
     serial: Callable | None = None,
     scan: Callable | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    bricks: np.ndarray | None = None,
+    edge_keys: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Marching cubes of the zero set on ``grid``, streamed over the octree's bricks.
 
     Args:
@@ -79,30 +81,51 @@ def extract_mc(
             chunk's samples (on a worker thread; it must not keep ``values``), and
             first ``scan.octree(bricks (K, 3), inside_volume)`` when it has that
             attribute: how the thin-part check (:mod:`.thin`) shares the mesher's work.
+        bricks: the lower corners ``(K, 3)`` of the bricks to mesh, sorted by x, y, z
+            (default: the octree's; a subset meshes part of the grid, see
+            :mod:`.parts`).
+        edge_keys: also return each vertex's grid edge (:func:`edge_key`).
 
     Returns:
         ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64 (what ``trimesh`` keeps, so
-        it makes no copy), counter-clockwise seen from outside.
+        it makes no copy), counter-clockwise seen from outside; with ``edge_keys``, then
+        ``keys (V,)`` int64.
     """
-    bricks = _sorted_bricks(grid, intervals, progress, scan)
+    if bricks is None:
+        bricks = _sorted_bricks(grid, intervals, progress, scan)
     if len(bricks) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        empty = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+        return (*empty, np.zeros(0, dtype=np.int64)) if edge_keys else empty
     dims = np.array(grid.dims, dtype=np.int64)
     # initial sizes from the brick count, grown on demand: ~2 faces and ~1 vertex per
     # surface voxel, ~B^2 surface voxels per brick. The outputs get twice that: pages
     # never written cost address space, not memory, and a growth would copy everything
     est_faces = int(len(bricks) * 4.0 * BRICK * BRICK) + 1024
     out = [K.fresh_array((est_faces, 3), np.int64), 0]  # faces, rows used
+    keys: list[np.ndarray] = []
 
     def kernel(chunk, vals, table, n_used, n_verts, ebuf):
         table, n_used, out[0], out[1], *ebuf, n_new = K.mc_chunk(
             chunk, vals, dims, EDGE_ORIGIN, EDGE_AXIS, _TRI, _N_TRI, table, n_used,
             out[0], out[1], n_verts, *ebuf)
+        if edge_keys:  # (the new edges are vertices n_verts, n_verts + 1, ...)
+            keys.append(edge_key(ebuf[0][:n_new], ebuf[1][:n_new], dims))
         return table, n_used, ebuf, n_new
 
     verts = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel,
                     est_faces // 2, serial, scan)
+    if edge_keys:
+        return verts, out[0][:out[1]], np.concatenate(keys)
     return verts, out[0][:out[1]]
+
+
+def edge_key(corner: np.ndarray, axis: np.ndarray, dims: np.ndarray) -> np.ndarray:
+    """A grid edge's number ``(E,)`` int64, the same wherever it is meshed: from its lower
+    sample ``corner (E, 3)`` and ``axis (E,)`` on a grid of ``dims`` voxels,
+    ``((i (ny + 1) + j) (nz + 1) + k) 3 + axis``."""
+    c = corner.astype(np.int64)
+    return ((c[:, 0] * (int(dims[1]) + 1) + c[:, 1]) * (int(dims[2]) + 1) + c[:, 2]) * 3 \
+        + axis.astype(np.int64)
 
 
 def extract_dc(
@@ -237,15 +260,16 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
         """Roots of the new edges ``ebuf[:n_new]``, written to ``out``; the pending ones
         (vertex ids from ``base``) or None."""
         e_c, e_a, e_f0, e_f1 = (a[:n_new] for a in ebuf)
-        roots = _Roots(e_c, e_a, e_f0, e_f1, origin, h, tol * h,
-                       box if K.edge_on_box(e_c, e_a, dims) else None)
+        on = K.edges_on_box(e_c, e_a, dims)
+        roots = _Roots(e_c, e_a, e_f0, e_f1, origin, h, tol * h, box,
+                       clip=on if on.any() else None)
         roots.run(f, FIRST_ITERATIONS)
         roots.points(out)
         return roots.pending(base) if len(roots.idx) else None
 
     # with ``serial`` a pool of workers runs the sampling and the searches; without it,
     # each job runs on this thread when it is submitted (the same loop, in sequence)
-    pool = _pool() if serial is not None else _Inline()
+    pool = _pool() if serial is not None and N_THREADS > 1 else _Inline()
     f = serial if serial is not None else values
     starts = range(0, len(bricks), per_chunk)
     ebuf = new_ebuf()
@@ -365,12 +389,16 @@ class _Roots:
     Attributes:
         e_c ``(E, 3)`` int64, e_a ``(E,)``: the edges; t, a, b, fa, fb, side ``(E,)``: the
         search state; idx: the edges still pending; it: steps done; vid ``(E,)``: the
-        edges' vertex ids (for the stragglers).
+        edges' vertex ids (for the stragglers); box: the grid box ``(lo, hi)``; clip:
+        bool ``(E,)``, the edges on the box, whose field is closed on it (None: none).
+        Each edge's search depends on that edge alone, not on the others searched with
+        it, so the roots do not depend on how the bricks are split into chunks or tasks.
     """
 
     def __init__(self, e_c, e_a, f0, f1, origin, h, tol, box, it=0, state=None, idx=None,
-                 vid=None):
+                 vid=None, clip=None):
         self.e_c, self.e_a, self.origin, self.h, self.tol, self.box = e_c, e_a, origin, h, tol, box
+        self.clip = clip
         self.state = K.root_start(f0, f1) if state is None else state
         self.idx = np.arange(len(e_a), dtype=np.int64) if idx is None else idx
         self.it = it
@@ -382,8 +410,12 @@ class _Roots:
             t = self.state[0]
             p = K.root_points(self.idx, self.e_c, self.e_a, t, self.origin, self.h)
             ft = np.asarray(values(p), dtype=np.float64)
-            if self.box is not None:
-                K.clip_to_box(p, ft, self.box[0], self.box[1], self.h)
+            if self.clip is not None:
+                on = self.clip[self.idx]
+                if on.any():
+                    f_on = ft[on]
+                    K.clip_to_box(p[on], f_on, self.box[0], self.box[1], self.h)
+                    ft[on] = f_on
             self.idx = K.root_update(self.idx, ft, *self.state, self.tol, self.it)
             self.it += 1
 
@@ -397,16 +429,20 @@ class _Roots:
         i = self.idx
         state = tuple(x[i] for x in self.state)
         return _Roots(self.e_c[i], self.e_a[i], None, None, self.origin, self.h, self.tol,
-                      self.box, self.it, state, None, vert_base + i)
+                      self.box, self.it, state, None, vert_base + i,
+                      None if self.clip is None else self.clip[i])
 
     @staticmethod
     def concat(parts: list[_Roots]) -> _Roots:
-        """One search over the pending edges of several (all after the same steps; the
-        grid box closes the field if it closes any part's)."""
-        box = next((p.box for p in parts if p.box is not None), None)
+        """One search over the pending edges of several (all after the same steps; each
+        edge on the grid box still sees the field closed on it)."""
         p0 = parts[0]
+        clip = None
+        if any(p.clip is not None for p in parts):
+            clip = np.concatenate([np.zeros(len(p.e_a), dtype=bool) if p.clip is None
+                                   else p.clip for p in parts])
         state = tuple(np.concatenate([p.state[k] for p in parts]) for k in range(6))
         return _Roots(np.concatenate([p.e_c for p in parts]),
                       np.concatenate([p.e_a for p in parts]), None, None, p0.origin, p0.h,
-                      p0.tol, box, p0.it, state, None,
-                      np.concatenate([p.vid for p in parts]))
+                      p0.tol, p0.box, p0.it, state, None,
+                      np.concatenate([p.vid for p in parts]), clip)

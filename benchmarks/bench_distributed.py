@@ -1,0 +1,170 @@
+"""csdf.distributed on a local Dask cluster (issue 22), against one machine in the same run.
+
+1. A mesh at ``--resolution`` (default 1024) by ``csdf.distributed.mesh`` on a
+   ``--workers``-process ``LocalCluster`` (one thread each) against ``csdf.mesh`` in
+   this process (``check_thin=False``, the same grid): median wall time of
+   ``--repeat`` runs after a warm-up at 128 (kernels loaded on every worker), the
+   overhead, the tasks, and whether the two meshes are equal (canonical order).
+2. The same with ``out=`` a PLY file (streamed: no process holds the whole mesh).
+3. A mesh at ``--big`` (default 2048) streamed to a PLY on a fresh cluster: wall time,
+   file size and each worker's peak resident memory (``ru_maxrss``, whole process life).
+4. ``fit_many`` on ``--scans`` scans against a loop of ``csdf.fit``: seconds and whether
+   the results agree.
+
+Models: the demo's CSG part (sphere & box minus three cylinders: 105 instructions, a
+cheap field, so the mesh's size, not the field, sets the cost: the hard case for
+shipping results) and the zoo chair (a heavier field).
+
+Run: ``python benchmarks/bench_distributed.py [--workers 2] [--resolution 1024]
+[--big 2048] [--scans 200] [--repeat 3]`` (needs the ``dask`` extra).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from common import median_time
+
+import csdf
+import csdf.distributed as cd
+from csdf.mesh.parts import canonical
+
+
+def _reset_peak() -> None:
+    """Reset this process's peak resident memory to its current one (Linux
+    ``/proc/self/clear_refs``; ``ru_maxrss`` would include what a forked process
+    inherited)."""
+    with open("/proc/self/clear_refs", "w") as fh:
+        fh.write("5")
+
+
+def _peak_rss_mb(field: str = "VmHWM") -> float:
+    """This process's peak resident memory since :func:`_reset_peak` (MB); with
+    ``field='VmRSS'`` its current one."""
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(field + ":"):
+                return float(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _median(fn, repeat: int):
+    """Median seconds of ``repeat`` runs after a warm-up, and the last result."""
+    return median_time(fn, repeat)
+
+
+def models() -> list[tuple[str, object]]:
+    c = csdf.cylinder(0.5, 3.0)
+    part = (csdf.sphere(1.0) & csdf.box(1.5)) - c - c.orient("x") - c.orient("y")
+    return [("CSG part", part), ("zoo chair", csdf.zoo.load("chair")),
+            ("zoo gear", csdf.zoo.load("gear"))]
+
+
+def bench_mesh(client, res: int, repeat: int) -> None:
+    print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh (median of {repeat})\n")
+    print("| model | triangles | csdf.mesh s | distributed s | overhead | tasks | "
+          "super-brick | equal | streamed to PLY s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, shape in models():
+        csdf.mesh(shape, resolution=128, progress=False, check_thin=False)  # warm-up
+        cd.mesh(shape, resolution=128, client=client, progress=False)
+        t_one, whole = _median(lambda s=shape: csdf.mesh(
+            s, resolution=res, progress=False, check_thin=False), repeat)
+        t_dist, dm = _median(lambda s=shape: cd.mesh(
+            s, resolution=res, client=client, progress=False), repeat)
+        a, b = canonical(whole.vertices, whole.faces), canonical(dm.vertices, dm.faces)
+        equal = a[0].shape == b[0].shape and np.array_equal(a[0], b[0]) and \
+            np.array_equal(a[1], b[1])
+        del whole, dm, a, b
+        with tempfile.TemporaryDirectory() as tmp:
+            t_out, mf = _median(lambda s=shape: cd.mesh(
+                s, resolution=res, client=client, progress=False,
+                out=Path(tmp) / "m.ply"), repeat)
+        print(f"| {name} | {mf.faces:,} | {t_one:.2f} | {t_dist:.2f} | "
+              f"{(t_dist / t_one - 1) * 100:+.0f} % | {mf.tasks} | {mf.super_brick} | "
+              f"{equal} | {t_out:.2f} |", flush=True)
+
+
+def bench_big(workers: int, res: int) -> None:
+    name, shape = models()[0]
+    client = cd.connect(workers=workers)
+    try:
+        cd.mesh(shape, resolution=128, client=client, progress=False)  # load the kernels
+        client.run(_reset_peak)
+        _reset_peak()
+        before = _peak_rss_mb("VmRSS")
+        with tempfile.TemporaryDirectory(dir=".") as tmp:
+            t0 = time.perf_counter()
+            mf = cd.mesh(shape, resolution=res, client=client, progress=False,
+                         out=Path(tmp) / "big.ply")
+            dt = time.perf_counter() - t0
+            size = mf.path.stat().st_size
+        peaks = client.run(_peak_rss_mb)
+    finally:
+        cd.disconnect(client)
+    print(f"\n## Mesh at {res}^3 streamed to disk ({name}, {workers} workers)\n")
+    print("| triangles | vertices | file | s | tasks | super-brick | worker peak RSS | "
+          "client peak RSS (before the job) |")
+    print("|---|---|---|---|---|---|---|---|")
+    print(f"| {mf.faces:,} | {mf.vertices:,} | {size / 2**30:.2f} GiB | {dt:.1f} | "
+          f"{mf.tasks} | {mf.super_brick} | "
+          f"{' / '.join(f'{v / 1024:.2f} GiB' for v in peaks.values())} | "
+          f"{_peak_rss_mb() / 1024:.2f} GiB ({before / 1024:.2f} GiB) |", flush=True)
+
+
+def bench_fit(client, n: int) -> None:
+    shape = csdf.zoo.load("stool")
+    rng = np.random.default_rng(0)
+    clouds = []
+    for i in range(n):
+        p, _ = csdf.sample_surface(shape, 1000, seed=i)
+        a = rng.normal(size=3) * 0.15
+        R = csdf.Pose.from_rotvec(a).rotation
+        clouds.append(p @ R.T + rng.normal(size=3) * 0.05 + rng.normal(0, 0.002, p.shape))
+    kw = {"estimate": "pose"}
+    csdf.fit(shape, clouds[0], **kw)
+    cd.fit_many(shape, clouds[:4], client=client, **kw)
+    t0 = time.perf_counter()
+    loop = [csdf.fit(shape, c, **kw) for c in clouds]
+    t_loop = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    many = cd.fit_many(shape, clouds, client=client, **kw)
+    t_many = time.perf_counter() - t0
+    same = all(np.array_equal(a.rotation, b.rotation) and
+               np.array_equal(a.translation, b.translation) for a, b in zip(loop, many))
+    ok = sum(bool(r.success) for r in many)
+    print(f"\n## fit_many on {n} scans vs a loop of csdf.fit\n")
+    print("| scans | loop s | fit_many s | speed-up | identical results | successes |")
+    print("|---|---|---|---|---|---|")
+    print(f"| {n} | {t_loop:.1f} | {t_many:.1f} | {t_loop / t_many:.2f}x | {same} | "
+          f"{ok}/{n} |", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--resolution", type=int, default=1024)
+    ap.add_argument("--big", type=int, default=2048, help="0 skips the out-of-core run")
+    ap.add_argument("--scans", type=int, default=200, help="0 skips fit_many")
+    ap.add_argument("--repeat", type=int, default=3)
+    a = ap.parse_args()
+    print(f"machine: {platform.processor() or platform.machine()}, "
+          f"{csdf.parallel.N_THREADS} cores; {a.workers} worker processes x 1 thread")
+    if a.big:  # first, so that no earlier job's memory is in the client's figure
+        bench_big(a.workers, a.big)
+    client = cd.connect(workers=a.workers)  # (each worker gets its share of the cores)
+    try:
+        bench_mesh(client, a.resolution, a.repeat)
+        if a.scans:
+            bench_fit(client, a.scans)
+    finally:
+        cd.disconnect(client)
+
+
+if __name__ == "__main__":
+    main()

@@ -30,6 +30,8 @@ def operators() -> dict:
     out = {
         "extrude": lambda: csdf.extrude(csdf.hexagon(0.5), 1.0),
         "revolve": lambda: csdf.revolve(csdf.circle(0.2), 0.6),
+        "revolve_faceted": lambda: csdf.revolve(csdf.rectangle((0.3, 0.4)), 0.5,
+                                                segments=7),
         "difference": lambda: _pair()[0] - _pair()[1],
         "complement": lambda: ~csdf.sphere(0.5),
         "union3_smooth": lambda: csdf.union(

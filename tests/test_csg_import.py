@@ -8,6 +8,7 @@ import math
 import os
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -160,11 +161,22 @@ def test_extrusions_offset_minkowski_and_hull():
         loads_csg("linear_extrude(height = 1, scale = [1, 2]) { circle(r = 1); }")
 
 
+#: an L-shaped prism (non-convex), as OpenSCAD prints it
+_L_POLYHEDRON = (
+    "polyhedron(points = [[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0], "
+    "[0, 0, 1], [2, 0, 1], [2, 1, 1], [1, 1, 1], [1, 2, 1], [0, 2, 1]], faces = [[5, 4, 3, "
+    "2, 1, 0], [6, 7, 8, 9, 10, 11], [0, 1, 7, 6], [1, 2, 8, 7], [2, 3, 9, 8], [3, 4, 10, 9], "
+    "[4, 5, 11, 10], [5, 0, 6, 11]], convexity = 1);")
+
+
 @pytest.mark.parametrize("text, where, match", [
     ("cube(size = [1, 1, 1]);\nsphere(r = 1", (2, 12), "syntax"),
     ("group() {\n  text(text = \"a\");\n}", (2, 3), "text: not supported"),
     ("group() {\n  polyhedron(points = [[0, 0, 0]], faces = [[0]]);\n}", (2, 3),
-     "polyhedron: not read yet"),
+     "polyhedron: points must be at least 4"),
+    (f"group() {{\n  {_L_POLYHEDRON}\n}}", (2, 3), "non-convex polyhedron is not read"),
+    ("hull() { polygon(points = [[0, 0], [1, 0], [2, 0]]); }", (1, 1),
+     "hull: .*on one line"),
     ("frobnicate();", (1, 1), "frobnicate: unknown node"),
     ("sphere(r = -1);", (1, 1), "r must be > 0"),
     ("cube(size = [1, 1]);", (1, 1), "size must be 3 finite numbers"),
@@ -172,7 +184,7 @@ def test_extrusions_offset_minkowski_and_hull():
      (1, 1), "singular"),
     ("group() { cube(); circle(r = 1); }", (1, 11), "mixes 2D and 3D"),
     ("rotate_extrude(angle = 90) { square(size = 1); }", (1, 1), "partial turn"),
-    ("hull() { cube(); sphere(r = 1); }", (1, 1), "hull of two spheres"),
+    ("hull() { cube(); circle(r = 1); }", (1, 1), "hull: mixes 2D and 3D"),
 ])
 def test_errors_are_located(text, where, match):
     with pytest.raises(ModelError, match=match) as ei:
@@ -186,8 +198,7 @@ def test_empty_model_facets_and_limits():
         loads_csg("group() { %sphere(r = 1); }")
     with pytest.raises(csdf.CsdfError, match="facets"):
         loads_csg("sphere(r = 1);", facets="round")
-    with pytest.raises(ModelError, match="facets='openscad'"):
-        loads_csg("sphere(r = 1);", facets="openscad")
+    assert loads_csg("sphere(r = 1);", facets="openscad").name == "convex_polyhedron"
 
 
 def test_load_and_cli_import(tmp_path):
@@ -234,3 +245,254 @@ def test_scad_through_openscad(tmp_path):
     broken.write_text("cube([1, 1, 1]\n")
     with pytest.raises(csdf.CsdfError, match="openscad failed"):
         csdf.load(broken)
+
+
+# -------------------------------------------------------------- facets='openscad', hull
+def _need_openscad() -> None:
+    if shutil.which("openscad") is None:
+        if os.environ.get("CSDF_REQUIRE_TOOLS") == "1":
+            pytest.fail("CSDF_REQUIRE_TOOLS=1 but the openscad program is not on PATH")
+        pytest.skip("needs the openscad program (apt-get install openscad)")
+
+
+def _stl(tmp_path, scad: str):
+    """OpenSCAD's own mesh of ``scad`` (a trimesh)."""
+    import trimesh
+
+    src = tmp_path / "m.scad"
+    src.write_text(scad)
+    out = tmp_path / "m.stl"
+    subprocess.run(["openscad", "-o", str(out), str(src)], check=True, capture_output=True,
+                   timeout=120)
+    return trimesh.load(out, force="mesh")
+
+
+def _planes_of(mesh) -> int:
+    """Distinct face planes of a triangle mesh (coplanar triangles merged)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = mesh.face_normals
+    d = np.einsum("ij,ij->i", n, mesh.triangles[:, 0])
+    pairs = cKDTree(np.column_stack([n, d / mesh.scale])).query_pairs(1e-4,
+                                                                      output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                       shape=(len(n), len(n)))
+    return connected_components(graph, directed=False)[0]
+
+
+def test_fragments_follow_openscad_rules():
+    from csdf.lang.csg import circle_points, fragments, sphere_points
+
+    assert fragments(10) == 30 and fragments(1) == 5 and fragments(3) == 10
+    assert fragments(3, fs=0.5, fa=5) == 38 and fragments(3, fn=2) == 3
+    assert fragments(3, fn=12.7) == 12 and fragments(1e-7) == 3
+    assert fragments(100, fs=0.0, fa=0.0) == 36000  # $fa, $fs raised to 0.01
+    c = circle_points(2.0, 6)
+    assert np.array_equal(c[0], [2, 0]) and c[3, 1] == 0.0  # exact on the axes
+    s = sphere_points(10.0, 12)  # 6 rings of 12 at polar angles 15, 45, ... 165
+    assert s.shape == (72, 3)
+    assert np.allclose(np.unique(np.round(s[:, 2], 9)),
+                       np.round(10 * np.cos(np.radians([165, 135, 105, 75, 45, 15])), 9))
+    with pytest.raises(ModelError, match="sphere: 2000 segments make more than") as ei:
+        loads_csg("sphere($fn = 2000, r = 1);", file="m.csg", facets="openscad")
+    assert (ei.value.line, ei.value.column) == (1, 1)
+
+
+@pytest.mark.parametrize("scad", [
+    "sphere(r = 10, $fn = 12);", "sphere(r = 3);", "sphere(r = 2, $fn = 7);",
+    "cylinder(r1 = 3, r2 = 1, h = 5, center = true);",
+    "cylinder(r1 = 3, r2 = 0, h = 5, $fn = 7);",
+    "circle(r = 4, $fn = 9);",
+])
+def test_faceted_curves_match_openscads_stl(scad, tmp_path):
+    _need_openscad()
+    from scipy.spatial import cKDTree
+
+    csg = tmp_path / "m.csg"
+    (tmp_path / "m.scad").write_text(scad)
+    subprocess.run(["openscad", "-o", str(csg), str(tmp_path / "m.scad")], check=True,
+                   capture_output=True, timeout=120)
+    shape = load_csg(csg, facets="openscad")
+    if shape.dim == 2:  # a circle: a polygon with OpenSCAD's vertices
+        ref = _stl(tmp_path, f"linear_extrude(height = 1) {scad}")
+        ours = np.asarray(shape.args[0])
+        theirs = np.unique(np.round(ref.vertices[:, :2], 5), axis=0)
+        assert len(ours) == len(theirs)
+        assert cKDTree(ours).query(theirs)[0].max() < 2e-5
+        return
+    ref = _stl(tmp_path, scad)
+    ours = np.unique(np.asarray(shape.args[0]), axis=0)
+    theirs = np.unique(np.round(ref.vertices, 5), axis=0)
+    assert len(ours) == len(theirs)  # the same vertices ...
+    assert cKDTree(ours).query(theirs)[0].max() < 2e-5  # (STL prints 6 digits)
+    assert abs(_f(shape, ref.vertices)).max() < 2e-5  # ... on the field's zero set
+    # ... and the same faces (OpenSCAD's triangles merged into planes)
+    from csdf.shapes.convex import hull_planes
+
+    assert len(hull_planes(ours)[0]) == _planes_of(ref)
+    assert shape.exactness == "bound"
+
+
+def test_faceted_rotate_extrude_passes_through_openscads_vertices(tmp_path):
+    _need_openscad()
+    for scad in ("rotate_extrude() translate([5, 0]) circle(r = 1, $fn = 6);",
+                 "rotate_extrude($fn = 8) translate([1, 0]) square([4, 1]);"):
+        ref = _stl(tmp_path, scad)
+        src = tmp_path / "m.scad"
+        src.write_text(scad)
+        shape = csdf.io.load_scad(src, facets="openscad")
+        assert shape.exactness == "bound"
+        assert abs(_f(shape, ref.vertices)).max() < 2e-5
+        centres = ref.triangles.mean(axis=1)  # the faces are flat: their centres too
+        assert abs(_f(shape, centres)).max() < 2e-5
+
+
+def test_convex_polyhedron_distances():
+    import trimesh
+
+    pts = RNG.normal(size=(40, 3)) * [1.0, 0.7, 0.5]
+    shape = csdf.convex_polyhedron(pts)
+    assert shape.exactness == "bound" and shape.lipschitz == 1.0
+    hull = trimesh.convex.convex_hull(pts)
+    q = RNG.uniform(-2.5, 2.5, (1500, 3))
+    f = _f(shape, q)
+    d = trimesh.proximity.closest_point(hull, q)[1]
+    inside = hull.contains(q)
+    assert inside.sum() > 50 and (~inside).sum() > 50
+    assert np.allclose(f[inside], -d[inside], atol=1e-9)  # exact inside
+    assert np.all(f[~inside] > 0) and np.all(f[~inside] <= d[~inside] + 1e-9)  # a bound
+    near_face = ~inside & (f > d - 1e-9)  # and exact where the nearest point is on a face
+    assert near_face.sum() > 10
+    assert np.allclose(np.asarray(shape.bounds), hull.bounds)
+    # the same solid given as planes, and through the language
+    n = hull.face_normals
+    planes = np.column_stack([n, np.einsum("ij,ij->i", n, hull.triangles[:, 0])])
+    assert np.allclose(_f(csdf.convex_polyhedron(planes=planes * 3.0), q), f, atol=1e-9)
+    back = csdf.loads(csdf.dumps(shape))
+    assert back.compile().to_bytes() == shape.compile().to_bytes()
+    # coplanar facets merged: a cube's 12 triangles are 6 planes (a balanced max tree)
+    cube = csdf.convex_polyhedron([[x, y, z] for x in (0, 1) for y in (0, 2) for z in (0, 3)])
+    inner = q[np.all((q > 0) & (q < [1, 2, 3]), axis=1)]
+    assert np.allclose(_f(cube, inner), _brute_box(inner, np.zeros(3), np.array([1, 2, 3])))
+    assert len(cube.compile().code) == 11  # 6 planes (x - 1, -x, ...) and 5 max
+    with pytest.raises(ShapeError, match="one plane"):
+        csdf.convex_polyhedron([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    with pytest.raises(ShapeError, match="finite region"):
+        csdf.convex_polyhedron(planes=[[1, 0, 0, 1], [0, 1, 0, 1], [0, 0, 1, 1],
+                                       [1, 1, 1, 1]])
+    with pytest.raises(ShapeError, match="not both"):
+        csdf.convex_polyhedron(pts, planes=planes)
+    with pytest.raises(ShapeError, match="parameters cannot"):
+        csdf.convex_polyhedron([[csdf.param("a", 1.0), 0, 0], [0, 1, 0], [0, 0, 1],
+                                [0, 0, 0]])
+
+
+def test_convex_polyhedron_node_and_hull_of_cube_and_sphere():
+    import trimesh
+
+    # a convex polyhedron node (OpenSCAD's example011 is one) is read exactly
+    pyr = loads_csg("polyhedron(points = [[10, 10, 0], [10, -10, 0], [-10, -10, 0], "
+                    "[-10, 10, 0], [0, 0, 10]], faces = [[0, 1, 4], [1, 2, 4], [2, 3, 4], "
+                    "[3, 0, 4], [1, 0, 3], [2, 1, 3]], convexity = 1);")
+    assert _f(pyr, [[0, 0, 5], [0, 0, 10], [0, 0, -1]]).round(9).tolist() == \
+        [round(-5 / math.sqrt(2), 9), 0.0, 1.0]
+    text = ("hull() { cube(size = [2, 2, 2], center = true); multmatrix([[1, 0, 0, 3], "
+            "[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) { sphere(r = 1); } }")
+    # the true hull: the cube's corners and a dense sampling of the sphere
+    u = RNG.normal(size=(20000, 3))
+    dense = np.concatenate([u / np.linalg.norm(u, axis=1, keepdims=True) + [3, 0, 0],
+                            [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]])
+    true = trimesh.convex.convex_hull(dense)
+    for facets in ("ideal", "openscad"):
+        s = loads_csg(text, facets=facets)
+        assert s.name == "convex_polyhedron" and s.exactness == "bound"
+        f = _f(s, [[-1, -1, -1], [0, 0, 0], [4, 0, 0], [3, 0, 1], [4.1, 0, 0]])
+        assert abs(f[0]) < 1e-12 and f[1] < -0.9 and f[4] > 0
+        if facets == "ideal":  # inscribed, within HULL_TOLERANCE of the radius
+            assert 0 <= f[2] <= 2e-3 and 0 <= f[3] <= 2e-3  # true surface: outside
+            vol = trimesh.convex.convex_hull(np.asarray(s.args[0])).volume
+            assert abs(vol / true.volume - 1) < 2e-3
+        else:  # OpenSCAD's 5-segment sphere: 3 rings, the middle one through (4, 0, 0)
+            assert abs(f[2]) < 1e-12 and f[3] > 0.1
+    flat = loads_csg("hull() { square(size = [2, 2], center = true); multmatrix([[1, 0, "
+                     "0, 3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) { circle(r = 1); } }")
+    assert flat.dim == 2 and flat.name == "polygon" and flat.exactness == "exact"
+    assert abs(_f(flat, [[4, 0]])[0]) < 1e-12 and _f(flat, [[-1, -1]])[0] == pytest.approx(0)
+    caps = loads_csg("hull() { circle(r = 1); multmatrix([[1, 0, 0, 3], [0, 1, 0, 0], "
+                     "[0, 0, 1, 0], [0, 0, 0, 1]]) { circle(r = 1); } }")
+    assert caps.name == "segment" and _f(caps, [[1.5, 1]])[0] == pytest.approx(0)
+    # a child read through its field: a cube with a spherical bite, and a sphere
+    bite = loads_csg("hull() { difference() { cube(size = [2, 2, 2], center = true); "
+                     "sphere(r = 1.2); } multmatrix([[1, 0, 0, 3], [0, 1, 0, 0], [0, 0, 1, "
+                     "0], [0, 0, 0, 1]]) { sphere(r = 1); } }", facets="openscad")
+    assert abs(_f(bite, [[-1, -1, -1]])[0]) < 1e-12  # the cube's corners are exact
+    assert -0.03 < _f(bite, [[-1, 0, 0]])[0] < 0.03  # sampled faces: about a cell
+
+
+def test_ideal_curved_volumes_within_a_thousandth():
+    """Sphere, cylinder and cone in ideal mode, meshed at resolution 160 (marching cubes
+    under-fills curved surfaces by about (h / R)^2; the mesh's volume is then within
+    0.1 % of the analytic one)."""
+    cases = [("sphere(r = 2);", 4 / 3 * math.pi * 8),
+             ("cylinder(h = 3, r1 = 1.5, r2 = 1.5, center = true);", math.pi * 2.25 * 3),
+             ("cylinder(h = 3, r1 = 1.5, r2 = 0.5);", math.pi * 3 / 3 * (2.25 + 0.75 + 0.25)),
+             ("cylinder(h = 3, r1 = 0, r2 = 1.5);", math.pi * 2.25 * 3 / 3)]
+    for text, vol in cases:
+        m = csdf.mesh(loads_csg(text), resolution=160, progress=False, check_thin=False)
+        assert abs(m.volume / vol - 1) < 1e-3, (text, m.volume / vol - 1)
+
+
+def test_facets_openscad_reads_every_example_ideal_reads(tmp_path):
+    """Every example of Debian's openscad package that loads with facets='ideal' loads
+    with facets='openscad' too (the CSG export is fast; no meshing here)."""
+    _need_openscad()
+    from concurrent.futures import ThreadPoolExecutor
+
+    examples = sorted(Path("/usr/share/openscad/examples").rglob("*.scad"))
+    if not examples:
+        pytest.skip("openscad's examples are not installed")
+
+    def export(f):
+        out = tmp_path / f"{f.parent.name}_{f.stem}.csg"
+        subprocess.run(["openscad", "-o", str(out), str(f)], capture_output=True,
+                       timeout=120, cwd=f.parent, stdin=subprocess.DEVNULL)
+        return out
+
+    with ThreadPoolExecutor(4) as pool:
+        files = [f for f in pool.map(export, examples) if f.exists()]
+    read = 0
+    for f in files:
+        try:
+            ideal = load_csg(f)
+        except csdf.CsdfError:
+            continue
+        faceted = load_csg(f, facets="openscad")
+        assert faceted.dim == ideal.dim, f.name
+        read += 1
+    assert read >= 20
+
+
+@pytest.mark.parametrize("child", [
+    "linear_extrude(height = 2, twist = 90, slices = 5) square(size = [2, 1], center = true);",
+    "linear_extrude(height = 2, scale = 0.5, center = true) polygon(points = [[0, 0], "
+    "[2, 0], [1, 1], [2, 2], [0, 2]]);",
+    "rotate_extrude($fn = 9) multmatrix([[1, 0, 0, 2], [0, 1, 0, 0], [0, 0, 1, 0], "
+    "[0, 0, 0, 1]]) square(size = [1, 1]);",
+    "minkowski() { cube(size = [2, 1, 1]); sphere(r = 0.3, $fn = 8); }",
+    "linear_extrude(height = 1) offset(r = 0.5, $fn = 8) polygon(points = [[0, 0], "
+    "[2, 0], [1, 1], [2, 2], [0, 2]]);",
+])
+def test_hull_points_of_each_node_lie_on_the_child(child):
+    """``facets='openscad'``: the hull's vertices are the child's own (on its surface),
+    and the hull holds the child (but for the round offset and Minkowski sum, which
+    stay round in this mode while the hull takes OpenSCAD's facets: 0.04 deep)."""
+    c = loads_csg(child, facets="openscad")
+    h = loads_csg(f"hull() {{ {child} }}", facets="openscad")
+    verts = np.asarray(h.args[0])
+    assert abs(_f(c, verts)).max() < 1e-9
+    b = np.asarray(c.bounds)
+    p = RNG.uniform(b[0] - 0.5, b[1] + 0.5, (3000, 3))
+    inside = _f(c, p) < -0.05
+    assert inside.sum() > 30 and np.all(_f(h, p[inside]) < 1e-9)

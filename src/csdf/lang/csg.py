@@ -34,17 +34,43 @@ contract each keeps:
                                          **bound**
 ``minkowski`` with a sphere or circle    the other child rounded by its radius (moved
                                          by its centre): **exact** on an exact child
-``hull`` of two spheres                 their round cone: **exact**
+``hull`` of two spheres                 their round cone: **exact** (two equal circles:
+                                         a ``segment`` of that thickness, **exact**)
+``hull`` of anything else                ``convex_polyhedron`` of points whose hull is
+                                         the children's (2D: ``polygon`` of the hull,
+                                         **exact** for that polygon): a **bound**, see
+                                         below
+``polyhedron`` when convex               ``convex_polyhedron`` of its points: a **bound**
+                                         (exact inside and on the faces)
 =======================================  ================================================
 
+``facets='openscad'`` reproduces OpenSCAD 2021.01's faceting: ``sphere`` and
+``cylinder`` become ``convex_polyhedron`` of exactly OpenSCAD's vertices (segments from
+``$fn``, ``$fa``, ``$fs`` by :func:`fragments`; a sphere's rings by
+:func:`sphere_points`), ``circle`` a ``polygon`` of OpenSCAD's vertices
+(:func:`circle_points`), and a full ``rotate_extrude`` ``revolve(..., segments=n)``
+turned so that its first section lies on -x as OpenSCAD's does (a **bound** with the
+exact faceted zero set). Everything else reads as in ``'ideal'`` mode: in particular a
+twisted ``linear_extrude`` is the smooth twist (OpenSCAD joins its slices by flat
+triangles, which bulge out of the twisted prism), ``offset(r)`` and ``minkowski`` with a
+sphere stay round.
+
+``hull`` (both modes): the children are turned into points whose convex hull is theirs
+(the exact vertices of cubes, squares, polygons, polyhedra and their transforms,
+extrusions, unions, Minkowski sums and offsets by ``r``; curves faceted as OpenSCAD
+does in ``'openscad'`` mode and with :data:`HULL_TOLERANCE` in ``'ideal'`` mode, the
+hull then lying inside the true one by at most 0.2 % of each curve's radius). Children
+with no such points (``difference``, ``intersection``, ``offset(delta)``, ...) are read
+through their field: their parts' vertices that lie in the solid, and surface points
+found on a grid of :data:`HULL_GRID` cells along their longest side, so the hull can
+fall short by about one such cell where the cut makes a sharp edge.
+
 Not yet read (a :class:`~csdf.errors.ModelError` naming the node, the file, line and
-column): ``facets='openscad'`` (the faceted curves), ``polyhedron``, ``hull`` of other
-shapes, ``minkowski`` without a sphere or circle, ``resize``, partial
-``rotate_extrude``, ``linear_extrude`` with a non-uniform scale, ``projection`` —
-these need
-the exact distance to a triangle mesh (``csdf.from_mesh``, issue 20) — and, as in
-OpenSCAD's own CSG export, ``import``, ``surface``, ``text``, ``roof`` and ``fill``
-(external data).
+column): non-convex ``polyhedron``, ``minkowski`` without a sphere or circle (outside a
+``hull``), ``resize``, partial ``rotate_extrude``, ``linear_extrude`` with a non-uniform
+scale, ``projection`` — these need the exact distance to a triangle mesh
+(``csdf.from_mesh``, issue 20) — and, as in OpenSCAD's own CSG export, ``import``,
+``surface``, ``text``, ``roof`` and ``fill`` (external data).
 
 Limits: :data:`MAX_CSG_BYTES` of text, :data:`MAX_CSG_NODES` nodes.
 """
@@ -65,11 +91,12 @@ import numpy as np
 from lark import Lark, Token, Transformer, UnexpectedInput, v_args
 from lark.exceptions import VisitError
 
-from ..errors import CsdfError, ModelError
+from ..errors import CsdfError, ModelError, ShapeError
 from .source import check_source, read_source
 
 __all__ = ["load_csg", "loads_csg", "load_scad", "MAX_CSG_BYTES", "MAX_CSG_NODES",
-           "SCAD_TIMEOUT", "FACETS"]
+           "SCAD_TIMEOUT", "FACETS", "fragments", "circle_points", "sphere_points",
+           "cylinder_points", "HULL_TOLERANCE", "HULL_GRID"]
 
 #: largest ``.csg`` text read (bytes)
 MAX_CSG_BYTES = 16 * 1024 * 1024
@@ -215,11 +242,8 @@ def loads_csg(text: str, file: str = "<string>", facets: str = "ideal"):
         if isinstance(exc.orig_exc, ModelError):
             raise exc.orig_exc from None
         raise
-    if facets == "openscad":
-        raise where("facets='openscad' (OpenSCAD's faceted curves) is not read yet: it "
-                    "needs csdf.from_mesh; use facets='ideal'", 1, 1)
     roots = _roots(nodes)
-    shape = _Converter(where).group(roots, "the file")
+    shape = _Converter(where, facets).group(roots, "the file")
     if shape is None:
         raise ModelError("the CSG file holds no geometry", file=file)
     return shape
@@ -245,10 +269,11 @@ def _roots(nodes: list[_Node]) -> list[_Node]:
 
 
 class _Converter:
-    """:class:`_Node` trees -> csdf shapes (``facets='ideal'``)."""
+    """:class:`_Node` trees -> csdf shapes (``facets`` ``'ideal'`` or ``'openscad'``)."""
 
-    def __init__(self, where):
+    def __init__(self, where, facets: str = "ideal"):
         self.where = where
+        self.faceted = facets == "openscad"
 
     # -- helpers ----------------------------------------------------------------------
     def err(self, n: _Node, msg: str) -> ModelError:
@@ -319,7 +344,16 @@ class _Converter:
             if n.name in _EXTERNAL:
                 raise self.err(n, f"not supported ({_EXTERNAL[n.name]})")
             raise self.err(n, "unknown node")
-        return fn(n)
+        try:
+            return fn(n)
+        except ShapeError as exc:  # a shape refused its arguments: say where
+            raise self.err(n, str(exc)) from None
+
+    def fragments(self, n: _Node, r: float) -> int:
+        """OpenSCAD's number of segments of a circle of radius ``r`` from the node's
+        ``$fn``, ``$fa``, ``$fs`` (:func:`fragments`)."""
+        return fragments(r, self.num(n, "$fn", 0.0), self.num(n, "$fs", 2.0),
+                         self.num(n, "$fa", 12.0))
 
     def n_group(self, n):
         return self.group(n.children, n.name)
@@ -367,7 +401,6 @@ class _Converter:
             A, t = A[:2, :2], t[:2]
         if abs(np.linalg.det(A)) < 1e-12 * max(np.abs(A).max(), 1e-300) ** len(A):
             raise self.err(n, "the matrix is singular (a zero scale)")
-        from ..errors import ShapeError
 
         if np.array_equal(A, np.eye(len(A))):  # a plain move: readable as such
             return child.translate(t.tolist()) if np.any(t != 0) else child
@@ -392,7 +425,16 @@ class _Converter:
     def n_sphere(self, n):
         from ..shapes.primitives3d import sphere
 
-        return sphere(self.positive(n, "r", self.num(n, "r", 1.0, index=0)))
+        r = self.positive(n, "r", self.num(n, "r", 1.0, index=0))
+        if self.faceted:
+            from ..shapes.convex import MAX_PLANES, convex_polyhedron
+
+            k = self.fragments(n, r)
+            if k * ((k + 1) // 2) > MAX_PLANES:
+                raise self.err(n, f"{k} segments make more than {MAX_PLANES} faces, more "
+                                  "than a convex_polyhedron holds (use facets='ideal')")
+            return convex_polyhedron(sphere_points(r, k))
+        return sphere(r)
 
     def n_cylinder(self, n):
         from ..shapes.primitives3d import capped_cone, cone, cylinder
@@ -403,6 +445,12 @@ class _Converter:
         if r1 < 0 or r2 < 0 or not (r1 > 0 or r2 > 0):
             raise self.err(n, f"radii r1 = {r1}, r2 = {r2} must be >= 0 and not both 0")
         centre = self.flag(n, "center")
+        if self.faceted:
+            from ..shapes.convex import convex_polyhedron
+
+            z0 = -h / 2 if centre else 0.0
+            return convex_polyhedron(cylinder_points(r1, r2, z0, z0 + h,
+                                                     self.fragments(n, max(r1, r2))))
         if r1 == r2:
             s = cylinder(r1, h)
             return s if centre else s.translate((0.0, 0.0, h / 2))
@@ -423,7 +471,12 @@ class _Converter:
     def n_circle(self, n):
         from ..shapes.primitives2d import circle
 
-        return circle(self.positive(n, "r", self.num(n, "r", 1.0, index=0)))
+        r = self.positive(n, "r", self.num(n, "r", 1.0, index=0))
+        if self.faceted:
+            from ..shapes.primitives2d import polygon
+
+            return polygon(circle_points(r, self.fragments(n, r)).tolist())
+        return circle(r)
 
     def n_polygon(self, n):
         from ..shapes.primitives2d import polygon
@@ -500,7 +553,18 @@ class _Converter:
                               "OpenSCAD refuses too")
         if b is not None and b[1, 0] <= 1e-9:  # all on the negative side: mirror it
             child = child.transform([[-1, 0, 0], [0, 1, 0], [0, 0, 1]])
-        return revolve(child)
+        if not self.faceted:
+            return revolve(child)
+        if b is None:
+            raise self.err(n, "an unbounded 2D child cannot be faceted")
+        pts = self.group_points(n)  # OpenSCAD counts the segments from the largest x
+        xmax = float(np.abs(pts[:, 0]).max()) if pts is not None else float(
+            np.abs(b[:, 0]).max())
+        k = self.fragments(n, xmax)
+        # OpenSCAD puts its first section on -x (then every 360 / k degrees)
+        s = revolve(child, segments=max(k, 3))
+        return s.transform([[-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) \
+            if k % 2 else s
 
     def n_offset(self, n):
         child = self.group(n.children, n.name)
@@ -537,13 +601,222 @@ class _Converter:
 
     def n_hull(self, n):
         kids = [c for c in n.children if c.modifier not in ("%", "*")]
-        balls = [_ball(c) for c in kids]
-        if len(kids) == 1:
-            return self.node(kids[0])
-        if len(kids) == 2 and all(b is not None and b[2] == 3 for b in balls):
-            return _ball_hull(balls[0], balls[1])
-        raise self.err(n, "only the hull of two spheres is read yet (the general hull "
-                          "needs csdf.from_mesh)")
+        if not kids:
+            return None
+        if not self.faceted:  # the closed forms of true spheres and circles
+            balls = [_ball(c) for c in kids]
+            if all(b is not None for b in balls):
+                if len({b[2] for b in balls}) > 1:
+                    raise self.err(n, "mixes 2D and 3D children")
+                if len(kids) == 1:
+                    return self.node(kids[0])
+                if len(kids) == 2 and balls[0][2] == 3:
+                    return _ball_hull(balls[0], balls[1])
+                if len(kids) == 2 and balls[0][0] == balls[1][0]:
+                    from ..shapes.primitives2d import segment
+
+                    (r, a, _), (_, b, _) = balls
+                    return segment(a.tolist(), b.tolist(), 2.0 * r)
+        pts = self.points(n)
+        if pts is None:
+            return None
+        return _hull_shape(pts)
+
+    # -- points whose convex hull is a node's ---------------------------------------
+    def points(self, n: _Node) -> np.ndarray | None:
+        """``(N, dim)`` points whose convex hull is the node's (``facets='openscad'``:
+        exactly OpenSCAD's faceted geometry; ``'ideal'``: curves faceted finely, within
+        :data:`HULL_TOLERANCE` of their radius, inside); None for no geometry."""
+
+        fn = getattr(self, "p_" + n.name, None)
+        try:
+            return fn(n) if fn is not None else self.sampled(n, None)
+        except ShapeError as exc:
+            raise self.err(n, str(exc)) from None
+
+    def group_points(self, n: _Node, children: list[_Node] | None = None
+                     ) -> np.ndarray | None:
+        kids = [c for c in (n.children if children is None else children)
+                if c.modifier not in ("%", "*")]
+        got = [p for p in (self.points(c) for c in kids) if p is not None and len(p)]
+        if not got:
+            return None
+        if len({p.shape[1] for p in got}) > 1:
+            raise self.err(n, "mixes 2D and 3D children")
+        return np.concatenate(got)
+
+    p_group = p_union = p_render = p_color = p_hull = group_points
+
+    def segments(self, n: _Node, r: float) -> int:
+        """Segments of a circle of radius ``r``: OpenSCAD's, or the fine ideal ones."""
+        return self.fragments(n, r) if self.faceted else _IDEAL_SEGMENTS
+
+    def p_cube(self, n):
+        s = self.vec(n, "size", 3, default=[1.0] * 3, index=0)
+        for i in range(3):
+            self.positive(n, f"size[{i}]", s[i])
+        c = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+        return c * s - (s / 2 if self.flag(n, "center") else 0.0)
+
+    def p_square(self, n):
+        s = self.vec(n, "size", 2, default=[1.0] * 2, index=0)
+        for i in range(2):
+            self.positive(n, f"size[{i}]", s[i])
+        c = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+        return c * s - (s / 2 if self.flag(n, "center") else 0.0)
+
+    def p_sphere(self, n):
+        r = self.positive(n, "r", self.num(n, "r", 1.0, index=0))
+        return sphere_points(r, self.segments(n, r))
+
+    def p_circle(self, n):
+        r = self.positive(n, "r", self.num(n, "r", 1.0, index=0))
+        return circle_points(r, self.segments(n, r))
+
+    def p_cylinder(self, n):
+        h = self.positive(n, "h", self.num(n, "h", 1.0))
+        r = self.num(n, "r", 1.0)
+        r1, r2 = self.num(n, "r1", r), self.num(n, "r2", r)
+        if r1 < 0 or r2 < 0 or not (r1 > 0 or r2 > 0):
+            raise self.err(n, f"radii r1 = {r1}, r2 = {r2} must be >= 0 and not both 0")
+        z0 = -h / 2 if self.flag(n, "center") else 0.0
+        return cylinder_points(r1, r2, z0, z0 + h, self.segments(n, max(r1, r2)))
+
+    def p_polygon(self, n):
+        pts = _array(n.args.get("points", n.pos[0] if n.pos else _UNDEF))
+        if pts is None or pts.ndim != 2 or pts.shape[1] < 2 or not np.all(np.isfinite(pts)):
+            raise self.err(n, "points must be finite [x, y] pairs")
+        return pts[:, :2]
+
+    def p_polyhedron(self, n):
+        return self.polyhedron_data(n)[0]
+
+    def p_multmatrix(self, n):
+        pts = self.group_points(n)
+        if pts is None:
+            return None
+        M = _array(n.args.get("m", n.pos[0] if n.pos else _UNDEF))
+        if M is None or M.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(M)):
+            raise self.err(n, "the matrix must be 4x4 finite numbers")
+        d = pts.shape[1]
+        A, t = (M[:3, :3], M[:3, 3]) if d == 3 else (M[:2, :2], M[:2, 3])
+        return pts @ A.T + t
+
+    def p_linear_extrude(self, n):
+        pts = self.group_points(n)
+        if pts is None:
+            return None
+        if pts.shape[1] != 2:
+            raise self.err(n, "needs 2D children")
+        h = self.positive(n, "height", self.num(n, "height", 100.0))
+        sc = _array(n.args.get("scale", 1.0))
+        if sc is None or sc.size not in (1, 2) or not np.all(np.isfinite(sc)):
+            raise self.err(n, "scale must be a number or [sx, sy]")
+        sc = np.broadcast_to(sc.reshape(-1), (2,))
+        v = n.args.get("v", _UNDEF)
+        if v is not _UNDEF and not np.allclose(_array(v), [0, 0, 1]):
+            raise self.err(n, f"an extrusion direction v = {_show(v)} is not read yet")
+        twist = self.num(n, "twist", 0.0)
+        if twist == 0.0:
+            layers = 1
+        elif self.faceted:
+            layers = max(int(self.num(n, "slices", 1.0)), 1)
+        else:  # a point turning by `step` degrees stays within the tolerance of its arc
+            step = math.degrees(2.0 * math.acos(1.0 - HULL_TOLERANCE))
+            layers = max(int(math.ceil(abs(twist) / step)), 1)
+        z0 = -h / 2 if self.flag(n, "center") else 0.0
+        out = []
+        for k in range(layers + 1):
+            t = k / layers
+            a = -math.radians(twist) * t  # clockwise seen from +z
+            R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+            xy = (pts * (1.0 + (sc - 1.0) * t)) @ R.T
+            out.append(np.column_stack([xy, np.full(len(xy), z0 + h * t)]))
+        return np.concatenate(out)
+
+    def p_rotate_extrude(self, n):
+        pts = self.group_points(n)
+        if pts is None:
+            return None
+        if pts.shape[1] != 2:
+            raise self.err(n, "needs 2D children")
+        x = np.abs(pts[:, 0])
+        angle = self.num(n, "angle", 360.0)
+        k = self.segments(n, float(x.max()))
+        if abs(angle) >= 360.0:
+            # OpenSCAD's sections start on -x; ideal: any start, all on the circle
+            a = math.pi + 2.0 * math.pi * np.arange(k) / k
+        else:
+            m = max(int(math.ceil(k * abs(angle) / 360.0)), 1)
+            a = np.radians(self.num(n, "start", 0.0) + angle * np.arange(m + 1) / m)
+        c, s_ = np.cos(a), np.sin(a)
+        return np.column_stack([(x[:, None] * c).ravel(), (x[:, None] * s_).ravel(),
+                                np.repeat(pts[:, 1], len(a))])
+
+    def p_offset(self, n):
+        pts = self.group_points(n)
+        if pts is None:
+            return None
+        r = n.args.get("r", _UNDEF)
+        if r is _UNDEF or r is None or not isinstance(r, float) or r < 0:
+            return self.sampled(n, pts)
+        if r == 0:
+            return pts
+        ring = circle_points(r, self.segments(n, r))
+        return _minkowski_points(pts, ring)
+
+    def p_minkowski(self, n):
+        kids = [c for c in n.children if c.modifier not in ("%", "*")]
+        sets = [p for p in (self.points(c) for c in kids) if p is not None and len(p)]
+        if not sets:
+            return None
+        if len({p.shape[1] for p in sets}) > 1:
+            raise self.err(n, "mixes 2D and 3D children")
+        out = sets[0]
+        for p in sets[1:]:  # hull(A + B) = hull(A) + hull(B)
+            out = _minkowski_points(out, p)
+        return out
+
+    def p_difference(self, n):
+        kids = [c for c in n.children if c.modifier not in ("%", "*")]
+        return self.sampled(n, self.points(kids[0]) if kids else None)
+
+    def p_intersection(self, n):
+        kids = [c for c in n.children if c.modifier not in ("%", "*")]
+        sets = [p for p in (self.points(c) for c in kids) if p is not None]
+        return self.sampled(n, np.concatenate(sets) if sets and len(
+            {p.shape[1] for p in sets}) == 1 else None)
+
+    def sampled(self, n: _Node, candidates: np.ndarray | None) -> np.ndarray | None:
+        """Points of a node read through its field: the ``candidates`` (exact vertices
+        of its parts) that lie in the solid, and surface points found on a grid of
+        :data:`HULL_GRID` cells along the longest side (projected onto the surface by
+        the gradient). Hull error: about one cell at sharp edges made by the cut."""
+        shape = self.node(n)
+        if shape is None:
+            return None
+        if shape.bounds is None:
+            raise self.err(n, "the hull of an unbounded child")
+        return _surface_points(shape, candidates)
+
+    def polyhedron_data(self, n: _Node) -> tuple[np.ndarray, list[list[int]]]:
+        """``(points (N, 3), faces)`` of a ``polyhedron`` node, checked."""
+        pts = _array(n.args.get("points", n.pos[0] if n.pos else _UNDEF))
+        if pts is None or pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4 \
+                or not np.all(np.isfinite(pts)):
+            raise self.err(n, "points must be at least 4 finite [x, y, z] triples")
+        faces = n.args.get("faces", n.args.get("triangles", _UNDEF))
+        if not isinstance(faces, list) or not faces:
+            raise self.err(n, f"faces must be a list of index lists, got {_show(faces)}")
+        out = []
+        for k, f in enumerate(faces):
+            idx = _array(f)
+            if idx is None or idx.ndim != 1 or len(idx) < 3 or np.any(idx != np.round(idx)) \
+                    or np.any(idx < 0) or np.any(idx >= len(pts)):
+                raise self.err(n, f"faces[{k}] must hold at least 3 indices of points "
+                                  f"(0..{len(pts) - 1})")
+            out.append([int(i) for i in idx])
+        return pts, out
 
     def n_projection(self, n):
         child = self.group(n.children, n.name)
@@ -554,11 +827,174 @@ class _Converter:
         raise self.err(n, "not read yet")
 
     def n_polyhedron(self, n):
-        raise self.err(n, "not read yet (needs csdf.from_mesh, the exact distance to a "
-                          "triangle mesh)")
+        from ..shapes.convex import convex_polyhedron
+
+        pts, faces = self.polyhedron_data(n)
+        used = pts[sorted({i for f in faces for i in f})]
+        if not _is_convex(used, pts, faces):
+            raise self.err(n, "a non-convex polyhedron is not read yet (needs "
+                              "csdf.from_mesh, the exact distance to a triangle mesh)")
+        return convex_polyhedron(used)
 
     def n_resize(self, n):
         raise self.err(n, "not read yet")
+
+
+#: ``facets='ideal'`` hulls: curved children are replaced by points on them whose hull
+#: lies within this fraction of each curve's radius inside the true curve
+HULL_TOLERANCE = 0.002
+#: the segments of a circle for that: a sphere's points then lie at most
+#: ``sqrt(2) pi / n`` radians from every point of it
+_IDEAL_SEGMENTS = int(math.ceil(math.sqrt(2.0) * math.pi / math.acos(1.0 - HULL_TOLERANCE)))
+#: cells along the longest side of the grid that samples children read through their
+#: field (difference, intersection, offset by delta, ...) for a hull
+HULL_GRID = 96
+#: OpenSCAD's smallest radius that still makes a circle (GRID_FINE)
+_GRID_FINE = 0.00000095367431640625
+
+
+def fragments(r: float, fn: float = 0.0, fs: float = 2.0, fa: float = 12.0) -> int:
+    """OpenSCAD 2021.01's number of segments of a circle of radius ``r`` (model units)
+    from ``$fn`` (count), ``$fs`` (length) and ``$fa`` (degrees): ``$fn`` when it is
+    > 0 (truncated, at least 3), else ``ceil(max(min(360 / $fa, 2 pi r / $fs), 5))``
+    with ``$fa`` and ``$fs`` raised to 0.01; 3 below OpenSCAD's grid size."""
+    if r < _GRID_FINE:
+        return 3
+    if fn > 0.0:
+        return max(int(fn), 3) if math.isfinite(fn) else 3
+    fs, fa = max(fs, 0.01), max(fa, 0.01)
+    return int(math.ceil(max(min(360.0 / fa, r * 2.0 * math.pi / fs), 5.0)))
+
+
+def _sin_cos_deg(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sin`` and ``cos`` of angles in degrees, exact at multiples of 90 and 30 (so
+    that a vertex on an axis has exact zeros)."""
+    a = np.mod(np.asarray(a, dtype=np.float64), 360.0)
+    r = np.radians(a)
+    s, c = np.sin(r), np.cos(r)
+    for deg, sv, cv in ((0, 0.0, 1.0), (30, 0.5, None), (60, None, 0.5), (90, 1.0, 0.0),
+                        (120, None, -0.5), (150, 0.5, None), (180, 0.0, -1.0),
+                        (210, -0.5, None), (240, None, -0.5), (270, -1.0, 0.0),
+                        (300, None, 0.5), (330, -0.5, None)):
+        hit = a == deg
+        if sv is not None:
+            s = np.where(hit, sv, s)
+        if cv is not None:
+            c = np.where(hit, cv, c)
+    return s, c
+
+
+def circle_points(r: float, k: int) -> np.ndarray:
+    """OpenSCAD's ``k``-gon of a circle of radius ``r``: ``(k, 2)``, vertex ``i`` at
+    ``360 i / k`` degrees (vertex 0 on +x)."""
+    s, c = _sin_cos_deg(360.0 * np.arange(k) / k)
+    return np.column_stack([r * c, r * s])
+
+
+def sphere_points(r: float, k: int) -> np.ndarray:
+    """OpenSCAD's faceted sphere of radius ``r`` with ``k`` segments: ``(k + 1) // 2``
+    rings (``k``-gons, vertex 0 at angle 0) at the polar angles
+    ``180 (i + 0.5) / rings`` degrees; ``(rings * k, 3)`` points."""
+    rings = (k + 1) // 2
+    s, c = _sin_cos_deg(180.0 * (np.arange(rings) + 0.5) / rings)
+    ring = circle_points(1.0, k)
+    return np.concatenate([np.column_stack([ring * (r * si), np.full(k, r * ci)])
+                           for si, ci in zip(s, c)])
+
+
+def cylinder_points(r1: float, r2: float, z1: float, z2: float, k: int) -> np.ndarray:
+    """OpenSCAD's faceted cylinder or cone: a ``k``-gon of radius ``r1`` at ``z1`` and
+    one of ``r2`` at ``z2`` (a radius 0 gives the apex point)."""
+    out = []
+    for r, z in ((r1, z1), (r2, z2)):
+        ring = circle_points(r, k) if r > 0 else np.zeros((1, 2))
+        out.append(np.column_stack([ring, np.full(len(ring), z)]))
+    return np.concatenate(out)
+
+
+def _minkowski_points(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Points whose hull is ``hull(a) + hull(b)``: the sums of the hull vertices."""
+    a, b = _hull_reduce(a), _hull_reduce(b)
+    return (a[:, None, :] + b[None, :, :]).reshape(-1, a.shape[1])
+
+
+def _hull_reduce(p: np.ndarray) -> np.ndarray:
+    """The hull's vertices of ``p`` (``p`` itself when it is flat or small)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(p) <= p.shape[1] + 1:
+        return p
+    try:
+        return p[ConvexHull(p).vertices]
+    except (QhullError, ValueError):
+        return p
+
+
+def _hull_shape(points: np.ndarray):
+    """The convex hull of ``(N, 3)`` points as a ``convex_polyhedron`` (of its vertices),
+    or of ``(N, 2)`` points as a ``polygon``."""
+    from ..shapes.convex import convex_polyhedron, hull_vertices_2d
+
+    if points.shape[1] == 2:
+        from ..shapes.primitives2d import polygon
+
+        return polygon(hull_vertices_2d(points).tolist())
+    return convex_polyhedron(_hull_reduce(np.unique(points, axis=0)))
+
+
+def _surface_points(shape, candidates: np.ndarray | None) -> np.ndarray:
+    """Points of ``shape``'s solid for its hull: the ``candidates`` with a field value
+    <= 0 (to 1e-9 of the size), and surface points: grid samples (``HULL_GRID`` cells
+    along the longest side of the bounds) within a cell of the surface, moved onto it
+    by Newton steps along the gradient."""
+    b = np.asarray(shape.bounds, dtype=np.float64)
+    dim = b.shape[1]
+    size = float((b[1] - b[0]).max())
+    tol = 1e-9 * max(size, 1e-300)
+    out = []
+    if candidates is not None and len(candidates) and candidates.shape[1] == dim:
+        v = np.asarray(shape(candidates), dtype=np.float64)
+        out.append(candidates[v <= tol])
+    h = size / HULL_GRID
+    axes = [np.arange(lo - h, hi + 1.5 * h, h) for lo, hi in zip(b[0], b[1])]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
+    v = np.asarray(shape(grid), dtype=np.float64)
+    p = grid[np.abs(v) <= h]
+    for _ in range(6):
+        val, g = shape.value_and_grad(p)
+        g = np.asarray(g, dtype=np.float64)[:, :dim]
+        g2 = np.maximum((g * g).sum(axis=1), 1e-300)
+        p = p - (np.asarray(val, dtype=np.float64) / g2)[:, None] * g
+    val = np.asarray(shape(p), dtype=np.float64)
+    out.append(p[np.abs(val) <= 1e-6 * size])
+    pts = np.concatenate(out)
+    if len(pts) < dim + 1:
+        raise ShapeError("no surface found to take the hull of")
+    return pts
+
+
+def _is_convex(used: np.ndarray, pts: np.ndarray, faces: list[list[int]]) -> bool:
+    """Whether a polyhedron's faces bound the convex hull of its points: every face's
+    vertices on one hull plane, and the faces' enclosed volume the hull's."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(used)
+    except (QhullError, ValueError):
+        return False
+    scale = float(np.abs(used - used.mean(axis=0)).max())
+    eq = hull.equations
+    for f in faces:
+        dist = pts[f] @ eq[:, :3].T + eq[:, 3]  # (face vertices, planes)
+        if not np.any(np.all(np.abs(dist) <= 1e-9 * scale, axis=0)):
+            return False
+    o = used.mean(axis=0)
+    vol = 0.0
+    for f in faces:
+        a = pts[f[0]] - o
+        for i in range(1, len(f) - 1):
+            vol += float(np.dot(a, np.cross(pts[f[i]] - o, pts[f[i + 1]] - o))) / 6.0
+    return abs(abs(vol) - hull.volume) <= 1e-9 * max(hull.volume, 1e-300)
 
 
 #: nodes that read external data

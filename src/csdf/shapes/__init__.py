@@ -3,6 +3,7 @@
 from . import deform as _deform  # noqa: F401  (registers shape methods)
 from . import params as _params  # noqa: F401  (registers bind and rename)
 from .base import REGISTRY, ApiEntry, Shape
+from .convex import convex_polyhedron
 from .csg import BLENDS, complement, difference, intersection, union
 from .domain import (
     mirror,
@@ -60,7 +61,7 @@ __all__ = [
     "Shape", "REGISTRY", "ApiEntry", "BLENDS",
     "sphere", "box", "rounded_box", "box_frame", "cylinder", "rounded_cylinder", "capsule",
     "cone", "capped_cone", "round_cone", "torus", "capped_torus", "link", "plane", "slab",
-    "ellipsoid", "octahedron", "pyramid", "hex_prism", "tri_prism",
+    "ellipsoid", "octahedron", "pyramid", "hex_prism", "tri_prism", "convex_polyhedron",
     "circle", "rectangle", "rounded_rectangle", "regular_polygon", "polygon", "triangle",
     "equilateral_triangle", "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse",
     "extrude", "revolve",

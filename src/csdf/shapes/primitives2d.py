@@ -294,15 +294,36 @@ def extrude(shape, height=1.0) -> Shape:
 
 
 @register("operator")
-def revolve(shape, offset=0.0) -> Shape:
+def revolve(shape, offset=0.0, segments=0) -> Shape:
     """Revolve a 2D shape around the z axis: its x becomes the distance from the axis
     minus ``offset`` and its y becomes z. **Exact** when the 2D shape is exact and lies
-    in ``x >= -offset``."""
+    in ``x >= -offset``.
+
+    With ``segments = n >= 3`` (a constant integer) the sweep is faceted as CAD tools
+    do: ``n`` copies of the section at the angles ``360 k / n`` degrees (the first on
+    +x) joined by flat faces, that is the distance from the axis replaced by the
+    regular ``n``-gon's gauge ``r cos(d) / cos(pi / n)`` (``d`` the angle from the
+    middle of the nearest segment), times ``cos(pi / n)``: a **bound** (exact zero set,
+    Lipschitz that of the section) when the section lies in ``x >= -offset``."""
     _require2d(shape, "revolve")
     o = scalar_arg(offset, "revolve: offset")
+    n = 0 if isinstance(segments, (int, np.integer)) and not isinstance(segments, bool) \
+        and segments == 0 else int_arg(segments, "revolve: segments", 3, 10_000)
+    half = math.pi / n if n else 0.0
+    cos_half = math.cos(half)
+
+    def radial(p: Vec) -> Expr:
+        r = length(Vec((p.x, p.y)))
+        if not n:
+            return r
+        from ..expr import atan2, cos, mod
+
+        d = mod(atan2(p.y, p.x), 2.0 * half) - half  # angle from the segment's middle
+        return r * cos(d) * (1.0 / cos_half)
 
     def f(p: Vec, ctx) -> Expr:
-        return shape.sdf(Vec((length(Vec((p.x, p.y))) - o, p.z)), ctx)
+        d = shape.sdf(Vec((radial(p) - o, p.z)), ctx)
+        return d * cos_half if n else d
 
     b = shape.bounds
     if b is None:
@@ -310,8 +331,9 @@ def revolve(shape, offset=0.0) -> Shape:
     else:
         R = max(abs(b[0, 0]), abs(b[1, 0])) + mag(o)
         bounds = box_bounds([-R, -R, b[0, 1]], [R, R, b[1, 1]])
+    keeps = not n
     return Shape(
         "revolve", f, dim=3, lipschitz=shape.lipschitz, bounds=bounds,
-        args=(shape, offset), children=(shape,),
-        exactness=derive_exactness([shape], keeps_exact=True, lipschitz=shape.lipschitz),
+        args=(shape, offset), kwargs={"segments": n} if n else None, children=(shape,),
+        exactness=derive_exactness([shape], keeps_exact=keeps, lipschitz=shape.lipschitz),
     )

@@ -81,6 +81,7 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
         icp,
         track,
     )
+    from .infer import InferResult, infer
     from .lang import dumps, load, loads
     from .mesh import mesh
     from .raster import raster
@@ -123,6 +124,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "Detection": (".detect", "Detection"),
     "PrimitiveDetection": (".detect", "PrimitiveDetection"),
     "estimate_normals": (".detect", "estimate_normals"),
+    "infer": (".infer", "infer"),
+    "InferResult": (".infer", "InferResult"),
     "dumps": (".lang", "dumps"),
     "load": (".lang", "load"),
     "loads": (".lang", "loads"),
@@ -201,7 +204,8 @@ __all__ = [
     "SceneQuery", "fit_depth", "fit_silhouette", "track", "Tracker", "TrackFrame",
     "TrackResult", "synth", "Sequence", "metrics", "detect", "detect_primitives",
     "detections_to_scene", "Detection", "PrimitiveDetection", "estimate_normals",
-    "to_c", "to_numpy", "x", "y", "z", "sqrt", "square", "sin", "cos", "tan", "asin",
+    "to_c", "to_numpy", "infer", "InferResult", "x", "y", "z", "sqrt", "square", "sin",
+    "cos", "tan", "asin",
     "acos", "atan", "atan2", "exp", "log", "floor", "step", "sign", "mod", "minimum",
     "maximum", "clamp", "mix",
     *_shape_names,

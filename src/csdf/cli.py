@@ -985,6 +985,49 @@ def track(
 
 
 @app.command()
+def infer(
+    scan: Path = typer.Argument(..., help="The point cloud (.ply) of one object."),
+    output: Path = typer.Option(..., "-o", "--output", help="The inferred model (.csdf)."),
+    max_primitives: int = typer.Option(8, "--max-primitives", help="The most primitives "
+                                       "in the tree."),
+    time_limit: float = typer.Option(30.0, "--time-limit", help="Seconds for the "
+                                     "structure search (the best tree found by then)."),
+    kinds: str = typer.Option("box,cylinder,sphere,cone,torus", "--kinds",
+                              help="The primitive kinds to use."),
+    viewpoint: str | None = typer.Option(None, "--viewpoint", help="x,y,z: the sensor "
+                                         "position of a single-view scan. Default: the PLY "
+                                         "header's record (csdf scan writes it); 'none' "
+                                         "ignores it."),
+    seed: int = typer.Option(0, "--seed", help="Seed of every random choice."),
+):
+    """Infer a CSG model of csdf primitives (csdf.infer) from a point cloud and write it
+    as a .csdf model with named parameters."""
+
+    def go():
+        from .infer import infer as infer_fn
+        from .io import atomic_path, read_point_cloud
+
+        if output.suffix.lower() != ".csdf":
+            raise CsdfError(f"{output}: the output must end in .csdf")
+        cloud = read_point_cloud(scan)
+        vp, source = _cloud_viewpoint(viewpoint, cloud, scan)
+        res = infer_fn(cloud.points, cloud.normals, max_primitives=max_primitives,
+                       kinds=kinds, viewpoint=vp, time_limit=time_limit, seed=seed)
+        header = (f"# inferred by csdf infer from {scan.name}: {len(res.primitives)} "
+                  f"primitives, rmse {res.rmse:.4g}, {res.inlier_fraction:.1%} of the "
+                  f"points within the noise\n# structure: {res.tree}\n")
+        with atomic_path(output) as tmp:
+            tmp.write_text(header + res.text)
+        out.print(f"{output}: {res.tree}", soft_wrap=True, markup=False)
+        out.print(f"{len(res.primitives)} primitives from {res.candidates} candidates, "
+                  f"rmse {res.rmse:.4g}, {res.inlier_fraction:.1%} inliers, "
+                  f"{res.seconds:.1f} s (viewpoint: {source})", soft_wrap=True,
+                  markup=False)
+
+    _run(go)
+
+
+@app.command()
 def detect(
     scan: Path = typer.Argument(..., help="The point cloud (.ply), e.g. from csdf scan."),
     models: str = typer.Option(..., "--models", help="Comma-separated zoo names or .csdf "

@@ -159,6 +159,27 @@ def rotate(shape: Shape, angle, axis="z") -> Shape:
     return _derived(shape, "rotate", f, args=(angle,), kwargs=kw, keeps_exact=True, bounds=b)
 
 
+def orient_matrix(axis) -> np.ndarray:
+    """The rotation ``(3, 3)`` :func:`orient` applies: the shortest turn taking +z onto
+    ``axis`` (name or 3-vector); a half turn about x for -z."""
+    u = axis_vector(axis)
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(z @ u)
+    if c > 1 - 1e-15:
+        return np.eye(3)
+    if c < -1 + 1e-15:
+        return np.diag([1.0, -1.0, -1.0])  # half turn about x
+    v = np.cross(z, u)
+    s = np.linalg.norm(v)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
+    ang = math.atan2(s, c)
+    R = np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * (K @ K)
+    # axis-aligned targets give a signed permutation: make it exact (cos 90 deg is
+    # 6e-17 in floating point), so no x * 1e-16 terms reach the bytecode
+    snapped = np.round(R)
+    return np.where(np.abs(R - snapped) < 1e-12, snapped, R)
+
+
 @register("method")
 def orient(shape: Shape, axis) -> Shape:
     """Rotate the shape so that its +z axis points along ``axis`` (name or 3-vector).
@@ -166,23 +187,7 @@ def orient(shape: Shape, axis) -> Shape:
     _check(shape, "orient")
     if shape.dim != 3:
         raise ShapeError("orient needs a 3D shape")
-    u = axis_vector(axis)
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(z @ u)
-    if c > 1 - 1e-15:
-        R = np.eye(3)
-    elif c < -1 + 1e-15:
-        R = np.diag([1.0, -1.0, -1.0])  # half turn about x
-    else:
-        v = np.cross(z, u)
-        s = np.linalg.norm(v)
-        K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
-        ang = math.atan2(s, c)
-        R = np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * (K @ K)
-        # axis-aligned targets give a signed permutation: make it exact (cos 90 deg is
-        # 6e-17 in floating point), so no x * 1e-16 terms reach the bytecode
-        snapped = np.round(R)
-        R = np.where(np.abs(R - snapped) < 1e-12, snapped, R)
+    R = orient_matrix(axis)
     Rl = R.tolist()
     return _derived(
         shape, "orient", lambda p, ctx: shape.sdf(_apply_inverse(Rl, p), ctx), args=(axis,),

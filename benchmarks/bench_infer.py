@@ -1,0 +1,336 @@
+"""CSG inference from point clouds (issue 21): ``csdf.infer`` on random CSG trees of csdf
+primitives, sampled in full and scanned from one view, scored against the truth.
+
+Trees (seeded): 2-8 primitives (boxes, cylinders, spheres, cones, tori; axis-aligned
+or turned by a random angle about a random axis), grown from a base solid by unions
+(parts attached at a surface point), differences (notches and holes cut at a surface
+point) and intersections (trims), each new leaf applied at the root or at a random
+subtree. A tree is kept when every leaf is the nearest surface for at least 3 % of
+2,000 surface samples (a leaf that shows nowhere cannot be recovered from points).
+
+Clouds: ``csdf.sample_surface`` (20,000 points with normals, all around) and
+``csdf.scan`` from one camera (640 x 480, 60 degrees, normals not given: ``infer``
+estimates them, turned to the viewpoint), Gaussian noise of 0.2 % of the bounding
+diagonal.
+
+Measures: **exact structure** (the same kinds and the same tree up to the order of
+commutative operands, leaves matched to the truth's by kind and position), **Chamfer**
+(the mean of both directed distances from 5,000 points on one surface to the other's
+mesh, marching cubes at 160, as a fraction of the truth's bounding diagonal), **IoU**
+of the signs on a 64^3 grid over the truth's box padded by 10 %, the **primitive
+count** against the truth's, and **seconds** per shape.
+
+Run: ``python benchmarks/bench_infer.py [--trees 100] [--time-limit 30] [--seed 0]
+[--views full,scan]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import statistics
+import time
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+import csdf
+from csdf.backends.meshdist import MeshDistance
+from csdf.infer import infer
+from csdf.infer import tree as T
+
+KINDS = ("box", "cylinder", "sphere", "cone", "torus")
+#: every tree is a new program: the interpreter, so that none compiles a kernel
+BACKEND = "interp"
+
+
+def _rotation(rng) -> np.ndarray:
+    if rng.random() < 0.6:  # axis-aligned: one of the three axis choices
+        perms = [np.eye(3), np.eye(3)[[1, 2, 0]], np.eye(3)[[2, 0, 1]]]
+        return perms[rng.integers(3)].T
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    return csdf.Pose.from_rotvec(axis * rng.uniform(0.2, 1.2)).rotation
+
+
+def _leaf(rng, kind: str, scale: float, centre: np.ndarray) -> tuple:
+    s = scale
+    if kind == "box":
+        vals = {k: float(rng.uniform(0.5, 1.0) * s) for k in ("size_x", "size_y", "size_z")}
+    elif kind == "cylinder":
+        vals = {"radius": float(rng.uniform(0.2, 0.45) * s),
+                "height": float(rng.uniform(0.6, 1.2) * s)}
+    elif kind == "sphere":
+        vals = {"radius": float(rng.uniform(0.3, 0.55) * s)}
+    elif kind == "cone":
+        r1 = float(rng.uniform(0.3, 0.5) * s)
+        vals = {"r1": r1, "r2": float(rng.uniform(0.05, 0.6) * r1),
+                "height": float(rng.uniform(0.6, 1.0) * s)}
+    else:
+        R = float(rng.uniform(0.3, 0.45) * s)
+        vals = {"major": R, "minor": float(rng.uniform(0.25, 0.45) * R)}
+    return (kind, _rotation(rng), np.asarray(centre, float), vals)
+
+
+def solid(kind: str, R: np.ndarray, t: np.ndarray, v: dict):
+    """A posed primitive with plain numbers (no parameters)."""
+    if kind == "sphere":
+        s = csdf.sphere(v["radius"])
+    elif kind == "cylinder":
+        s = csdf.cylinder(v["radius"], v["height"])
+    elif kind == "cone":
+        s = csdf.capped_cone(v["r1"], v["r2"], v["height"])
+    elif kind == "torus":
+        s = csdf.torus(v["major"], v["minor"])
+    else:
+        s = csdf.box((v["size_x"], v["size_y"], v["size_z"]))
+    return s.rotate(R).translate(tuple(float(c) for c in t))
+
+
+def _shape_of(tree, leaves):
+    return T.build(tree, lambda i: solid(*leaves[i]))
+
+
+def random_tree(rng, k: int, tries: int = 200):
+    """A random tree of ``k`` primitives whose every leaf shows (see the module docs):
+    ``(tree, leaves [(kind, R, t, sizes)])``."""
+    for _ in range(tries):
+        base = _leaf(rng, str(rng.choice(["box", "cylinder", "sphere"])), 1.6, np.zeros(3))
+        leaves = [base]
+        tree = 0
+        ok = True
+        for i in range(1, k):
+            shape = _shape_of(tree, leaves)
+            try:
+                p, _ = csdf.sample_surface(shape, 64, seed=int(rng.integers(1 << 30)),
+                                              backend=BACKEND)
+            except csdf.CsdfError:
+                ok = False
+                break
+            centre = p[rng.integers(len(p))]
+            op = str(rng.choice(["union", "difference", "intersection"], p=[0.45, 0.4, 0.15]))
+            scale = {"union": 0.8, "difference": 0.6, "intersection": 1.4}[op]
+            if op == "intersection":
+                centre = 0.7 * centre
+            leaves.append(_leaf(rng, str(rng.choice(KINDS)), scale, centre))
+            paths = [pt for pt, _ in T.subtrees(tree)]
+            path = () if rng.random() < 0.7 else paths[rng.integers(len(paths))]
+            sub = dict(T.subtrees(tree))[path]
+            tree = T.replace(tree, path, (op, sub, i))
+        if ok and _all_show(tree, leaves, rng):
+            return tree, leaves
+    raise RuntimeError("no valid tree found")
+
+
+def _all_show(tree, leaves, rng) -> bool:
+    shape = _shape_of(tree, leaves)
+    try:
+        p, _ = csdf.sample_surface(shape, 2000, seed=int(rng.integers(1 << 30)),
+                                  backend=BACKEND)
+    except csdf.CsdfError:
+        return False
+    d = np.stack([np.abs(csdf.as_field(solid(*lf), backend=BACKEND).value(p)) for lf in leaves])
+    share = np.bincount(np.argmin(d, axis=0), minlength=len(leaves)) / len(p)
+    return bool(share.min() >= 0.03)
+
+
+def _match(res, leaves) -> dict[int, int] | None:
+    """Inferred primitive index -> truth leaf index (same kind, nearest centres), or
+    None when the counts or kinds differ."""
+    if len(res.primitives) != len(leaves):
+        return None
+    n = len(leaves)
+    cost = np.full((n, n), 1e9)
+    for i, p in enumerate(res.primitives):
+        for j, lf in enumerate(leaves):
+            if p["kind"] == lf[0]:
+                cost[i, j] = float(np.linalg.norm(np.asarray(p["translation"]) - lf[2]))
+    r, c = linear_sum_assignment(cost)
+    if cost[r, c].max() >= 1e9:
+        return None
+    return {int(i): int(j) for i, j in zip(r, c)}
+
+
+def exact_structure(res, tree, leaves) -> bool:
+    m = _match(res, leaves)
+    if m is None:
+        return False
+    name_to_index = {p["name"]: i for i, p in enumerate(res.primitives)}
+    inferred = _parse(res.tree, name_to_index)
+    return T.canonical(inferred, lambda i: str(m[i])) == T.canonical(tree)
+
+
+def _parse(text: str, index: dict[str, int]):
+    """The tree of ``InferResult.tree`` text (fully parenthesised infix)."""
+    ops = {"|": "union", "&": "intersection", "-": "difference"}
+    tokens = text.replace("(", " ( ").replace(")", " ) ").split()
+    pos = 0
+
+    def node():
+        nonlocal pos
+        tok = tokens[pos]
+        pos += 1
+        if tok != "(":
+            return index[tok]
+        a = node()
+        op = ops[tokens[pos]]
+        pos += 1
+        b = node()
+        pos += 1  # ')'
+        return (op, a, b)
+
+    return node()
+
+
+_SURFACES: dict[int, tuple] = {}  # id(shape) -> (its surface points, its mesh distance)
+
+
+def _surface(shape) -> tuple:
+    """5,000 points on a shape's surface (``sample_surface``: on the zero set to 1e-10)
+    and the exact distance to its mesh (marching cubes at 160), kept for the truths."""
+    key = id(shape)
+    if key not in _SURFACES:
+        pts, _ = csdf.sample_surface(shape, 5000, seed=1, backend=BACKEND)
+        m = csdf.mesh(csdf.Field(shape, backend=BACKEND), resolution=160, method="mc",
+                      progress=False, check_thin=False)
+        _SURFACES[key] = (pts, MeshDistance(m), shape)  # (the shape keeps its id)
+    return _SURFACES[key]
+
+
+def chamfer(a, b, diag: float) -> float:
+    """Symmetric mean distance between the surfaces, as a fraction of ``diag``: from
+    5,000 points on each surface to the other surface's mesh (exact distance to its
+    triangles), so that no sampling gap between two point sets adds to it."""
+    pa, ma, _ = _surface(a)
+    pb, mb, _ = _surface(b)
+    total = float(np.abs(mb.value(pa)).mean()) + float(np.abs(ma.value(pb)).mean())
+    if id(a) in _SURFACES and a is not b:
+        del _SURFACES[id(a)]  # (only the truths are kept)
+    return 0.5 * total / diag
+
+
+def iou(a, b, box: np.ndarray, n: int = 64) -> float:
+    lo, hi = box
+    pad = 0.1 * (hi - lo)
+    axes = [np.linspace(lo[d] - pad[d], hi[d] + pad[d], n) for d in range(3)]
+    g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    ia = csdf.as_field(a, backend=BACKEND).value(g) <= 0
+    ib = csdf.as_field(b, backend=BACKEND).value(g) <= 0
+    u = np.logical_or(ia, ib).sum()
+    return float(np.logical_and(ia, ib).sum() / u) if u else 1.0
+
+
+def cloud(shape, view: str, sigma: float, rng, box):
+    if view == "full":
+        p, n = csdf.sample_surface(shape, 20000, seed=int(rng.integers(1 << 30)),
+                                  backend=BACKEND)
+        return p + rng.normal(0, sigma, p.shape), n, None
+    centre = 0.5 * (box[0] + box[1])
+    r = 2.5 * float(np.linalg.norm(box[1] - box[0]))
+    az, el = rng.uniform(0, 2 * math.pi), rng.uniform(0.3, 0.8)
+    eye = centre + r * np.array([math.cos(az) * math.cos(el), math.sin(az) * math.cos(el),
+                                 math.sin(el)])
+    cam = csdf.Camera.look_at(eye, centre, fov=30.0, width=640, height=480)
+    pc, _ = csdf.scan(shape, cam, noise=sigma, seed=int(rng.integers(1 << 30)),
+                      backend=BACKEND)
+    M = cam.pose
+    return pc @ M[:3, :3].T + M[:3, 3], None, eye
+
+
+def four_views(shape, sigma: float, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Points and normals (facing each camera: outwards) of four scans from around and
+    above, merged in the world frame."""
+    box = csdf.as_field(shape, backend=BACKEND).bounds
+    centre = 0.5 * (box[0] + box[1])
+    r = 2.5 * float(np.linalg.norm(box[1] - box[0]))
+    pts, nrm = [], []
+    for k in range(4):
+        az = math.pi / 4 + k * math.pi / 2
+        eye = centre + r * np.array([math.cos(az) * 0.8, math.sin(az) * 0.8, 0.6])
+        cam = csdf.Camera.look_at(eye, centre, fov=30.0, width=640, height=480)
+        pc, nc = csdf.scan(shape, cam, noise=sigma, seed=int(rng.integers(1 << 30)),
+                           backend=BACKEND)
+        M = cam.pose
+        pts.append(pc @ M[:3, :3].T + M[:3, 3])
+        nrm.append(nc @ M[:3, :3].T)
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+def bench_zoo(time_limit: float, seed: int, out_dir: str | None) -> None:
+    """The zoo parts scanned from four views: structure, IoU and Chamfer."""
+    rng = np.random.default_rng(seed)
+    print("\n## Zoo parts, four views merged\n")
+    print("| part | points | primitives (inferred / hand-written leaves) | IoU | Chamfer | "
+          "s | inferred structure |")
+    print("|---|---|---|---|---|---|---|")
+    for name in ("flange", "electrical_box", "connector", "cross_shaft"):
+        shape = csdf.zoo.load(name)
+        box = csdf.as_field(shape, backend=BACKEND).bounds
+        diag = float(np.linalg.norm(box[1] - box[0]))
+        pts, nrm = four_views(shape, 0.002 * diag, rng)
+        res = infer(pts, nrm, time_limit=time_limit, seed=seed)
+        n_hand = sum(1 for c in csdf.as_field(shape).program.calls)
+        print(f"| {name} | {len(pts):,} | {len(res.primitives)} / {n_hand} | "
+              f"{iou(res.shape, shape, box):.3f} | {chamfer(res.shape, shape, diag):.2%} | "
+              f"{res.seconds:.1f} | `{res.tree}` |", flush=True)
+        if out_dir:
+            from pathlib import Path
+
+            Path(out_dir, f"{name}.inferred.csdf").write_text(res.text)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--trees", type=int, default=100)
+    ap.add_argument("--time-limit", type=float, default=30.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--views", default="full,scan")
+    ap.add_argument("--zoo", action="store_true", help="only the zoo parts")
+    ap.add_argument("--out", default=None, help="a folder for the zoo parts' inferred "
+                    ".csdf models")
+    a = ap.parse_args()
+    if a.zoo:
+        bench_zoo(a.time_limit, a.seed, a.out)
+        return
+    rng = np.random.default_rng(a.seed)
+    print(f"machine: {platform.processor() or platform.machine()}, "
+          f"{csdf.parallel.N_THREADS} cores; {a.trees} trees, time limit {a.time_limit} s")
+    truths = [random_tree(rng, int(rng.integers(2, 9))) for _ in range(a.trees)]
+    shapes = [_shape_of(tree, leaves) for tree, leaves in truths]
+    rows: dict[tuple[str, str], list] = {}
+    for view in a.views.split(","):
+        for k, ((tree, leaves), shape) in enumerate(zip(truths, shapes)):
+            box = csdf.as_field(shape).bounds
+            diag = float(np.linalg.norm(box[1] - box[0]))
+            pts, nrm, eye = cloud(shape, view, 0.002 * diag, rng, box)
+            t0 = time.perf_counter()
+            try:
+                res = infer(pts, nrm, viewpoint=eye, time_limit=a.time_limit, seed=a.seed)
+            except csdf.CsdfError as exc:
+                print(f"{view} tree {k}: {exc}")
+                continue
+            dt = time.perf_counter() - t0
+            n = len(leaves)
+            band = "2-3" if n <= 3 else ("4-5" if n <= 5 else "6-8")
+            rows.setdefault((view, band), []).append((
+                exact_structure(res, tree, leaves), chamfer(res.shape, shape, diag),
+                iou(res.shape, shape, box), len(res.primitives) / n, dt))
+        print(f"\n## {view}\n")
+        print("| primitives | trees | exact structure | Chamfer (median) | IoU (median) | "
+              "IoU >= 0.97 | count / truth (median) | s (median, max) |")
+        print("|---|---|---|---|---|---|---|---|")
+        for band in ("2-3", "4-5", "6-8"):
+            r = rows.get((view, band), [])
+            if not r:
+                continue
+            ex, ch, io, cnt, ts = (list(x) for x in zip(*r))
+            print(f"| {band} | {len(r)} | {sum(ex) / len(r):.0%} | "
+                  f"{statistics.median(ch):.2%} | {statistics.median(io):.3f} | "
+                  f"{sum(v >= 0.97 for v in io) / len(r):.0%} | "
+                  f"{statistics.median(cnt):.2f} | {statistics.median(ts):.1f}, "
+                  f"{max(ts):.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

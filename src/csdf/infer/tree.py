@@ -1,0 +1,136 @@
+"""CSG trees over candidate primitives, as plain data: what the search builds, evaluates
+on sampled distances, compares and turns into a csdf shape.
+
+A tree is ``int`` (a leaf: the index of a candidate primitive) or ``(op, a, b)`` with
+``op`` one of ``'union'``, ``'intersection'``, ``'difference'`` and ``a``, ``b`` trees.
+On distances the ops are csdf's: ``min(a, b)``, ``max(a, b)``, ``max(a, -b)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+__all__ = ["OPS", "Tree", "evaluate", "leaves", "size", "subtrees", "replace", "remove",
+           "canonical", "to_text", "build"]
+
+Tree = int | tuple
+OPS = ("union", "intersection", "difference")
+
+
+def evaluate(tree: Tree, leaf_values: np.ndarray) -> np.ndarray:
+    """The tree's field ``(N,)`` from its leaves' fields ``leaf_values (L, N)``."""
+    if isinstance(tree, (int, np.integer)):
+        return leaf_values[int(tree)]
+    op, a, b = tree
+    fa, fb = evaluate(a, leaf_values), evaluate(b, leaf_values)
+    if op == "union":
+        return np.minimum(fa, fb)
+    if op == "intersection":
+        return np.maximum(fa, fb)
+    return np.maximum(fa, -fb)
+
+
+def leaves(tree: Tree) -> list[int]:
+    """The leaves, left to right."""
+    if isinstance(tree, (int, np.integer)):
+        return [int(tree)]
+    return leaves(tree[1]) + leaves(tree[2])
+
+
+def size(tree: Tree) -> int:
+    """The number of leaves."""
+    return len(leaves(tree))
+
+
+def subtrees(tree: Tree, path: tuple = ()) -> Iterator[tuple[tuple, Tree]]:
+    """Every ``(path, subtree)``; a path is the sequence of child indices (1 or 2)."""
+    yield path, tree
+    if not isinstance(tree, (int, np.integer)):
+        yield from subtrees(tree[1], path + (1,))
+        yield from subtrees(tree[2], path + (2,))
+
+
+def replace(tree: Tree, path: tuple, new: Tree) -> Tree:
+    """The tree with the subtree at ``path`` replaced by ``new``."""
+    if not path:
+        return new
+    op, a, b = tree
+    if path[0] == 1:
+        return (op, replace(a, path[1:], new), b)
+    return (op, a, replace(b, path[1:], new))
+
+
+def remove(tree: Tree, leaf: int) -> Tree | None:
+    """The tree without ``leaf`` (its parent replaced by its sibling); None when the
+    tree is that leaf alone."""
+    if isinstance(tree, (int, np.integer)):
+        return None if int(tree) == leaf else tree
+    op, a, b = tree
+    if a == leaf:
+        return b
+    if b == leaf:
+        return a
+    ra, rb = remove(a, leaf), remove(b, leaf)
+    return (op, ra, rb)
+
+
+def canonical(tree: Tree, label: Callable[[int], str] = str) -> str:
+    """A text that is equal for two trees exactly when they are the same up to the order
+    of the operands of unions and intersections (and of the subtrahends of a chain of
+    differences: ``(a - b) - c`` is ``a - (b | c)``); leaves printed by ``label``."""
+    if isinstance(tree, (int, np.integer)):
+        return label(int(tree))
+    op, a, b = tree
+    if op == "difference":
+        base, subs = a, [b]
+        while not isinstance(base, (int, np.integer)) and base[0] == "difference":
+            subs.append(base[2])
+            base = base[1]
+        parts = sorted(x for s in subs for x in _operands(s, "union", label))
+        sub = parts[0] if len(parts) == 1 else "U(" + ",".join(parts) + ")"
+        return f"D({canonical(base, label)},{sub})"
+    return _flat(tree, op, label)
+
+
+def _operands(tree: Tree, op: str, label: Callable[[int], str]) -> list[str]:
+    """The canonical texts of the operands of a chain of ``op``, flattened."""
+    items: list[str] = []
+    stack = [tree]
+    while stack:
+        t = stack.pop()
+        if not isinstance(t, (int, np.integer)) and t[0] == op:
+            stack.extend((t[1], t[2]))
+        else:
+            items.append(canonical(t, label))
+    return items
+
+
+def _flat(tree: Tree, op: str, label: Callable[[int], str]) -> str:
+    """A union's or intersection's operands flattened and sorted."""
+    items = _operands(tree, op, label)
+    if len(items) == 1:
+        return items[0]
+    return ("U(" if op == "union" else "I(") + ",".join(sorted(items)) + ")"
+
+
+def to_text(tree: Tree, label: Callable[[int], str] = str) -> str:
+    """Infix text: ``(a | b) - c``."""
+    if isinstance(tree, (int, np.integer)):
+        return label(int(tree))
+    sym = {"union": "|", "intersection": "&", "difference": "-"}[tree[0]]
+    return f"({to_text(tree[1], label)} {sym} {to_text(tree[2], label)})"
+
+
+def build(tree: Tree, leaf: Callable[[int], object]):
+    """The csdf shape of a tree, leaves made by ``leaf(i)``."""
+    if isinstance(tree, (int, np.integer)):
+        return leaf(int(tree))
+    op, a, b = tree
+    sa, sb = build(a, leaf), build(b, leaf)
+    if op == "union":
+        return sa | sb
+    if op == "intersection":
+        return sa & sb
+    return sa - sb

@@ -132,3 +132,14 @@ def test_serial_values_matches_value():
     else:
         assert serial is None
     assert as_field(csdf.sphere(1.0), backend="numpy").serial_values() is None
+
+
+def test_a_field_of_a_field_keeps_its_evaluator():
+    """Field(field, bounds=...) (what csdf.mesh makes of a given field) keeps the
+    field's backend, as the docs say; a per-call choice ('auto') is made anew."""
+    base = csdf.as_field(csdf.sphere(1.0), backend="interp")
+    assert csdf.Field(base, bounds=((-2, -2, -2), (2, 2, 2))).backend == "interp"
+    assert csdf.Field(base, backend="numpy").backend == "numpy"
+    small = csdf.as_field(csdf.sphere(1.0), work=10)
+    assert small.backend == "auto"
+    assert csdf.Field(small, bounds=((-2, -2, -2), (2, 2, 2))).backend != "auto"

@@ -315,6 +315,11 @@ class Field:
             raise CsdfError("a 2D program cannot be posed in 3D; extrude or revolve it")
         self._auto = backend == "auto"
         self.backend = choose_backend(backend, work, len(self.program.code))
+        if isinstance(model, Field) and backend == "auto" and work is None and \
+                model.backend != "auto":
+            # a field made from a field keeps its evaluator (one chosen per call is
+            # chosen anew: a sweep needs one evaluator for all its calls)
+            self._auto, self.backend = model._auto, model.backend
         self._cells: Any = None  # the CellTapes of pruned evaluation, made on first use
         self._region: tuple[np.ndarray, int | None] | None = None
         self._bounds_given = None if bounds is None else check_bounds(bounds)

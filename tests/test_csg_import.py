@@ -216,6 +216,15 @@ def test_load_and_cli_import(tmp_path):
     assert np.allclose(_f(back, p), _f(s, p), atol=1e-12)
     res = CliRunner().invoke(app, ["info", str(src)])
     assert res.exit_code == 0 and "instructions" in res.output
+    # OpenSCAD's facets: the cylinder's hole becomes a prism (the default $fn: 5 sides)
+    faceted = tmp_path / "faceted.csdf"
+    res = CliRunner().invoke(app, ["import", str(src), "-o", str(faceted), "--facets",
+                                   "openscad"])
+    assert res.exit_code == 0, res.output
+    assert np.allclose(_f(csdf.load(faceted), p), _f(load_csg(src, "openscad"), p),
+                       atol=1e-12)
+    res = CliRunner().invoke(app, ["import", str(src), "-o", str(faceted), "--facets", "x"])
+    assert res.exit_code != 0 and "facets" in res.output
     bad = tmp_path / "bad.csg"
     bad.write_text("group() {\n  import(file = \"x.stl\");\n}\n")
     res = CliRunner().invoke(app, ["import", str(bad), "-o", str(tmp_path / "bad.csdf")])

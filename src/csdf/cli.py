@@ -396,6 +396,9 @@ def import_(
     model: Path = typer.Argument(..., help="An OpenSCAD .scad (needs the openscad program) "
                                  "or .csg file."),
     output: Path = typer.Option(..., "-o", "--output", help="The .csdf model to write."),
+    facets: str = typer.Option("ideal", "--facets", help="ideal (true spheres, cylinders "
+                               "and cones) or openscad (OpenSCAD's facets, from $fn, $fa "
+                               "and $fs)."),
 ):
     """Convert an OpenSCAD model to a readable .csdf model (shapes used more than once
     bound with let)."""
@@ -410,7 +413,7 @@ def import_(
             raise CsdfError(f"{model}: csdf import reads .scad or .csg files")
         if output.suffix.lower() != ".csdf":
             raise CsdfError(f"{output}: the output must end in .csdf")
-        shape = load_scad(model) if suffix == ".scad" else load_csg(model)
+        shape = load_scad(model, facets) if suffix == ".scad" else load_csg(model, facets)
         text = f"# imported from {model.name} by csdf import\n" + dumps(shape)
         with atomic_path(output) as tmp:
             tmp.write_text(text, encoding="utf-8")

@@ -106,3 +106,19 @@ def test_cli(tmp_path, cloud):
     assert r.exit_code == 0 and "parameter" in r.output
     r = runner.invoke(app, ["infer", str(tmp_path / "part.ply"), "-o", str(tmp_path / "x.stl")])
     assert r.exit_code != 0 and ".csdf" in r.output
+
+
+def test_a_hole_seen_from_one_side_goes_through():
+    """The scan sees the wall of a hole but not its bottom: the cut goes through instead
+    of leaving a skin over the opening that no point shows."""
+    shape = csdf.box((1.0, 0.8, 0.5)) - csdf.cylinder(0.2, 1.0)
+    cam = csdf.Camera.look_at((1.2, -1.0, 2.2), (0.0, 0.0, 0.0), width=320, height=240)
+    pc, _ = csdf.scan(shape, cam, noise=0.002, seed=1)
+    M = cam.pose
+    res = infer(pc @ M[:3, :3].T + M[:3, 3], viewpoint=M[:3, 3], seed=0, time_limit=10)
+    assert res.tree.replace(" ", "") == "(box_1-cylinder_1)"
+    cyl = next(p for p in res.primitives if p["kind"] == "cylinder")
+    assert cyl["height"] >= 0.5  # at least through the box
+    # the opening is open: points on the axis just inside the top face are outside
+    f = csdf.as_field(res.shape).value(np.array([[0.0, 0.0, 0.24], [0.0, 0.0, -0.2]]))
+    assert (f > 0).all()

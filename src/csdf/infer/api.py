@@ -234,9 +234,15 @@ def _extended(lf: _Leaf, P: np.ndarray, inl: np.ndarray) -> _Leaf | None:
     changed = False
     for k in axes:
         tol = 0.02 * max(2 * half[k], 1e-12)
-        if np.sum(np.abs(q[:, k] - hi[k]) <= tol) < EXTEND_BELOW:
+        # points on the face itself, not on the faces around it near its edges
+        if lf.kind == "box":
+            inside = np.all([np.abs(q[:, j]) < half[j] - 0.02 * 2 * half[j]
+                             for j in range(3) if j != k], axis=0)
+        else:
+            inside = np.hypot(q[:, 0], q[:, 1]) < 0.9 * lf.vals["radius"]
+        if np.sum(inside & (np.abs(q[:, k] - hi[k]) <= tol)) < EXTEND_BELOW:
             hi[k], changed = max(hi[k], float(a[:, k].max())), True
-        if np.sum(np.abs(q[:, k] - lo[k]) <= tol) < EXTEND_BELOW:
+        if np.sum(inside & (np.abs(q[:, k] - lo[k]) <= tol)) < EXTEND_BELOW:
             lo[k], changed = min(lo[k], float(a[:, k].min())), True
     if not changed:
         return None
@@ -324,7 +330,12 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     # box cut by an intersection shows only what is inside the other operand): the
     # candidates also hold each box and cylinder with those faces out to the cloud's
     # extent
-    leaves += [v for d, lf in zip(dets, leaves) if (v := _extended(lf, P, P[d.inliers]))]
+    through: dict[int, int] = {}
+    for i, (d, lf) in enumerate(zip(dets, list(leaves))):
+        v = _extended(lf, P, P[d.inliers])
+        if v is not None:
+            through[i] = len(leaves)
+            leaves.append(v)
     leaves = [_snap(lf) for lf in leaves]
     diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
     if epsilon is None:
@@ -375,6 +386,14 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
             best = (sc, lvs)
     assert best is not None
     sc, lvs = best
+    # the winner's cuts go through where nothing shows their ends (see search.polish)
+    scorer = scorer_for(lvs)
+    swapped = polish(scorer, sc.tree, len(lvs), int(max_primitives), 0.0, through)
+    if T.canonical(swapped.tree) != T.canonical(sc.tree):
+        lvs2 = _refined(swapped.tree, lvs, P[fit_idx], tau, vp)
+        sc2 = scorer_for(lvs2).score(swapped.tree)
+        if sc2.total <= sc.total + 0.01 * penalty:
+            sc, lvs = sc2, lvs2
     shape, names = _shape(sc.tree, lvs)
     label = names.__getitem__
     if not history or abs(history[-1][2] - sc.total) > 1e-15:

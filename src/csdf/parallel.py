@@ -12,15 +12,18 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
-__all__ = ["N_THREADS", "MIN_PER_THREAD", "executor", "run_parallel"]
+__all__ = ["N_THREADS", "MIN_PER_THREAD", "cores", "executor", "run_parallel"]
 
+
+
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS has one)."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+               else (os.cpu_count() or 1))
 
 
 def _threads() -> int:
-    """``$CSDF_THREADS`` when set to a positive integer, else the cores this process may
-    run on."""
-    cores = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                else (os.cpu_count() or 1))
+    """``$CSDF_THREADS`` when set to a positive integer, else :func:`cores`."""
     text = os.environ.get("CSDF_THREADS", "").strip()
     if text:
         try:
@@ -30,7 +33,7 @@ def _threads() -> int:
         if n < 1:
             raise ValueError(f"CSDF_THREADS must be a positive integer, got {text!r}")
         return n
-    return cores
+    return cores()
 
 
 #: the threads csdf's evaluators and meshers use in this process: the cores it may run

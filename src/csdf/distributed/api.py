@@ -15,10 +15,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import CsdfError
-from ..field import Field, as_field, check_bounds
+from ..field import Field, as_field, check_bounds, choose_backend
 from ..io.meshstream import MeshStreamWriter
 from ..mesh.api import mesh_grid, prepare_field
 from ..mesh.parts import Stitcher, plan_parts
+from ..parallel import cores
 from . import tasks
 
 __all__ = ["mesh", "evaluate", "sample_surface", "sample_volume", "fit_many", "connect",
@@ -113,12 +114,6 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     return client
 
 
-def cores() -> int:
-    """The cores this process may run on."""
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-               else os.cpu_count() or 1)
-
-
 def disconnect(client) -> None:
     """Close a client of :func:`connect` (and the local cluster it started)."""
     cluster = getattr(client, "_csdf_cluster", None)
@@ -158,6 +153,12 @@ def _ship(shape: Any, params: dict | None, what: str, check_ranges: bool,
         raise CsdfError(f"{what} works on a model in its own frame: give it without its "
                         "pose, and place the result")
     return fld
+
+
+def _window(client) -> int:
+    """Tasks kept in flight: a few per worker, so that results wait on the workers, not
+    in this process."""
+    return max(4, 3 * max(1, len(client.scheduler_info().get("workers", {}))))
 
 
 def _blob(fld: Field) -> tuple[bytes, dict[str, float]]:
@@ -225,13 +226,11 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
     g = (np.asarray(grid.origin, dtype=np.float64), float(grid.h), tuple(grid.dims))
     bounds_ = np.asarray(fld.bounds, dtype=np.float64)
     with _client(client) as c:
-        n_workers = max(1, len(c.scheduler_info().get("workers", {})))
-        window = max(4, 3 * n_workers)  # tasks in flight: results wait on workers, not here
-
         def submit(cell):
             return c.submit(tasks.mesh_task, blob, pvals, bounds_, g, cell, size, pure=False)
 
-        parts_iter = _ordered(submit, list(cells), window, progress, "meshing super-bricks")
+        parts_iter = _ordered(submit, list(cells), _window(c), progress,
+                              "meshing super-bricks")
         if writer is None:  # (each part stitched in as it arrives)
             st = Stitcher()
             for part in parts_iter:
@@ -312,7 +311,7 @@ def evaluate(shape: Any, points: Any, params: dict | None = None, what: str = "v
     if what not in ("value", "gradient", "param_jacobian"):
         raise CsdfError(f"what must be 'value', 'gradient' or 'param_jacobian', got {what!r}")
     fld = _ship(shape, params, "distributed.evaluate", check_ranges)
-    as_field(fld, backend=backend)  # (checks the name)
+    choose_backend(backend)  # (checks the name)
     if not isinstance(points, da.Array):
         arr = np.asarray(points, dtype=np.float64)
         if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
@@ -443,8 +442,7 @@ def fit_many(shape: Any, clouds: Any, client: Any = None, *, progress: bool = Fa
     with _client(client) as c:
         results = list(_ordered(
             lambda cl: c.submit(tasks.fit_task, blob, cl, fit_kwargs, pure=False),
-            items, max(4, 3 * max(1, len(c.scheduler_info().get("workers", {})))),
-            progress, "fitting clouds"))
+            items, _window(c), progress, "fitting clouds"))
     return [_entry(i, _source(cl), r) for i, (cl, r) in enumerate(zip(items, results))]
 
 

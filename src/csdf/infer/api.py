@@ -35,7 +35,7 @@ from ..lang.printer import dumps
 from ..shapes import box, capped_cone, cylinder, sphere, torus
 from ..shapes.domain import orient_matrix
 from . import tree as T
-from .search import Scorer, beam_search, polish
+from .search import Scorer, beam_search, polish, through_cuts
 
 __all__ = ["infer", "InferResult", "SOLID_KINDS", "SEARCH_POINTS", "FIT_POINTS"]
 
@@ -378,17 +378,18 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     best = None
     for cand in found[:REFINE_TREES]:
         lvs = _refined(cand.tree, leaves, P[fit_idx], tau, vp)
-        sc = polish(scorer_for(lvs), cand.tree, len(lvs), int(max_primitives), polish_until)
+        scorer = scorer_for(lvs)
+        sc = polish(scorer, cand.tree, len(lvs), int(max_primitives), polish_until)
         if T.canonical(sc.tree) != T.canonical(cand.tree):
             lvs = _refined(sc.tree, lvs, P[fit_idx], tau, vp)
-            sc = scorer_for(lvs).score(sc.tree)
+            scorer = scorer_for(lvs)
+            sc = scorer.score(sc.tree)
         if best is None or sc.total < best[0].total:
-            best = (sc, lvs)
+            best = (sc, lvs, scorer)
     assert best is not None
-    sc, lvs = best
-    # the winner's cuts go through where nothing shows their ends (see search.polish)
-    scorer = scorer_for(lvs)
-    swapped = polish(scorer, sc.tree, len(lvs), int(max_primitives), 0.0, through)
+    sc, lvs, scorer = best
+    # the winner's cuts go through where nothing shows their ends (search.through_cuts)
+    swapped = through_cuts(scorer, sc.tree, through)
     if T.canonical(swapped.tree) != T.canonical(sc.tree):
         lvs2 = _refined(swapped.tree, lvs, P[fit_idx], tau, vp)
         sc2 = scorer_for(lvs2).score(swapped.tree)

@@ -33,7 +33,7 @@ import numpy as np
 
 from .tree import Tree, canonical, evaluate, leaves, remove, replace, size, subtrees
 
-__all__ = ["Scorer", "beam_search", "polish", "Scored"]
+__all__ = ["Scorer", "beam_search", "polish", "through_cuts", "Scored"]
 
 
 @dataclass
@@ -157,25 +157,28 @@ def _swap(tree: Tree, old: int, new: int) -> Tree:
     return (tree[0], _swap(tree[1], old, new), _swap(tree[2], old, new))
 
 
-def polish(scorer: Scorer, tree: Tree, n_leaves: int, max_primitives: int, deadline: float,
-           through: dict[int, int] | None = None) -> Scored:
+def through_cuts(scorer: Scorer, tree: Tree, through: dict[int, int]) -> Scored:
+    """``tree`` with each cut (a leaf cut away) turned into its variant in ``through``
+    (candidate -> the same with its point-less faces moved out) unless that scores
+    worse by more than a hundredth of the penalty: a hole whose bottom no point shows
+    goes through (the points seen on its wall say nothing of its length, and a closed
+    skin over its opening costs only the few free-space samples that fall in it)."""
+    best = scorer.score(tree)
+    for c in sorted(_subtrahends(best.tree)):
+        v = through.get(c)
+        if v is not None and v not in leaves(best.tree):
+            sc = scorer.score(_swap(best.tree, c, v))
+            if sc.total <= best.total + 0.01 * scorer.penalty:
+                best = sc
+    return best
+
+
+def polish(scorer: Scorer, tree: Tree, n_leaves: int, max_primitives: int, deadline: float
+           ) -> Scored:
     """Local moves from ``tree`` while one lowers the score: take a leaf out and put it
     back anywhere with any op (the beam grew the tree in one order; an operand may
-    belong elsewhere), drop a leaf, or add an unused candidate anywhere.
-
-    ``through``: candidate -> its variant with the point-less faces moved out. A cut
-    (a leaf cut away) is then turned into its variant unless that scores worse by more
-    than a hundredth of the penalty: a hole whose bottom no point shows goes through
-    (the points seen on its wall say nothing of its length, and a closed skin over its
-    opening costs only the few free-space samples that fall in it)."""
+    belong elsewhere), drop a leaf, or add an unused candidate anywhere."""
     best = scorer.score(tree)
-    if through:
-        for c in sorted(_subtrahends(best.tree)):
-            v = through.get(c)
-            if v is not None and v not in leaves(best.tree):
-                sc = scorer.score(_swap(best.tree, c, v))
-                if sc.total <= best.total + 0.01 * scorer.penalty:
-                    best = sc
     while time.perf_counter() < deadline:
         found = best
         used = leaves(best.tree)

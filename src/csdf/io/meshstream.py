@@ -105,10 +105,6 @@ class MeshStreamWriter:
             else:
                 self._stl(fh, tmp / "vertices", shared_verts, faces, shared_ids)
 
-    @staticmethod
-    def _resolve(block: np.ndarray, shared_ids: np.ndarray) -> np.ndarray:
-        return Stitcher.resolve(block, shared_ids)
-
     def _ply(self, fh, vpath: Path, shared_verts: np.ndarray, faces: _Blocks,
              shared_ids: np.ndarray) -> None:
         header = ("ply\nformat binary_little_endian 1.0\ncomment csdf\n"
@@ -121,7 +117,7 @@ class MeshStreamWriter:
         fh.write(np.ascontiguousarray(shared_verts, dtype="<f8").tobytes())
         rec = np.dtype([("n", "u1"), ("v", "<i4", (3,))])
         for block in faces:
-            block = self._resolve(block, shared_ids)
+            block = Stitcher.resolve(block, shared_ids)
             out = np.empty(len(block), dtype=rec)
             out["n"] = 3
             out["v"] = block
@@ -136,7 +132,7 @@ class MeshStreamWriter:
             if n_own else np.zeros((0, 3))
         rec = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
         for block in faces:
-            block = self._resolve(block, shared_ids)
+            block = Stitcher.resolve(block, shared_ids)
             tri = np.empty(block.shape + (3,))
             is_own = block < n_own
             tri[is_own] = own[block[is_own]]

@@ -436,14 +436,19 @@ class _Converter:
             return convex_polyhedron(sphere_points(r, k))
         return sphere(r)
 
-    def n_cylinder(self, n):
-        from ..shapes.primitives3d import capped_cone, cone, cylinder
-
+    def cylinder_args(self, n) -> tuple[float, float, float]:
+        """A ``cylinder`` node's ``(h, r1, r2)``, checked (``r`` gives both radii)."""
         h = self.positive(n, "h", self.num(n, "h", 1.0))
         r = self.num(n, "r", 1.0)
         r1, r2 = self.num(n, "r1", r), self.num(n, "r2", r)
         if r1 < 0 or r2 < 0 or not (r1 > 0 or r2 > 0):
             raise self.err(n, f"radii r1 = {r1}, r2 = {r2} must be >= 0 and not both 0")
+        return h, r1, r2
+
+    def n_cylinder(self, n):
+        from ..shapes.primitives3d import capped_cone, cone, cylinder
+
+        h, r1, r2 = self.cylinder_args(n)
         centre = self.flag(n, "center")
         if self.faceted:
             from ..shapes.convex import convex_polyhedron
@@ -674,11 +679,7 @@ class _Converter:
         return circle_points(r, self.segments(n, r))
 
     def p_cylinder(self, n):
-        h = self.positive(n, "h", self.num(n, "h", 1.0))
-        r = self.num(n, "r", 1.0)
-        r1, r2 = self.num(n, "r1", r), self.num(n, "r2", r)
-        if r1 < 0 or r2 < 0 or not (r1 > 0 or r2 > 0):
-            raise self.err(n, f"radii r1 = {r1}, r2 = {r2} must be >= 0 and not both 0")
+        h, r1, r2 = self.cylinder_args(n)
         z0 = -h / 2 if self.flag(n, "center") else 0.0
         return cylinder_points(r1, r2, z0, z0 + h, self.segments(n, max(r1, r2)))
 

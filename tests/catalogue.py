@@ -93,8 +93,16 @@ def operators() -> dict:
     return out
 
 
-def catalogue() -> dict:
-    return {**primitives(), **operators()}
+#: primitives whose program holds a mesh call: only the CPU evaluators run them (GLSL
+#: and C export refuse them, tested in test_from_mesh.py)
+MESH_CALLS = ("polyhedron",)
+
+
+def catalogue(mesh_calls: bool = True) -> dict:
+    """Every primitive and operator; ``mesh_calls=False`` leaves out :data:`MESH_CALLS`
+    (for the consumers that do not run them)."""
+    out = {**primitives(), **operators()}
+    return out if mesh_calls else {k: v for k, v in out.items() if k not in MESH_CALLS}
 
 
 def sample_box(shape, pad: float = 0.3, default: float = 1.5):

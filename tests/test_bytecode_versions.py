@@ -82,7 +82,7 @@ def test_program_carries_shape_bounds_through_bytes_and_text(make_shape):
     assert p.bounds.tobytes() == np.asarray(s.bounds, dtype=np.float64).tobytes()
     assert not p.bounds.flags.writeable
     b = p.to_bytes()
-    assert struct.unpack_from("<H", b, 4)[0] == binary.VERSION == 2
+    assert struct.unpack_from("<H", b, 4)[0] == 2  # (version 3 only with data blocks)
     q = csdf.Program.from_bytes(b)
     assert q == p and q.to_bytes() == b and q.bounds.tobytes() == p.bounds.tobytes()
     text = p.disassemble()
@@ -133,8 +133,8 @@ def test_bad_bounds_are_rejected():
     with pytest.raises(csdf.BytecodeError, match="48 unexpected trailing bytes"):
         csdf.Program.from_bytes(_with_crc(bytes(v1)))
     bad = bytearray(raw[:-4])
-    struct.pack_into("<H", bad, 4, 3)
-    with pytest.raises(csdf.BytecodeError, match="unsupported version 3 .*reads 1 and 2"):
+    struct.pack_into("<H", bad, 4, 4)
+    with pytest.raises(csdf.BytecodeError, match="unsupported version 4 .*reads 1 and 2 and 3"):
         csdf.Program.from_bytes(_with_crc(bytes(bad)))
     text = p.disassemble()
     lines = text.splitlines()

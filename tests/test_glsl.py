@@ -60,7 +60,7 @@ def _all_ops():
     return compile_expr(-root * 0.25, lipschitz=math.inf)
 
 
-CAT = catalogue()
+CAT = catalogue(mesh_calls=False)
 MODELS: dict = {name: f for name, f in CAT.items()}
 MODELS["all_ops"] = _all_ops
 

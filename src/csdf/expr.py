@@ -37,8 +37,13 @@ __all__ = [
     "sqrt", "square", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "exp", "log",
     "floor", "step", "sign", "minimum", "maximum", "mod", "clamp", "mix", "select_ge",
     "walk", "expr_params", "is_const", "const_value", "to_float", "describe_number",
-    "NodeBudget", "node_budget", "substitute",
+    "NodeBudget", "node_budget", "substitute", "mesh_call", "DATA_OPS",
 ]
+
+#: expression ops that hold a data block in ``value`` (not scalar ops of :data:`OPS`):
+#: ``'mesh'``, the signed distance to a :class:`csdf.meshdata.MeshData` at its three
+#: arguments
+DATA_OPS = frozenset({"mesh"})
 
 Number = int | float
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -75,7 +80,8 @@ class Expr:
     Attributes:
         op: ``'x' | 'y' | 'z' | 'const' | 'param'`` or an op name from :data:`csdf.ops.OPS`.
         args: child expressions (empty for leaves).
-        value: the float of a ``'const'`` node, the :class:`Param` of a ``'param'`` node.
+        value: the float of a ``'const'`` node, the :class:`Param` of a ``'param'`` node,
+            the :class:`csdf.meshdata.MeshData` of a ``'mesh'`` node.
         key: deterministic 64-bit structural hash.
     """
 
@@ -163,6 +169,8 @@ class Expr:
             return (param, (p.name, p.default, p.lo, p.hi))  # type: ignore[union-attr]
         if self.op in ("x", "y", "z"):
             return (_leaf, (self.op,))
+        if self.op in DATA_OPS:
+            return (mesh_call, (self.value, *self.args))
         return (make, (self.op, *self.args))
 
 
@@ -255,6 +263,8 @@ def _structural_key(op: str, args: tuple[Expr, ...], value: object) -> int:
         p: Param = value  # type: ignore[assignment]
         h.update(p.name.encode())
         h.update(_float_bits(p.default) + _float_bits(p.lo) + _float_bits(p.hi))
+    elif op in DATA_OPS:
+        h.update(value.digest.encode())  # type: ignore[attr-defined]
     return int.from_bytes(h.digest(), "little")
 
 
@@ -263,6 +273,8 @@ def _intern(op: str, args: tuple[Expr, ...], value: object = None) -> Expr:
         ident = (op, _float_bits(value))  # type: ignore[arg-type]
     elif op == "param":
         ident = (op, value)
+    elif op in DATA_OPS:
+        ident = (op, tuple(id(a) for a in args), value.digest)  # type: ignore[attr-defined]
     else:
         ident = (op, tuple(id(a) for a in args))
     node = _INTERN.get(ident)
@@ -470,6 +482,17 @@ def make(op: str, *args: Expr) -> Expr:
     return _intern(op, args)
 
 
+def mesh_call(data, ax: Expr | Number, ay: Expr | Number, az: Expr | Number) -> Expr:
+    """The node ``mesh(ax, ay, az)``: the exact signed distance to the closed triangle
+    mesh ``data`` (a :class:`csdf.meshdata.MeshData`) at the point ``(ax, ay, az)``
+    (model units). It is never folded (its value needs the mesh's hierarchy, built by
+    the evaluators); the compiler gives it one call in the tape with the mesh as a data
+    block."""
+    if not hasattr(data, "digest") or not hasattr(data, "faces"):
+        raise TypeError(f"a mesh call needs a MeshData, got {type(data).__name__}")
+    return _intern("mesh", (as_expr(ax), as_expr(ay), as_expr(az)), data)
+
+
 # ----------------------------------------------------------------------------- helpers
 def sqrt(a: Expr | Number) -> Expr:
     return make("sqrt", a)
@@ -609,7 +632,12 @@ def substitute(roots: Sequence[Expr], leaf: Callable[[Expr], Expr | None]) -> li
                 continue
             args = tuple(new[id(a)] for a in n.args)
             same = all(a is b for a, b in zip(args, n.args))
-            new[id(n)] = n if same else make(n.op, *args)
+            if same:
+                new[id(n)] = n
+            elif n.op in DATA_OPS:
+                new[id(n)] = mesh_call(n.value, *args)
+            else:
+                new[id(n)] = make(n.op, *args)
     return [new[id(r)] for r in roots]
 
 
@@ -655,6 +683,8 @@ def to_infix(root: Expr, max_nodes: int = 200) -> str:
             return f"({go(e.args[0])} {_INFIX[e.op]} {go(e.args[1])})"
         if e.op == "neg":
             return f"-{go(e.args[0])}"
+        if e.op in DATA_OPS:
+            return f"mesh#{e.value.digest}({', '.join(go(a) for a in e.args)})"  # type: ignore[attr-defined]
         return f"{e.op}({', '.join(go(a) for a in e.args)})"
 
     return go(root)

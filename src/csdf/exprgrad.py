@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from .errors import CsdfError
 from .expr import Expr, X, Y, Z, as_expr, cos, floor, sign, sin, sqrt, step, walk
 from .ops import OPS, chain_tangent, tie_comparison
 
@@ -73,9 +74,12 @@ def gradient(e: Expr, wrt: Sequence[Expr] = (X, Y, Z)) -> tuple[Expr, ...]:
         a = node.args[0]
         b = node.args[1] if len(node.args) > 1 else None
         ta, tb = tan[id(a)], (tan[id(b)] if b is not None else None)
-        if ta is None and tb is None:
+        if ta is None and tb is None and len(node.args) <= 2:
             tan[id(node)] = None
             continue
+        if node.op not in OPS:
+            raise CsdfError(f"the derivative of a {node.op!r} call (a mesh) cannot be "
+                            "written as an expression; evaluate its gradient instead")
         rule = OPS[node.op].derivative
         if rule.kind == "zero":
             tan[id(node)] = None

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from .backends import BACKENDS
+from .backends import BACKENDS, check_mesh_calls
 from .backends import fast as _fast_backend
 from .backends.cexport import to_c, to_numpy
 from .backends.glsl import glsl_float, glsl_params, shadertoy, to_glsl
@@ -315,6 +315,10 @@ class Field:
             raise CsdfError("a 2D program cannot be posed in 3D; extrude or revolve it")
         self._auto = backend == "auto"
         self.backend = choose_backend(backend, work, len(self.program.code))
+        if self.program.data:  # mesh calls: only some evaluators run them
+            if self.backend == "auto" or self._auto:
+                self.backend = "numpy"
+            check_mesh_calls(self.backend, self.program)
         if isinstance(model, Field) and backend == "auto" and work is None and \
                 model.backend != "auto":
             # a field made from a field keeps its evaluator (one chosen per call is
@@ -567,8 +571,8 @@ class Field:
         decreasing) by the compiled quadtree of shortened tapes
         (:func:`csdf.backends.pruned.raster_image`): ``(H, W)`` float64 values, or
         bool ``value < 0``; bit-identical to the ``'interp'`` backend. None where Numba
-        is missing or a parameter is NaN."""
-        if not numba_available() or np.isnan(self.pvals).any():
+        is missing, a parameter is NaN or the program has mesh calls."""
+        if not numba_available() or np.isnan(self.pvals).any() or self.program.data:
             return None
         from .backends.pruned import raster_image
 

@@ -200,12 +200,18 @@ class FieldSet:
                     pool.add_cells(t, fld, depth)
             return t
 
+        #: instances evaluated outside the compiled kernel (mesh calls: see nearest)
+        self.host: list[int] = []
         for k, fld in enumerate(self.fields):
             if fld.dim != 3:
                 raise CsdfError(f"instance {k}: a scene holds 3D fields; extrude or revolve "
                                 "a 2D shape first")
             pose = fld.pose
             boxes[k] = fld.bounds
+            if fld.program.data:  # a mesh call runs outside the register tapes
+                self.host.append(k)
+                ent_range.append((len(owner), 0))
+                continue
             frame = np.concatenate([pose.rotation.reshape(-1), pose.translation,
                                     [pose.scale]])
             contract = _CONTRACT[fld.exactness]
@@ -223,6 +229,8 @@ class FieldSet:
                 owner.append(k)
             boxes[k, 0] = np.minimum(boxes[k, 0], world[:, 0].min(axis=0))  # holds its
             boxes[k, 1] = np.maximum(boxes[k, 1], world[:, 1].max(axis=0))  # parts' boxes
+        if not owner:  # only host instances: the kernel has nothing to run
+            pool.add(np.zeros((1, 4), np.int32), np.zeros(1), 0, 1)
         self.code, self.imm, self.tape_i, self.tape_f, self.cell_tab = pool.arrays()
         self.max_regs = int(self.tape_i[:, 3].max())
         #: per entry of the hierarchy (an instance, or one part of a union instance)
@@ -277,5 +285,37 @@ class FieldSet:
         else:
             list(executor().map(lambda c: NK.nearest(*args, c, n), range(n)))
         if len(self.owner) != len(self.fields):  # entries -> instances
-            inst = np.where(inst >= 0, self.owner[np.maximum(inst, 0)], -1)
+            inst = np.where(inst >= 0, self.owner[np.maximum(inst, 0)], -1) \
+                if len(self.owner) else np.full(N, -1, np.int64)
+        if self.host:
+            self._host_nearest(pts, start, dist, g if grad else None, inst, exact)
         return dist, (g if grad else None), inst, exact
+
+    def _host_nearest(self, pts: np.ndarray, start: np.ndarray, dist: np.ndarray,
+                      g: np.ndarray | None, inst: np.ndarray, exact: np.ndarray) -> None:
+        """Fold the host instances (fields with mesh calls, which the compiled kernel
+        does not run) into a kernel result, in place: each is evaluated by its field
+        (the ``'numpy'`` evaluator, whose mesh query is a multithreaded Numba kernel) at
+        the points its world box does not rule out (box distance below the best value
+        so far, the kernel's own test), and wins where its value is below the best."""
+        for k in self.host:
+            fld = self.fields[k]
+            box = self.boxes[k]
+            best = np.where(inst >= 0, dist, start)
+            gap = np.linalg.norm(np.maximum(np.maximum(box[0] - pts, pts - box[1]), 0.0),
+                                 axis=1)
+            idx = np.flatnonzero((gap <= 0.0) | (gap < best))
+            if not len(idx):
+                continue
+            if g is not None:
+                v, vg = fld.value_and_grad(pts[idx])
+            else:
+                v, vg = fld.value(pts[idx]), None
+            with np.errstate(invalid="ignore"):
+                win = v < best[idx]
+            w = idx[win]
+            dist[w] = v[win]
+            inst[w] = k
+            exact[w] = fld.exactness == "exact"
+            if g is not None and vg is not None:
+                g[w] = vg[win]

@@ -61,7 +61,7 @@ Pair = tuple[Arr, Arr]
 #: ``(lo, hi)`` of one scalar interval
 Interval = tuple[float, float]
 #: one instruction ready to run: ``(rule, dst, a, b, binary)`` (see :func:`tape_steps`)
-Step = tuple[Callable[..., Pair], int, int, int, bool]
+Step = tuple[Callable[..., Pair], int, Any, int, Any]
 
 _K = 2.0**-48  # 16 ulps: relative widening of library-function endpoints
 _TINY = 2.0**-1060  # absolute widening (absorbs subnormal results)
@@ -363,21 +363,50 @@ SAME_OPERAND_RULES: dict[str, Callable[[Arr, Arr], Pair]] = {
 
 
 # ------------------------------------------------------------------------- tapes
-def tape_steps(code: np.ndarray, op_names: Mapping[int, str]) -> list[Step]:
+#: opcodes of a mesh call's two rows (the values of :data:`csdf.ops.MESH_CODE` and
+#: ``ARG_CODE``; this module does not import the op table)
+_MESH, _ARG = 48, 49
+
+
+def _keep(lo, hi):
+    return lo, hi
+
+
+def tape_steps(code: np.ndarray, op_names: Mapping[int, str],
+               mesh_rule: Callable[..., Pair] | None = None) -> list[Step]:
     """The rule of every instruction of a tape, ready for :func:`run_tape`.
 
     Args:
         code: ``(K, 4)`` integer instructions ``(opcode, dst, a, b)`` (see
             ``docs/bytecode.md``).
         op_names: opcode -> op name (e.g. ``{c: i.name for c, i in OPS_BY_CODE.items()}``).
+        mesh_rule: the interval rule of mesh calls, ``rule(block, alo, ahi, blo, bhi,
+            clo, chi) -> (lo, hi)`` (given by the evaluator that holds the meshes);
+            None: a tape with mesh calls is refused.
 
     Returns:
         Per instruction ``(rule, dst, a, b, binary)``: ``rule`` takes four arrays when
         ``binary`` is True, else two (a unary op, or a binary op whose operands are the
-        same slot, with its rule from :data:`SAME_OPERAND_RULES`).
+        same slot, with its rule from :data:`SAME_OPERAND_RULES`); a mesh call's first
+        row has ``binary == 'mesh'``, ``a`` its three operand slots and ``b`` its data
+        block, its second row the rule that keeps the destination (``binary ==
+        'keep'``).
+
+    Raises:
+        CsdfError: a mesh call and no ``mesh_rule``.
     """
     out: list[Step] = []
-    for op, dst, a, b in np.asarray(code).reshape(-1, 4).tolist():
+    rows = np.asarray(code).reshape(-1, 4).tolist()
+    for k, (op, dst, a, b) in enumerate(rows):
+        if op == _MESH:
+            if mesh_rule is None:
+                raise CsdfError("this interval evaluation cannot run a mesh call "
+                                "(csdf.from_mesh); use csdf.backends.interval_eval")
+            out.append((mesh_rule, dst, (a, b, rows[k + 1][2]), rows[k + 1][3], "mesh"))
+            continue
+        if op == _ARG:
+            out.append((_keep, dst, dst, 0, "keep"))
+            continue
         name = op_names[op]
         if name in _UNARY:
             out.append((_UNARY[name], dst, a, b, False))
@@ -405,7 +434,11 @@ def run_tape(
     """
     with np.errstate(all="ignore"):
         for rule, dst, a, b, binary in steps:
-            if binary:
+            if binary == "mesh":
+                r = rule(b, lo[a[0]], hi[a[0]], lo[a[1]], hi[a[1]], lo[a[2]], hi[a[2]])
+            elif binary == "keep":
+                r = (lo[dst], hi[dst])
+            elif binary:
                 r = rule(lo[a], hi[a], lo[b], hi[b])
             else:
                 r = rule(lo[a], hi[a])

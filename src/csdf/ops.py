@@ -68,7 +68,7 @@ from .opformula import Formula
 
 __all__ = ["OpInfo", "Derivative", "OPS", "OPS_BY_CODE", "CATEGORIES", "numpy_impl",
            "interval_rule", "tie_strict", "tie_comparison", "tie_mask", "chain_tangent",
-           "TangentAlgebra"]
+           "TangentAlgebra", "MESH_CODE", "ARG_CODE", "DATA_CODES"]
 
 CATEGORIES = ("add", "mul", "div", "call", "branch")
 
@@ -315,6 +315,21 @@ OPS: dict[str, OpInfo] = {
     for name, code, arity, cat, fn, deriv, kink in _TABLE
 }
 OPS_BY_CODE: dict[int, OpInfo] = {info.code: info for info in OPS.values()}
+
+# ------------------------------------------------------------------------- data calls
+#: opcode of a mesh call: ``slot[dst] = d(slot[a], slot[b], slot[c])``, the exact signed
+#: distance to the closed triangle mesh of the program's data block ``k``; it takes two
+#: rows of the tape, ``(MESH_CODE, dst, a, b)`` then ``(ARG_CODE, dst, c, k)`` (see
+#: ``docs/bytecode.md``). Not in :data:`OPS`: it is no scalar op of the expression
+#: algebra (its value needs the data block), so the per-op tables do not list it.
+#: Derivative: the chain rule through the mesh's unit gradient (the direction from the
+#: nearest point). Interval: the value at the centre of the box of its three inputs,
+#: plus or minus the box's half diagonal (the distance is 1-Lipschitz). Category: call.
+MESH_CODE = 48
+#: the second row of a mesh call: its third operand and its data block
+ARG_CODE = 49
+#: the data opcodes (rows that evaluators handle outside :data:`OPS`)
+DATA_CODES = frozenset({MESH_CODE, ARG_CODE})
 
 
 def numpy_impl(name: str) -> Callable:

@@ -7,8 +7,10 @@ them with their capabilities and says how to add one.
   compiled once for all programs (``interp.py``);
 * ``'fast'``: a Numba kernel generated per program structure, vectorised across points,
   on all cores; compiled on first use and cached on disk (``fast.py``);
-* ``'auto'``: ``'numpy'`` below ``AUTO_MIN_POINTS`` points unless the fast kernel is
-  ready; ``'fast'`` when its kernel is ready (memory or disk) or the call has at least
+* ``'auto'``: for a program with mesh calls (``csdf.from_mesh``), the evaluator that
+  runs them (``'numpy'``, whose mesh op is a multithreaded Numba query); else
+  ``'numpy'`` below ``AUTO_MIN_POINTS`` points unless the fast kernel is ready;
+  ``'fast'`` when its kernel is ready (memory or disk) or the call has at least
   ``AUTO_COMPILE_POINTS`` points; else ``'interp'``.
 
 Backends read a program as data and never import :mod:`csdf.compiler` (whose
@@ -20,7 +22,8 @@ from __future__ import annotations
 from ..errors import CsdfError
 from . import registry
 
-__all__ = ["BACKENDS", "AUTO_MIN_POINTS", "AUTO_COMPILE_POINTS", "select"]
+__all__ = ["BACKENDS", "AUTO_MIN_POINTS", "AUTO_COMPILE_POINTS", "select",
+           "check_mesh_calls"]
 
 #: ``'auto'`` then the point evaluators of the registry: numpy, interp, fast
 BACKENDS = ("auto", *(e.name for e in registry.point_evaluators()))
@@ -36,12 +39,33 @@ def _named(name: str):
     return info.load()
 
 
+def check_mesh_calls(name: str, prog) -> None:
+    """Raise unless evaluator ``name`` can run ``prog`` (one with mesh calls needs an
+    evaluator whose registry entry has ``mesh_calls``).
+
+    Raises:
+        CsdfError: naming the evaluator and the ones that can run it.
+    """
+    if prog is None or not getattr(prog, "data", ()):
+        return
+    info = registry.get(name)
+    if not info.mesh_calls:
+        able = ", ".join(repr(e.name) for e in registry.point_evaluators() if e.mesh_calls)
+        raise CsdfError(
+            f"the {name!r} evaluator cannot run this program: it calls the distance to a "
+            f"triangle mesh (csdf.from_mesh / polyhedron), which only {able} evaluates "
+            "(backend='auto' picks it)")
+
+
 def select(name: str, n_points: int, prog=None, mode: str = "value"):
     """The evaluator module for backend ``name`` and a call on ``n_points`` points."""
     if name not in BACKENDS:
         raise CsdfError(f"backend must be one of {', '.join(BACKENDS)}; got {name!r}")
     if name != "auto":
+        check_mesh_calls(name, prog)
         return _named(name)
+    if prog is not None and prog.data:
+        return registry.get("numpy").load()
     fast = registry.get("fast")
     if fast.available():
         impl = fast.load()

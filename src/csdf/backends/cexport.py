@@ -88,6 +88,10 @@ def _program(obj):
         raise CsdfError(f"expected a shape or a program, got {type(obj).__name__}")
     if prog.dim not in (2, 3):
         raise CsdfError(f"program dim must be 2 or 3, got {prog.dim}")
+    if prog.data:
+        raise CsdfError("C and NumPy source export cannot hold a mesh call "
+                        "(csdf.from_mesh / polyhedron): its triangle hierarchy is not "
+                        "written out; evaluate the shape in Python, or mesh it")
     return prog
 
 

@@ -202,15 +202,24 @@ def _is_program(obj) -> bool:
     return all(hasattr(obj, a) for a in ("code", "consts", "params", "output", "layout"))
 
 
+def _refuse_mesh(prog) -> None:
+    if getattr(prog, "data", ()):
+        raise CsdfError("GLSL export cannot hold a mesh call (csdf.from_mesh / polyhedron): "
+                        "its triangle hierarchy runs on the CPU evaluators only; "
+                        "mesh the shape first (csdf.mesh) to draw it elsewhere")
+
+
 def _program(shape_or_program):
     """The program of a Shape (anything whose ``compile()`` returns a Program; compiled,
     cached) or the Program itself."""
     if _is_program(shape_or_program):
+        _refuse_mesh(shape_or_program)
         return shape_or_program
     compile_ = getattr(shape_or_program, "compile", None)
     if callable(compile_) and not isinstance(shape_or_program, type):
         prog = compile_()
         if _is_program(prog):
+            _refuse_mesh(prog)
             return prog
     raise CsdfError(
         f"GLSL export expects a Shape or Program, got {type(shape_or_program).__name__}")

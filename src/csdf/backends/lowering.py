@@ -190,6 +190,10 @@ def lowered(prog) -> Lowered:
     """The (cached) lowering of a program."""
     low = prog.__dict__.get("_lowered")
     if low is None:
+        if prog.data:
+            from . import check_mesh_calls
+
+            check_mesh_calls("interp", prog)
         low = Lowered(prog)
         prog.__dict__["_lowered"] = low
     return low

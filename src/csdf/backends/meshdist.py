@@ -23,66 +23,41 @@ import numpy as np
 
 from ..bvh import build_bvh
 from ..errors import CsdfError
+from ..meshdata import MAX_TRIANGLES, MeshData
 
-__all__ = ["MeshDistance", "LEAF_SIZE", "MAX_TRIANGLES"]
+__all__ = ["MeshDistance", "LEAF_SIZE", "MAX_TRIANGLES", "for_data"]
 
 #: triangles per leaf of the hierarchy
 LEAF_SIZE = 4
-#: the most triangles a mesh may have
-MAX_TRIANGLES = 5_000_000
 
 
 class MeshDistance:
     """The exact signed distance field of a closed triangle mesh.
 
     Args:
-        vertices: ``(Nv, 3)`` vertex positions (a :class:`trimesh.Trimesh` may be given
-            instead, with ``faces`` None).
+        vertices: ``(Nv, 3)`` vertex positions, or a :class:`csdf.meshdata.MeshData`,
+            or a :class:`trimesh.Trimesh` (``faces`` None for either).
         faces: ``(Nt, 3)`` vertex indices of the triangles (either orientation, but the
             same for all: the mesh is turned outwards when its volume is negative).
 
     Attributes:
+        data: the checked mesh (:class:`csdf.meshdata.MeshData`).
         vertices, faces: the mesh as used (faces oriented outwards).
         bounds: ``(2, 3)`` the mesh's box.
         volume: the enclosed volume.
 
     Raises:
-        CsdfError: not ``(N, 3)`` arrays, non-finite vertices, indices out of range,
-            more than :data:`MAX_TRIANGLES` triangles, or a mesh that is not closed or
-            not consistently oriented (naming an offending edge).
+        CsdfError: the checks of :class:`csdf.meshdata.MeshData` (shapes, finite
+            values, index range, size limit, closed and consistently oriented).
     """
 
     def __init__(self, vertices: Any, faces: Any = None):
-        if faces is None and hasattr(vertices, "vertices") and hasattr(vertices, "faces"):
-            vertices, faces = vertices.vertices, vertices.faces
-        V = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64))
-        try:
-            T = np.asarray(faces)
-        except (TypeError, ValueError):
-            raise CsdfError("faces must be an (N, 3) array of vertex indices") from None
-        if V.ndim != 2 or V.shape[1] != 3 or len(V) < 4:
-            raise CsdfError(f"vertices must be an (N, 3) array of at least 4 points, got "
-                            f"shape {V.shape}")
-        if not np.all(np.isfinite(V)):
-            raise CsdfError("vertices must be finite")
-        if T.ndim != 2 or T.shape[1] != 3 or len(T) < 4 or not np.issubdtype(
-                T.dtype, np.integer):
-            raise CsdfError(f"faces must be an (N, 3) integer array of at least 4 "
-                            f"triangles, got shape {T.shape} of {T.dtype}")
-        if len(T) > MAX_TRIANGLES:
-            raise CsdfError(f"the mesh has {len(T)} triangles; the limit is {MAX_TRIANGLES}")
-        T = np.ascontiguousarray(T, dtype=np.int64)
-        if T.min() < 0 or T.max() >= len(V):
-            raise CsdfError(f"faces hold vertex indices outside 0..{len(V) - 1}")
-        tri_edge = _check_closed(T)
+        data = vertices if isinstance(vertices, MeshData) and faces is None else \
+            MeshData(vertices, faces)
+        self.data = data
+        V, T, tri_edge = data.vertices, data.faces, data.tri_edge
+        self.vertices, self.faces, self.volume = V, T, data.volume
         a, b, c = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]
-        vol = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-        if vol < 0:  # turned inwards: flip every triangle (v0 v1 v2 -> v0 v2 v1)
-            T = np.ascontiguousarray(T[:, [0, 2, 1]])
-            tri_edge = np.ascontiguousarray(tri_edge[:, [2, 1, 0]])
-            b, c = c, b
-            vol = -vol
-        self.vertices, self.faces, self.volume = V, T, vol
         cr = np.cross(b - a, c - a)
         area2 = np.linalg.norm(cr, axis=1)
         fn = cr / np.maximum(area2, 1e-300)[:, None]
@@ -97,9 +72,9 @@ class MeshDistance:
         lo = np.minimum(np.minimum(a, b), c)
         hi = np.maximum(np.maximum(a, b), c)
         node_f, node_i, order = build_bvh(lo, hi, LEAF_SIZE)
-        self._data = (V, T, order, node_f, node_i, np.ascontiguousarray(fn), en,
-                      np.ascontiguousarray(tri_edge), vn)
-        self.bounds = np.array([V.min(axis=0), V.max(axis=0)])
+        self._data = (np.array(V), np.array(T), order, node_f, node_i,
+                      np.ascontiguousarray(fn), en, np.array(tri_edge), vn)
+        self.bounds = np.array(data.bounds)
 
     def __repr__(self) -> str:
         return f"MeshDistance({len(self.faces)} triangles, volume {self.volume:g})"
@@ -119,6 +94,42 @@ class MeshDistance:
         near = np.empty((n if want_closest else 0, 3))
         signed_distance(P, *self._data, out, grad, near, want_grad, want_closest)
         return out, grad, near
+
+    def field(self, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
+              want_grad: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The field as an op of a program: ``(values (N,), gradients (N, 3) or (0, 3))``
+        float64 at the points ``(p0, p1, p2)`` (three ``(N,)`` arrays, any real dtype, or
+        scalars broadcast to the others). A point with a NaN coordinate gives NaN, and
+        NaN gradients; an infinite coordinate gives ``+inf`` with the gradient of the
+        direction it runs off to (the mesh is bounded)."""
+        P = np.empty((max(np.size(p0), np.size(p1), np.size(p2)), 3))
+        P[:, 0], P[:, 1], P[:, 2] = p0, p1, p2
+        ok = np.isfinite(P).all(axis=1)
+        n = len(P)
+        out = np.empty(n)
+        grad = np.empty((n if want_grad else 0, 3))
+        if ok.all():
+            Q = P
+        else:
+            Q = np.ascontiguousarray(P[ok])
+        o = np.empty(len(Q))
+        g = np.empty((len(Q) if want_grad else 0, 3))
+        from .mesh_kernels import signed_distance
+
+        signed_distance(Q, *self._data, o, g, np.empty((0, 3)), want_grad, False)
+        if ok.all():
+            return o, g
+        out[ok] = o
+        nan = np.isnan(P).any(axis=1)
+        far = ~ok & ~nan
+        out[~ok] = np.where(far[~ok], np.inf, np.nan)
+        if want_grad:
+            grad[ok] = g
+            with np.errstate(invalid="ignore"):
+                d = np.where(np.isinf(P), np.sign(P), 0.0)[far]
+                grad[far] = d / np.linalg.norm(d, axis=1, keepdims=True)
+            grad[nan] = np.nan
+        return out, grad
 
     def value(self, points) -> np.ndarray:
         """``(N,)`` signed distances of ``points`` ``(N, 3)`` (negative inside)."""
@@ -144,22 +155,15 @@ class MeshDistance:
         return v - r, v + r
 
 
-def _check_closed(T: np.ndarray) -> np.ndarray:
-    """``(Nt, 3)`` the undirected edge id of each triangle's edges ``v0v1, v1v2, v2v0``;
-    raises unless every edge joins exactly two triangles, once in each direction."""
-    d = T[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)  # directed edges, 3 per triangle
-    und = np.sort(d, axis=1)
-    keys, inv, counts = np.unique(und, axis=0, return_inverse=True, return_counts=True)
-    bad = np.flatnonzero(counts != 2)
-    if len(bad):
-        e = keys[bad[0]]
-        raise CsdfError(f"the mesh is not closed: edge ({e[0]}, {e[1]}) belongs to "
-                        f"{counts[bad[0]]} triangle(s), not 2 ({len(bad)} such edges)")
-    forward = d[:, 0] < d[:, 1]
-    nfwd = np.bincount(inv.reshape(-1), weights=forward, minlength=len(keys))
-    wrong = np.flatnonzero(nfwd != 1)
-    if len(wrong):
-        e = keys[wrong[0]]
-        raise CsdfError(f"the mesh is not consistently oriented: both triangles at edge "
-                        f"({e[0]}, {e[1]}) run it the same way ({len(wrong)} such edges)")
-    return inv.reshape(-1, 3).astype(np.int64)
+_BY_DIGEST: dict[str, MeshDistance] = {}
+
+
+def for_data(data: MeshData) -> MeshDistance:
+    """The :class:`MeshDistance` of a program's mesh block, built once per process and
+    mesh (kept by content digest; the 16 most recent)."""
+    md = _BY_DIGEST.get(data.digest)
+    if md is None or md.data != data:
+        if len(_BY_DIGEST) >= 16:
+            _BY_DIGEST.pop(next(iter(_BY_DIGEST)))
+        md = _BY_DIGEST[data.digest] = MeshDistance(data)
+    return md

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..ops import OPS, OPS_BY_CODE, chain_tangent, numpy_impl, tie_mask
+from ..ops import ARG_CODE, MESH_CODE, OPS, OPS_BY_CODE, chain_tangent, numpy_impl, tie_mask
 
 __all__ = ["evaluate", "available", "uniform_prefix", "CHUNK"]
 
@@ -126,9 +126,8 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
     with np.errstate(over="ignore"):  # constants beyond float32 range become inf
         consts = prog.consts.astype(dtype)
         pv = pvals.astype(dtype)
-    code = [(OPS_BY_CODE[op].name, OPS_BY_CODE[op].arity, dst, a, b)
-            for op, dst, a, b in prog.code.tolist()]
-    fns = {name: numpy_impl(name) for name, *_ in code}
+    code = _steps(prog)
+    fns = {name: numpy_impl(name) for name, *_ in code if name != "mesh"}
     lay = prog.layout
     n_slots = lay.n_slots
     c_lo, c_hi = lay.const_base, lay.reg_base  # constant slots (the tie rule of min/max)
@@ -162,6 +161,11 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
         tans = list(seeds) if T else None
         with np.errstate(all="ignore"):
             for name, arity, dst, a, b in code:
+                if name == "mesh":
+                    vals[dst], t = _mesh_step(prog, vals, tans, a, b, m, dtype)
+                    if T:
+                        tans[dst] = t
+                    continue
                 va = vals[a]
                 vb = vals[b] if arity == 2 else None
                 out = fns[name](va, vb) if arity == 2 else fns[name](va)
@@ -193,6 +197,43 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str, *,
                 if key in res:
                     res[key][vnan] = np.nan
     return res
+
+
+def _steps(prog) -> list[tuple]:
+    """``(name, arity, dst, a, b)`` per instruction; a mesh call is one step
+    ``('mesh', 3, dst, (a, b, c), block)`` (its argument row is folded in)."""
+    rows = prog.code.tolist()
+    out: list[tuple] = []
+    for k, (op, dst, a, b) in enumerate(rows):
+        if op == ARG_CODE:
+            continue
+        if op == MESH_CODE:
+            out.append(("mesh", 3, dst, (a, b, rows[k + 1][2]), rows[k + 1][3]))
+            continue
+        info = OPS_BY_CODE[op]
+        out.append((info.name, info.arity, dst, a, b))
+    return out
+
+
+def _mesh_step(prog, vals: list, tans: list | None, ops: tuple[int, int, int], block: int,
+               m: int, dtype):
+    """Value ``(m,)`` and tangent of a mesh call: the signed distance to data block
+    ``block`` at the three operand slots, and ``sum_i g_i * d(operand_i)`` with ``g`` the
+    distance's unit gradient (computed in float64, returned in ``dtype``)."""
+    from .meshdist import for_data
+
+    md = for_data(prog.data[block])
+    p = [np.broadcast_to(np.asarray(vals[s], dtype=np.float64), (m,)) for s in ops]
+    want = tans is not None and any(tans[s] is not None for s in ops)
+    v, g = md.field(p[0], p[1], p[2], want)
+    t = None
+    if want:
+        g = g.astype(dtype)
+        for i, s in enumerate(ops):
+            t = _add(t, _sc(g[:, i], tans[s]))  # type: ignore[index]
+        if t is not None and t.ndim == 1:
+            t = np.broadcast_to(t, (m, len(t))).copy()
+    return v.astype(dtype), t
 
 
 def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int, tangents: bool = True):

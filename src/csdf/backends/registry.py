@@ -102,6 +102,8 @@ class EvaluatorInfo:
         values, gradients, param_jacobians, intervals: what it computes.
         dtypes: the point dtypes it evaluates in (``'float32'``, ``'float64'``).
         needs: what it needs beyond NumPy, for messages (``'Numba'``), or ``''``.
+        mesh_calls: whether it runs programs with mesh calls (``csdf.from_mesh``:
+            a data block per mesh, see ``docs/bytecode.md``).
     """
 
     name: str
@@ -114,6 +116,7 @@ class EvaluatorInfo:
     intervals: bool = False
     dtypes: tuple[str, ...] = ("float32", "float64")
     needs: str = ""
+    mesh_calls: bool = False
 
     def load(self) -> ModuleType:
         """The evaluator's module (imported on first use)."""
@@ -130,7 +133,8 @@ class EvaluatorInfo:
 EVALUATORS: tuple[EvaluatorInfo, ...] = (
     EvaluatorInfo(
         "numpy", "numpy_backend", "points",
-        "the reference: one NumPy array operation per instruction over chunks of points"),
+        "the reference: one NumPy array operation per instruction over chunks of points",
+        mesh_calls=True),
     EvaluatorInfo(
         "interp", "interp", "points",
         "Numba kernels interpreting the tape over blocks of points, on all cores; "
@@ -144,7 +148,7 @@ EVALUATORS: tuple[EvaluatorInfo, ...] = (
         "interval arithmetic over boxes: bounds of the values over each box (pruning, "
         "bounds, tape simplification)",
         values=False, gradients=False, param_jacobians=False, intervals=True,
-        dtypes=("float64",)),
+        dtypes=("float64",), mesh_calls=True),
     EvaluatorInfo(
         "glsl", "glsl", "source",
         "GLSL ES 3.00 / 3.30 source of the value and its gradient (float32 on a GPU; "

@@ -1,4 +1,4 @@
-"""Binary bytecode: encoding, decoding and validation (format v2, ``docs/bytecode.md``).
+"""Binary bytecode: encoding, decoding and validation (format v3, ``docs/bytecode.md``).
 
 Layout (little-endian)::
 
@@ -8,12 +8,16 @@ Layout (little-endian)::
     consts   n_consts x f64
     code     n_instr x 8 bytes: u8 opcode, u8 reserved (0), u16 dst, u16 a, u16 b
     calls    n_calls x (u8 name length, name, u32 out instruction, u16 n_in, n_in x u32)
-    bounds   version 2 only: dim x f64 lo, then dim x f64 hi
+    bounds   version 2, and version 3 with flag 8: dim x f64 lo, then dim x f64 hi
+    data     version 3 only: u32 n_blocks, then per block u8 kind (1: a closed
+             triangle mesh), u32 n_vertices, u32 n_triangles, n_vertices x 3 f64,
+             n_triangles x 3 u32 (vertex indices, oriented outwards)
     crc32    u32 of everything before it
 
-Version 2 added the bounds section. A program with bounds is written as version 2; one
-without (``bounds is None``) as version 1, byte for byte what earlier csdf wrote, so
-each program has one encoding. Both versions are read (version 1 gives
+Version 2 added the bounds section, version 3 the data blocks of mesh calls. A program
+with data blocks is written as version 3 (flag 8 when it has bounds); one without, with
+bounds, as version 2; one with neither as version 1, byte for byte what earlier csdf
+wrote, so each program has one encoding. All three versions are read (version 1 gives
 ``bounds=None``).
 
 :func:`decode_fields` checks every field and raises :class:`~csdf.BytecodeError` naming
@@ -34,10 +38,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import BytecodeError
+from ..errors import BytecodeError, CsdfError
 from ..expr import RESERVED_PARAM_NAMES, Param
 from ..layout import MAX_PARAMS, MAX_SLOTS
-from ..ops import OPS_BY_CODE
+from ..meshdata import MAX_TRIANGLES, MeshData
+from ..ops import ARG_CODE, MESH_CODE, OPS_BY_CODE
 from .calls import INSTR_REF, Call
 
 __all__ = ["encode", "decode_fields", "validate", "VERSION", "VERSIONS", "MAGIC",
@@ -45,11 +50,17 @@ __all__ = ["encode", "decode_fields", "validate", "VERSION", "VERSIONS", "MAGIC"
 
 MAGIC = b"CSDF"
 #: the newest format version (written for programs with bounds)
-VERSION = 2
+VERSION = 3
 #: the versions :func:`decode` reads
-VERSIONS = (1, 2)
+VERSIONS = (1, 2, 3)
 #: the version that has the bounds section
 _BOUNDS_VERSION = 2
+#: the version that has data blocks (and flags the bounds section)
+_DATA_VERSION = 3
+#: flag (version 3): the bounds section is present
+FLAG_BOUNDS = 8
+#: data block kind: a closed triangle mesh
+MESH_BLOCK = 1
 HEADER = struct.Struct("<4sHHHHHHIId")
 INSTR = struct.Struct("<BBHHH")
 EXACTNESS_CODES = {"exact": 0, "bound": 1, "neither": 2}
@@ -63,7 +74,12 @@ MAX_CALL_INPUTS = 0xFFFF
 def encode(prog: Any) -> bytes:
     """Serialise a :class:`csdf.Program` (see the module docstring for the layout)."""
     flags = EXACTNESS_CODES[prog.exactness] | (FLAG_DIM2 if prog.dim == 2 else 0)
-    version = 1 if prog.bounds is None else _BOUNDS_VERSION
+    data = getattr(prog, "data", ())
+    if data:
+        version = _DATA_VERSION
+        flags |= FLAG_BOUNDS if prog.bounds is not None else 0
+    else:
+        version = 1 if prog.bounds is None else _BOUNDS_VERSION
     out = bytearray(
         HEADER.pack(
             MAGIC, version, flags, len(prog.params), len(prog.consts), prog.n_regs,
@@ -82,6 +98,12 @@ def encode(prog: Any) -> bytes:
         out += struct.pack(f"<{len(c.inputs)}I", *c.inputs)
     if prog.bounds is not None:
         out += prog.bounds.astype("<f8").tobytes()  # row-major: lo, then hi
+    if data:
+        out += struct.pack("<I", len(data))
+        for block in data:
+            out += struct.pack("<BII", MESH_BLOCK, len(block.vertices), len(block.faces))
+            out += block.vertices.astype("<f8").tobytes()
+            out += block.faces.astype("<u4").tobytes()
     out += struct.pack("<I", zlib.crc32(out) & 0xFFFFFFFF)
     return bytes(out)
 
@@ -142,7 +164,8 @@ def decode_fields(data: bytes) -> dict[str, Any]:
     if version not in VERSIONS:
         known = " and ".join(str(v) for v in VERSIONS)
         raise BytecodeError(f"byte 4: unsupported version {version} (this csdf reads {known})")
-    if flags & ~(3 | FLAG_DIM2) or (flags & 3) == 3:
+    allowed = 3 | FLAG_DIM2 | (FLAG_BOUNDS if version == _DATA_VERSION else 0)
+    if flags & ~allowed or (flags & 3) == 3:
         raise BytecodeError(f"byte 6: invalid flags 0x{flags:04x}")
     params = []
     for i in range(n_params):
@@ -168,15 +191,37 @@ def decode_fields(data: bytes) -> dict[str, Any]:
         calls.append(Call(name, out, tuple(inputs)))
     dim = 2 if flags & FLAG_DIM2 else 3
     bounds = None
-    if version == _BOUNDS_VERSION:
+    if version == _BOUNDS_VERSION or flags & FLAG_BOUNDS:
         raw_box = r.take(16 * dim, "bounds")
         bounds = np.frombuffer(raw_box, dtype="<f8").astype(np.float64).reshape(2, dim)
+    data = []
+    if version == _DATA_VERSION:
+        at = r.pos
+        (n_blocks,) = r.unpack("<I", "data block count")
+        if not 1 <= n_blocks <= max(n_instr, 1):
+            raise BytecodeError(f"byte {at}: {n_blocks} data blocks for {n_instr} "
+                                "instructions")
+        for i in range(n_blocks):
+            at = r.pos
+            kind, nv, nt = r.unpack("<BII", f"data block {i} header")
+            if kind != MESH_BLOCK:
+                raise BytecodeError(f"byte {at}: data block {i} has unknown kind {kind}")
+            if nt > MAX_TRIANGLES or nv > 3 * MAX_TRIANGLES:
+                raise BytecodeError(f"byte {at}: data block {i} has {nt} triangles and "
+                                    f"{nv} vertices (at most {MAX_TRIANGLES} triangles)")
+            V = np.frombuffer(r.take(24 * nv, f"data block {i} vertices"), dtype="<f8")
+            T = np.frombuffer(r.take(12 * nt, f"data block {i} triangles"), dtype="<u4")
+            try:
+                block = MeshData(V.reshape(nv, 3), T.reshape(nt, 3).astype(np.int64))
+            except CsdfError as exc:
+                raise BytecodeError(f"byte {at}: data block {i}: {exc}") from None
+            data.append(block)
     if r.pos != len(r.data):
         raise BytecodeError(f"byte {r.pos}: {len(r.data) - r.pos} unexpected trailing bytes")
     return dict(
         params=tuple(params), consts=consts, code=code, output=output, n_regs=n_regs,
         dim=dim, exactness=EXACTNESS_NAMES[flags & 3],
-        lipschitz=lipschitz, calls=tuple(calls), bounds=bounds,
+        lipschitz=lipschitz, calls=tuple(calls), bounds=bounds, data=tuple(data),
     )
 
 
@@ -213,20 +258,39 @@ def validate(prog: Any) -> None:
             f"(2, {prog.dim})"
         )
     written = set()
-    for k, (op, dst, a, b) in enumerate(prog.code.tolist()):
-        info = OPS_BY_CODE.get(op)
-        if info is None:
-            raise BytecodeError(f"instruction {k}: unknown opcode {op}")
+    rows = prog.code.tolist()
+    data = getattr(prog, "data", ())
+    for k, (op, dst, a, b) in enumerate(rows):
+        if op == ARG_CODE:
+            if k == 0 or rows[k - 1][0] != MESH_CODE:
+                raise BytecodeError(f"instruction {k}: a mesh argument row must follow a "
+                                    "mesh call")
+            continue
+        if op == MESH_CODE:
+            if k + 1 >= len(rows) or rows[k + 1][0] != ARG_CODE or rows[k + 1][1] != dst:
+                raise BytecodeError(f"instruction {k}: a mesh call must be followed by "
+                                    "its argument row (same destination)")
+            block = rows[k + 1][3]
+            if not 0 <= block < len(data):
+                raise BytecodeError(f"instruction {k}: mesh call reads data block {block}; "
+                                    f"the program has {len(data)}")
+            operands = (("a", a), ("b", b), ("c", rows[k + 1][2]))
+        else:
+            info = OPS_BY_CODE.get(op)
+            if info is None:
+                raise BytecodeError(f"instruction {k}: unknown opcode {op}")
+            operands = (("a", a), ("b", b)) if info.arity == 2 else (("a", a),)
+            if info.arity == 1 and b != 0:
+                raise BytecodeError(f"instruction {k}: unary op {info.name} has operand "
+                                    f"b = {b}")
         if not n_fixed <= dst < n_slots:
             raise BytecodeError(f"instruction {k}: destination slot {dst} is not a register")
-        for name, s in (("a", a), ("b", b)) if info.arity == 2 else (("a", a),):
+        for name, s in operands:
             if not 0 <= s < n_slots:
                 raise BytecodeError(f"instruction {k}: operand {name} slot {s} out of range")
             if s >= n_fixed and s not in written:
                 raise BytecodeError(f"instruction {k}: operand {name} reads register "
                                     f"r{s - n_fixed} before it is written")
-        if info.arity == 1 and b != 0:
-            raise BytecodeError(f"instruction {k}: unary op {info.name} has operand b = {b}")
         written.add(dst)
     if not 0 <= prog.output < n_slots or (prog.output >= n_fixed and prog.output not in written):
         raise BytecodeError(f"output slot {prog.output} is never written")
@@ -237,8 +301,14 @@ def validate(prog: Any) -> None:
         )
     if len(prog.code) >= 2**32 or len(prog.calls) >= 2**32:
         raise BytecodeError("too many instructions or calls")
-    if prog.dim == 2 and any(2 in (a, b) for _, _, a, b in prog.code.tolist()):
+    if prog.dim == 2 and any(2 in prog.operands(k) for k in range(len(rows))):
         raise BytecodeError("a 2D program reads z")
+    if len(data) and any(not isinstance(d, MeshData) for d in data):
+        raise BytecodeError("a program's data blocks must be MeshData")
+    used_blocks = {rows[k][3] for k in range(len(rows)) if rows[k][0] == ARG_CODE}
+    if used_blocks != set(range(len(data))):
+        raise BytecodeError(f"the program has {len(data)} data blocks but its mesh calls "
+                            f"read {len(used_blocks)}")
     n_instr = len(prog.code)
     for i, c in enumerate(prog.calls):
         if not _IDENT.fullmatch(c.name) or len(c.name.encode()) > 255:

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import BytecodeError, CsdfError, ParamError
 from ..expr import Param, describe_number
 from ..layout import SlotLayout
-from ..ops import CATEGORIES, OPS_BY_CODE
+from ..ops import ARG_CODE, CATEGORIES, MESH_CODE, OPS_BY_CODE
 from .binary import decode_fields, encode, validate
 from .calls import INSTR_REF, Call
 from .text import assemble_fields, disassemble
@@ -76,6 +76,8 @@ class Program:
         bounds: ``(2, dim)`` float64 ``[lo, hi]`` box (model units) containing the zero
             set, read-only, or None when unbounded or unknown (a shape's
             :attr:`~csdf.Shape.bounds`, kept in the bytecode since format version 2).
+        data: the data blocks of the program's mesh calls
+            (:class:`csdf.meshdata.MeshData`; format version 3), empty for most.
 
     With its metadata (exactness, Lipschitz bound, bounds) a program alone is enough
     for every consumer; :meth:`to_bytes` and :meth:`disassemble` keep all of it, and two
@@ -95,8 +97,10 @@ class Program:
         lipschitz: float = math.inf,
         calls: tuple[Call, ...] = (),
         bounds: np.ndarray | None = None,
+        data: tuple = (),
     ):
         self.params = tuple(params)
+        self.data = tuple(data)
         self.consts = np.asarray(consts, dtype=np.float64)
         self.code = np.asarray(code, dtype=np.int64).reshape(-1, 4)
         self.output = int(output)
@@ -138,6 +142,16 @@ class Program:
     def __len__(self) -> int:
         return len(self.code)
 
+    def operands(self, k: int) -> tuple[int, ...]:
+        """The slots instruction ``k`` reads: ``(a,)``, ``(a, b)``, ``(a, b, c)`` for a
+        mesh call (its second row, ``ARG_CODE``, reads none of its own)."""
+        op, _, a, b = (int(v) for v in self.code[k])
+        if op == MESH_CODE:
+            return (a, b, int(self.code[k + 1, 2]))
+        if op == ARG_CODE:
+            return ()
+        return (a, b) if OPS_BY_CODE[op].arity == 2 else (a,)
+
     @property
     def param_names(self) -> list[str]:
         return [p.name for p in self.params]
@@ -163,7 +177,7 @@ class Program:
         return Program(
             params=self.params, consts=self.consts, code=self.code, output=self.output,
             n_regs=self.n_regs, dim=self.dim, exactness=self.exactness,
-            lipschitz=self.lipschitz, calls=self.calls, bounds=bounds,
+            lipschitz=self.lipschitz, calls=self.calls, bounds=bounds, data=self.data,
         )
 
     # ------------------------------------------------------------------ parameters
@@ -322,20 +336,24 @@ class Program:
         out = dict.fromkeys(CATEGORIES, 0)
         inside = self._primitive_bodies() if level == "primitive" else set()
         for k, row in enumerate(self.code):
-            if k in inside:
+            op = int(row[0])
+            if k in inside or op == ARG_CODE:
                 continue
-            out[OPS_BY_CODE[int(row[0])].category] += 1
+            out["call" if op == MESH_CODE else OPS_BY_CODE[op].category] += 1
         if level == "primitive":
             out["call"] += len(self.calls)
         return out
 
     def _primitive_bodies(self) -> set[int]:
         """Instruction indices computed inside primitive calls."""
-        writer: list[tuple[int, int]] = []  # per instruction: producers of a and b
+        writer: list[tuple[int, ...]] = []  # per instruction: producers of its operands
         last: dict[int, int] = {}
-        for k, (op, dst, a, b) in enumerate(self.code.tolist()):
-            arity = OPS_BY_CODE[op].arity
-            writer.append((last.get(a, -1), last.get(b, -1) if arity == 2 else -1))
+        rows = self.code.tolist()
+        for k, (op, dst, _a, _b) in enumerate(rows):
+            if op == ARG_CODE:
+                writer.append(())
+                continue
+            writer.append(tuple(last.get(s, -1) for s in self.operands(k)))
             last[dst] = k
         inside: set[int] = set()
         for call in self.calls:
@@ -395,12 +413,13 @@ class Program:
         n_instr = len(self.code) - len(inside) + len(self.calls)
         used: set[int] = set()
         layout = self.layout
-        for k, (op, _dst, a, b) in enumerate(self.code.tolist()):
+        for k in range(len(self.code)):
             if k in inside:
                 continue
-            used.update(s for s in ((a, b) if OPS_BY_CODE[op].arity == 2 else (a,)))
+            used.update(self.operands(k))
         for c in self.calls:
             used.update(s for s in c.inputs if not s & INSTR_REF)
         n_consts = sum(1 for s in used if layout.is_const(s))
         params = sum(1 + len(p.name.encode()) + 24 for p in self.params)
-        return 32 + params + 8 * n_consts + 8 * n_instr + 4
+        data = sum(13 + d.nbytes for d in self.data) + (4 if self.data else 0)
+        return 32 + params + 8 * n_consts + 8 * n_instr + 4 + data

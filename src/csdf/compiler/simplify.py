@@ -114,7 +114,8 @@ def simplify(
         for every parameter value in its interval, are bit-identical to ``prog``'s (NaN
         where ``prog`` gives NaN). Outside the box it is a different function, so its
         exactness, Lipschitz and bounds metadata describe ``prog`` in the box only.
-        Primitive ``calls`` whose instructions were removed are dropped.
+        Primitive ``calls`` whose instructions were removed are dropped. A program
+        with mesh calls (data blocks) is returned as it is.
 
     Raises:
         CsdfError, ParamError: as for ``evaluate_intervals``; also a corner with NaN.
@@ -123,6 +124,8 @@ def simplify(
     hi_arr = _as_box(prog, box_hi, "box_hi")
     blo, bhi = check_boxes(prog.dim, lo_arr[None, :], hi_arr[None, :])
     plo, phi = param_bounds(prog, params, param_intervals)
+    if prog.data:
+        return prog
     sl, sh = init_slots(prog.layout, prog.consts, plo, phi)
     for k in range(N_COORDS):
         sl[k], sh[k] = blo[:, k], bhi[:, k]

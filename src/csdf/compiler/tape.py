@@ -24,9 +24,9 @@ import struct
 import numpy as np
 
 from ..errors import CsdfError
-from ..expr import Expr, expr_params, walk
+from ..expr import DATA_OPS, Expr, expr_params, walk
 from ..layout import MAX_PARAMS, MAX_SLOTS, SlotLayout
-from ..ops import OPS
+from ..ops import ARG_CODE, MESH_CODE, OPS
 from .calls import INSTR_REF, Call
 from .program import Program
 from .regalloc import linear_scan
@@ -88,9 +88,11 @@ def compile_expr(
             uniform[id(n)] = False
         elif n.op in ("const", "param"):
             uniform[id(n)] = True
+        elif n.op in DATA_OPS:
+            uniform[id(n)] = False  # a mesh call runs with the points (never folded)
         else:
             uniform[id(n)] = all(uniform[id(a)] for a in n.args)
-    ops = [n for n in order if n.op in OPS]
+    ops = [n for n in order if n.op in OPS or n.op in DATA_OPS]
     sched = [n for n in ops if uniform[id(n)]] + [n for n in ops if not uniform[id(n)]]
 
     param_index = {p.name: i for i, p in enumerate(params)}
@@ -115,7 +117,8 @@ def compile_expr(
 
     # linear-scan register allocation
     index = {id(n): i for i, n in enumerate(sched)}
-    reads = [[index[id(a)] for a in n.args if a.op in OPS] for n in sched]
+    reads = [[index[id(a)] for a in n.args if a.op in OPS or a.op in DATA_OPS]
+             for n in sched]
     regs, n_regs = linear_scan(reads, [index[id(root)]] if id(root) in index else ())
     layout = SlotLayout(len(params), len(consts), n_regs)
     if layout.n_slots > MAX_SLOTS:
@@ -137,19 +140,33 @@ def compile_expr(
         f = fixed(n)
         return f if f is not None else layout.reg(regs[index[id(n)]])
 
-    code = np.zeros((len(sched), 4), dtype=np.int64)
+    # the data blocks (meshes) in first-use order; a mesh call takes two rows
+    data: list = []
+    data_index: dict[str, int] = {}
+    row_of: list[int] = []
+    rows: list[tuple[int, int, int, int]] = []
     for i, n in enumerate(sched):
-        info = OPS[n.op]
+        row_of.append(len(rows))
         operands = [slot(a) for a in n.args]
-        code[i] = (info.code, layout.reg(regs[i]), operands[0],
-                   operands[1] if info.arity == 2 else 0)
+        dst = layout.reg(regs[i])
+        if n.op in DATA_OPS:
+            k = data_index.get(n.value.digest)  # type: ignore[union-attr]
+            if k is None:
+                k = data_index[n.value.digest] = len(data)  # type: ignore[union-attr]
+                data.append(n.value)
+            rows.append((MESH_CODE, dst, operands[0], operands[1]))
+            rows.append((ARG_CODE, dst, operands[2], k))
+            continue
+        info = OPS[n.op]
+        rows.append((info.code, dst, operands[0], operands[1] if info.arity == 2 else 0))
+    code = np.array(rows, dtype=np.int64).reshape(-1, 4)
 
     def source(e: Expr) -> int | None:
         f = fixed(e)
         if f is not None:
             return f
         i = index.get(id(e))
-        return None if i is None else INSTR_REF | i
+        return None if i is None else INSTR_REF | row_of[i]
 
     call_list: list[Call] = []
     for name, out, inputs in calls or ():
@@ -157,7 +174,7 @@ def compile_expr(
         if i is None:
             continue
         srcs = tuple(s for s in (source(e) for e in inputs) if s is not None)
-        call_list.append(Call(name, i, srcs))
+        call_list.append(Call(name, row_of[i], srcs))
     call_list.sort(key=lambda c: c.out)
     return Program(
         params=tuple(params),
@@ -170,4 +187,5 @@ def compile_expr(
         lipschitz=lipschitz,
         calls=tuple(call_list),
         bounds=bounds,
+        data=tuple(data),
     )

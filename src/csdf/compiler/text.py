@@ -25,6 +25,12 @@ z``, ``$name`` (parameter), ``c<k>`` (constant ``k``, declared by a ``const c<k>
 <value>`` line), ``r<k>`` (register). In ``call`` lines ``@i`` is the result of
 instruction ``i``. Floats are written with ``repr`` so they round-trip exactly (a NaN
 as ``nan:0x<16 hex digits>``, its bit pattern). Comments start with ``;``.
+
+A mesh call is one line, ``r0 = mesh d0 x y z`` (the signed distance to data block
+``d0`` at the three operands), and two instructions of the tape (so ``@i`` counts it
+twice). Its data block is listed before the instructions as ``data d0 mesh <vertices>
+<triangles>``, then one ``v <x> <y> <z>`` line per vertex and one ``f <i> <j> <k>``
+line per triangle.
 """
 
 from __future__ import annotations
@@ -36,15 +42,16 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import BytecodeError
+from ..errors import BytecodeError, CsdfError
 from ..expr import Param
 from ..layout import MAX_SLOTS, N_COORDS, SlotLayout
-from ..ops import OPS, OPS_BY_CODE
+from ..meshdata import MeshData
+from ..ops import ARG_CODE, MESH_CODE, OPS, OPS_BY_CODE
 from .calls import INSTR_REF, Call
 
 __all__ = ["disassemble", "assemble_fields"]
 
-_MAX_LINES = 1_000_000
+_MAX_LINES = 20_000_000
 
 
 def _slot_name(layout: SlotLayout, prog: Any, s: int) -> str:
@@ -72,7 +79,19 @@ def disassemble(prog: Any) -> str:
         lines.append(f"param {p.name} {p.default!r} {p.lo!r} {p.hi!r}")
     for i, c in enumerate(prog.consts.tolist()):
         lines.append(f"const c{i} {_fmt(c)}")
-    for op, dst, a, b in prog.code.tolist():
+    for i, block in enumerate(getattr(prog, "data", ())):
+        lines.append(f"data d{i} mesh {len(block.vertices)} {len(block.faces)}")
+        lines += ["v " + " ".join(_fmt(c) for c in row) for row in block.vertices.tolist()]
+        lines += [f"f {i} {j} {k}" for i, j, k in block.faces.tolist()]
+    rows = prog.code.tolist()
+    for k, (op, dst, a, b) in enumerate(rows):
+        if op == ARG_CODE:
+            continue
+        if op == MESH_CODE:
+            _, _, c, block = rows[k + 1]
+            args = " ".join(_slot_name(layout, prog, s) for s in (a, b, c))
+            lines.append(f"{_slot_name(layout, prog, dst)} = mesh d{block} {args}")
+            continue
         info = OPS_BY_CODE[op]
         args = [_slot_name(layout, prog, a)]
         if info.arity == 2:
@@ -122,6 +141,24 @@ def assemble_fields(text: str) -> dict[str, Any]:
     reg_rows: list[tuple[int, str, str, str | None]] = []
     output_tok: tuple[int, str] | None = None
     call_rows: list[tuple[int, list[str]]] = []
+    data: list[MeshData] = []
+    block: tuple[int, int, int, list, list] | None = None  # line, nv, nt, vertices, faces
+
+    def close_block() -> None:
+        nonlocal block
+        if block is None:
+            return
+        ln0, nv, nt, vs, fs = block
+        if len(vs) != nv or len(fs) != nt:
+            raise BytecodeError(f"line {ln0}: data d{len(data)} declares {nv} vertices and "
+                                f"{nt} triangles; {len(vs)} and {len(fs)} follow")
+        try:
+            data.append(MeshData(np.array(vs, dtype=np.float64).reshape(-1, 3),
+                                 np.array(fs, dtype=np.int64).reshape(-1, 3)))
+        except CsdfError as exc:
+            raise BytecodeError(f"line {ln0}: data d{len(data)}: {exc}") from None
+        block = None
+
     seen_magic = False
     for ln, line in enumerate(raw_lines, 1):
         line = line.split(";", 1)[0].strip()
@@ -134,7 +171,23 @@ def assemble_fields(text: str) -> dict[str, Any]:
             seen_magic = True
             continue
         kw = toks[0]
-        if kw == "dim" and len(toks) == 2 and toks[1] in ("2", "3"):
+        if block is not None and kw == "v" and len(toks) == 4:
+            block[3].append([_float(t, ln) for t in toks[1:]])
+            continue
+        if block is not None and kw == "f" and len(toks) == 4:
+            if not all(re.fullmatch(r"\d{1,10}", t) for t in toks[1:]):
+                raise BytecodeError(f"line {ln}: a triangle is three vertex indices")
+            block[4].append([int(t) for t in toks[1:]])
+            continue
+        close_block()
+        if kw == "data" and len(toks) == 5 and toks[2] == "mesh":
+            if toks[1] != f"d{len(data)}":
+                raise BytecodeError(f"line {ln}: expected data block d{len(data)}, got "
+                                    f"{toks[1]}")
+            if not all(re.fullmatch(r"\d{1,9}", t) for t in toks[3:]):
+                raise BytecodeError(f"line {ln}: data counts must be whole numbers")
+            block = (ln, int(toks[3]), int(toks[4]), [], [])
+        elif kw == "dim" and len(toks) == 2 and toks[1] in ("2", "3"):
             header["dim"] = int(toks[1])
         elif kw == "exactness" and len(toks) == 2 and toks[1] in ("exact", "bound", "neither"):
             header["exactness"] = toks[1]
@@ -152,6 +205,8 @@ def assemble_fields(text: str) -> dict[str, Any]:
             output_tok = (ln, toks[1])
         elif kw == "call" and len(toks) >= 3:
             call_rows.append((ln, toks[1:]))
+        elif len(toks) == 7 and toks[1] == "=" and toks[2] == "mesh":
+            reg_rows.append((ln, toks[0], "mesh", " ".join(toks[3:])))
         elif len(toks) in (4, 5) and toks[1] == "=":
             if toks[2] not in OPS:
                 raise BytecodeError(f"line {ln}: unknown op {toks[2]!r}")
@@ -161,6 +216,7 @@ def assemble_fields(text: str) -> dict[str, Any]:
             reg_rows.append((ln, toks[0], toks[2], " ".join(toks[3:])))
         else:
             raise BytecodeError(f"line {ln}: cannot read {line[:60]!r}")
+    close_block()
     if not seen_magic:
         raise BytecodeError("line 1: empty listing (expected 'csdf-program 1')")
     layout = SlotLayout(len(params), len(consts))
@@ -185,8 +241,17 @@ def assemble_fields(text: str) -> dict[str, Any]:
         if not re.fullmatch(r"r\d{1,5}", dst_tok):
             raise BytecodeError(f"line {ln}: destination must be a register r<k>, got {dst_tok!r}")
         dst = slot(dst_tok, ln)
-        ops = [slot(t, ln) for t in operands.split()]
         n_regs = max(n_regs, dst - n_fixed + 1)
+        if opname == "mesh":
+            toks = operands.split()
+            m = re.fullmatch(r"d(\d{1,6})", toks[0])
+            if not m:
+                raise BytecodeError(f"line {ln}: a mesh call names its data block d<k>")
+            a, b, c = (slot(t, ln) for t in toks[1:])
+            code.append((MESH_CODE, dst, a, b))
+            code.append((ARG_CODE, dst, c, int(m.group(1))))
+            continue
+        ops = [slot(t, ln) for t in operands.split()]
         code.append((OPS[opname].code, dst, ops[0], ops[1] if len(ops) > 1 else 0))
     if output_tok is None:
         raise BytecodeError("missing 'output' line")
@@ -220,5 +285,5 @@ def assemble_fields(text: str) -> dict[str, Any]:
         params=tuple(params), consts=np.array(consts, dtype=np.float64), code=code_arr,
         output=output, n_regs=n_regs, dim=int(header["dim"]),
         exactness=str(header["exactness"]), lipschitz=float(header["lipschitz"]),
-        calls=tuple(calls), bounds=bounds,
+        calls=tuple(calls), bounds=bounds, data=tuple(data),
     )

@@ -120,6 +120,9 @@ def dumps_vm(model, params: dict | None = None) -> str:
             it); a bad parameter value (:class:`csdf.ParamError`).
     """
     prog, _ = as_program(model, "dumps_vm")
+    if prog.data:
+        raise CsdfError("a .vm file has no mesh op: a shape with a mesh call "
+                        "(csdf.from_mesh / polyhedron) cannot be written as .vm")
     pvals = prog.param_values(params)
     layout = prog.layout
     w = _Writer()

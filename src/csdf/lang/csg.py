@@ -42,6 +42,8 @@ contract each keeps:
                                          below
 ``polyhedron`` when convex               ``convex_polyhedron`` of its points: a **bound**
                                          (exact inside and on the faces)
+``polyhedron`` otherwise                 ``polyhedron`` (csdf.from_mesh): the exact
+                                         distance to its closed surface, **exact**
 =======================================  ================================================
 
 ``facets='openscad'`` reproduces OpenSCAD 2021.01's faceting: ``sphere`` and
@@ -66,10 +68,9 @@ found on a grid of :data:`HULL_GRID` cells along their longest side, so the hull
 fall short by about one such cell where the cut makes a sharp edge.
 
 Not yet read (a :class:`~csdf.errors.ModelError` naming the node, the file, line and
-column): non-convex ``polyhedron``, ``minkowski`` without a sphere or circle (outside a
-``hull``), ``resize``, partial ``rotate_extrude``, ``linear_extrude`` with a non-uniform
-scale, ``projection`` — these need the exact distance to a triangle mesh
-(``csdf.from_mesh``, issue 20) — and, as in OpenSCAD's own CSG export, ``import``,
+column): ``minkowski`` without a sphere or circle (outside a ``hull``), ``resize``,
+partial ``rotate_extrude``, ``linear_extrude`` with a non-uniform scale,
+``projection``, and, as in OpenSCAD's own CSG export, ``import``,
 ``surface``, ``text``, ``roof`` and ``fill`` (external data).
 
 Limits: :data:`MAX_CSG_BYTES` of text, :data:`MAX_CSG_NODES` nodes.
@@ -829,13 +830,16 @@ class _Converter:
 
     def n_polyhedron(self, n):
         from ..shapes.convex import convex_polyhedron
+        from ..shapes.polyhedron import polyhedron
 
         pts, faces = self.polyhedron_data(n)
         used = pts[sorted({i for f in faces for i in f})]
-        if not _is_convex(used, pts, faces):
-            raise self.err(n, "a non-convex polyhedron is not read yet (needs "
-                              "csdf.from_mesh, the exact distance to a triangle mesh)")
-        return convex_polyhedron(used)
+        if _is_convex(used, pts, faces):
+            return convex_polyhedron(used)
+        try:
+            return polyhedron(pts, faces)
+        except ShapeError as exc:
+            raise self.err(n, str(exc)) from None
 
     def n_resize(self, n):
         raise self.err(n, "not read yet")

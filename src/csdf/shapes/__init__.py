@@ -16,6 +16,7 @@ from .domain import (
     transform,
     translate,
 )
+from .polyhedron import from_mesh, polyhedron
 from .primitives2d import (
     circle,
     ellipse,
@@ -62,6 +63,7 @@ __all__ = [
     "sphere", "box", "rounded_box", "box_frame", "cylinder", "rounded_cylinder", "capsule",
     "cone", "capped_cone", "round_cone", "torus", "capped_torus", "link", "plane", "slab",
     "ellipsoid", "octahedron", "pyramid", "hex_prism", "tri_prism", "convex_polyhedron",
+    "polyhedron", "from_mesh",
     "circle", "rectangle", "rounded_rectangle", "regular_polygon", "polygon", "triangle",
     "equilateral_triangle", "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse",
     "extrude", "revolve",

@@ -197,7 +197,7 @@ def test_non_convex_polyhedron_is_the_exact_distance_to_its_surface():
     ("multmatrix([[1, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) { cube(); }",
      (1, 1), "singular"),
     ("group() { cube(); circle(r = 1); }", (1, 11), "mixes 2D and 3D"),
-    ("rotate_extrude(angle = 90) { square(size = 1); }", (1, 1), "partial turn"),
+    ("rotate_extrude(angle = 0) { square(size = 1); }", (1, 1), "non-zero"),
     ("hull() { cube(); circle(r = 1); }", (1, 1), "hull: mixes 2D and 3D"),
 ])
 def test_errors_are_located(text, where, match):
@@ -370,6 +370,109 @@ def test_faceted_rotate_extrude_passes_through_openscads_vertices(tmp_path):
         assert abs(_f(shape, ref.vertices)).max() < 2e-5
         centres = ref.triangles.mean(axis=1)  # the faces are flat: their centres too
         assert abs(_f(shape, centres)).max() < 2e-5
+
+
+def test_partial_rotate_extrude_resize_and_cut_projection_match_openscad(tmp_path):
+    """The nodes read as documented bounds: partial turns (faceted as OpenSCAD does
+    where a whole faceting of the turn fits, else the true curve), resize (a scale by
+    the children's box) and projection with cut (the section at z = 0)."""
+    _need_openscad()
+    cases = [  # (scad, all of OpenSCAD's vertices and face centres on the zero set?)
+        ("rotate_extrude(angle = 90) translate([10, 0]) square([3, 5]);", True),
+        ("rotate_extrude(angle = -200) translate([10, 0]) circle(r = 3, $fn = 40);",
+         False),
+        ("resize([30, 0, 10], auto = [false, true, false]) "
+         "cylinder(r1 = 4, r2 = 2, h = 6, $fn = 24);", True),
+        ("linear_extrude(height = 2) projection(cut = true) translate([0, 0, -1]) "
+         "rotate([30, 20, 0]) cube([10, 8, 6], center = true);", True),
+    ]
+    for scad, flat in cases:
+        ref = _stl(tmp_path, scad)
+        src = tmp_path / "m.scad"
+        src.write_text(scad)
+        shape = csdf.io.load_scad(src, facets="openscad")
+        assert shape.exactness == "bound", scad
+        diag = float(np.linalg.norm(ref.bounds[1] - ref.bounds[0]))
+        assert abs(_f(shape, ref.vertices)).max() < 1e-5 * diag, scad
+        centres = ref.triangles.mean(axis=1)
+        err = abs(_f(shape, centres)).max() / diag
+        assert err < 1e-5 if flat else err < 5e-3, (scad, err)  # (curve vs facets)
+        m = csdf.mesh(shape, resolution=128, method="dc", progress=False)
+        assert abs(m.volume / ref.volume - 1) < (0.01 if flat else 0.02), scad
+
+
+@pytest.mark.parametrize("scad", [
+    "linear_extrude(height = 20, twist = 90) square([20, 10], center = true);",
+    "linear_extrude(height = 40, center = true, twist = -360, slices = 200, scale = 0) "
+    "square([20, 10], center = true);",
+    "linear_extrude(height = 30, twist = 150, scale = [1.5, 0.5]) difference() { "
+    "circle(r = 10); translate([3, 0]) square([4, 3], center = true); }",
+    "linear_extrude(height = 10, scale = [2, 0.5]) polygon([[0, 0], [10, 0], [10, 5], "
+    "[5, 2], [0, 5]]);",
+    "linear_extrude(height = 25, twist = -250, scale = 0.6, $fn = 17) difference() { "
+    "circle(r = 8); translate([2, 1]) circle(r = 3); square([1, 12], center = true); }",
+    "linear_extrude(height = 12, twist = 45, scale = [0.3, 1.7]) polygon(points = [[0, 0], "
+    "[10, 0], [10, 10], [0, 10], [3, 3], [7, 3], [7, 7], [3, 7]], paths = [[0, 1, 2, 3], "
+    "[4, 5, 6, 7]]);",
+])
+def test_twisted_and_unevenly_scaled_extrusions_are_openscads_surface(scad, tmp_path):
+    """facets='openscad': the same slices, vertices and triangles as OpenSCAD's export
+    (every vertex and every face centre of its STL on csdf's zero set), as a polyhedron;
+    the ideal mode keeps the smooth twist."""
+    _need_openscad()
+    pytest.importorskip("shapely")
+    ref = _stl(tmp_path, scad)
+    src = tmp_path / "m.scad"
+    src.write_text(scad)
+    shape = csdf.io.load_scad(src, facets="openscad")
+    assert shape.name == "polyhedron" and shape.exactness == "exact"
+    tol = 1e-5 * float(np.abs(ref.bounds).max())  # (the STL prints 6 digits)
+    assert abs(_f(shape, ref.vertices)).max() < tol
+    assert abs(_f(shape, ref.triangles.mean(axis=1))).max() < tol
+    data = shape.compile().data[0]
+    assert len(data.faces) == len(ref.faces)
+    assert data.volume == pytest.approx(ref.volume, rel=1e-5)
+    if "scale = [" not in scad:  # the ideal mode: a smooth twist (no uneven scale)
+        assert csdf.io.load_scad(src).name != "polyhedron"
+
+
+def test_openscad_slice_counts():
+    from csdf.lang.csg import diagonal_slices, helix_slices
+
+    # measured on openscad 2021.01's STL exports (distinct z levels - 1)
+    assert helix_slices(125.0, 20.0, 90.0) == 8
+    assert helix_slices(125.0, 20.0, 90.0, fn=8) == 2
+    assert helix_slices(1.25, 20.0, 200.0) == 11
+    assert helix_slices(125.0, 50.0, 90.0) == 8
+    assert diagonal_slices(106.25, 10.0) == 8
+    assert diagonal_slices(106.25, 40.0) == 21
+    assert diagonal_slices(400.0, 1.0) == 11
+    assert diagonal_slices(400.0, 1.0, fn=5) == 5
+
+
+def test_partial_revolve_and_cross_section_fields():
+    ring = csdf.revolve(csdf.circle(0.2).translate((0.6, 0)), angle=math.pi / 2)
+    p = np.array([[0.6, -0.3, 0], [-0.6, 0, 0], [0, 0.6, 0.3], [0.42, 0.42, 0]])
+    # outside past the start face, behind the axis (a bound: the wedge's apex is 0.6
+    # away, the end face 0.72), above the end face, inside the sweep
+    np.testing.assert_allclose(ring(p), [0.3, 0.6, 0.1, 0.6 - np.hypot(0.42, 0.42) - 0.2],
+                               atol=1e-12)
+    back = csdf.revolve(csdf.circle(0.2).translate((0.6, 0)), angle=-1.5 * math.pi)
+    assert back([[0.6, 0.01, 0]])[0] == pytest.approx(0.01)  # clockwise: +y is cut off
+    assert back([[0.6, -0.01, 0]])[0] < 0
+    assert ring.exactness == "bound" and csdf.revolve(csdf.circle(0.2).translate(
+        (0.6, 0))).exactness == "exact"
+    with pytest.raises(csdf.ShapeError, match="within"):
+        csdf.revolve(csdf.circle(0.2), angle=7.0)
+    with pytest.raises(csdf.ShapeError, match="a number"):
+        csdf.revolve(csdf.circle(0.2), angle=csdf.param("a", 1.0))
+    sec = csdf.cross_section(csdf.sphere(1.0), 0.6)
+    assert sec.dim == 2 and sec.exactness == "bound"
+    np.testing.assert_allclose(sec([[0, 0], [0.8, 0], [2, 0]]), [-0.4, 0.0, np.sqrt(4.36) - 1])
+    for s in (ring, csdf.extrude(sec, 1.0)):
+        assert csdf.loads(csdf.dumps(s)).compile() == s.compile()
+    with pytest.raises(ModelError, match="cut = false"):
+        loads_csg("projection(cut = false) { sphere(r = 2); }")
 
 
 def test_convex_polyhedron_distances():

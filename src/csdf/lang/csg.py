@@ -26,8 +26,17 @@ contract each keeps:
                                          combined even-odd: holes): **exact**
 ``linear_extrude``                       ``extrude`` (**exact**); with ``twist`` or a
                                          uniform ``scale``, ``twist`` / ``taper``
+                                         (``facets='openscad'``: OpenSCAD's ruled
+                                         surface, see below)
                                          (**neither**, with a Lipschitz bound)
 ``rotate_extrude`` (full turn)           ``revolve``: **exact**
+``rotate_extrude`` (partial turn)        ``revolve(..., angle=)``: the sweep cut by the
+                                         exact distance to its wedge, a **bound**
+``resize``                               ``transform`` by the scale that takes the
+                                         children's box (their hull's) to ``newsize``
+                                         (``auto`` as OpenSCAD): a **bound** (exact
+                                         when the scale is uniform)
+``projection(cut = true)``               ``cross_section`` at z = 0: a **bound**
 ``offset(r = R)``                        the 2D child offset by ``R``: **exact** for
                                          ``R > 0`` on an exact child
 ``offset(delta = D)``                    the same (rounded where OpenSCAD mitres): a
@@ -46,16 +55,25 @@ contract each keeps:
                                          distance to its closed surface, **exact**
 =======================================  ================================================
 
+A partial ``rotate_extrude`` in ``facets='openscad'`` mode is faceted as OpenSCAD does
+(``int(k |angle| / 360)`` segments from +x, ``k`` the full turn's) where the faceted
+full turn with that segment width has a whole number of segments, and read with the
+true curve otherwise.
+
 ``facets='openscad'`` reproduces OpenSCAD 2021.01's faceting: ``sphere`` and
 ``cylinder`` become ``convex_polyhedron`` of exactly OpenSCAD's vertices (segments from
 ``$fn``, ``$fa``, ``$fs`` by :func:`fragments`; a sphere's rings by
 :func:`sphere_points`), ``circle`` a ``polygon`` of OpenSCAD's vertices
 (:func:`circle_points`), and a full ``rotate_extrude`` ``revolve(..., segments=n)``
 turned so that its first section lies on -x as OpenSCAD's does (a **bound** with the
-exact faceted zero set). Everything else reads as in ``'ideal'`` mode: in particular a
-twisted ``linear_extrude`` is the smooth twist (OpenSCAD joins its slices by flat
-triangles, which bulge out of the twisted prism), ``offset(r)`` and ``minkowski`` with a
-sphere stay round.
+exact faceted zero set). A twisted or unevenly scaled ``linear_extrude`` whose child is
+made of squares, circles and polygons (moved, united, cut, intersected) becomes
+OpenSCAD's own surface: the outline (computed with shapely, the ``openscad`` extra) at
+each of OpenSCAD's slices (:func:`helix_slices`, :func:`diagonal_slices`), neighbouring
+slices joined by flat triangles split along each quad's shorter diagonal, as a
+``polyhedron`` (**exact** for that surface); other children, or no shapely, keep the
+smooth twist. Everything else reads as in ``'ideal'`` mode: ``offset(r)`` and
+``minkowski`` with a sphere stay round.
 
 ``hull`` (both modes): the children are turned into points whose convex hull is theirs
 (the exact vertices of cubes, squares, polygons, polyhedra and their transforms,
@@ -68,9 +86,10 @@ found on a grid of :data:`HULL_GRID` cells along their longest side, so the hull
 fall short by about one such cell where the cut makes a sharp edge.
 
 Not yet read (a :class:`~csdf.errors.ModelError` naming the node, the file, line and
-column): ``minkowski`` without a sphere or circle (outside a ``hull``), ``resize``,
-partial ``rotate_extrude``, ``linear_extrude`` with a non-uniform scale,
-``projection``, and, as in OpenSCAD's own CSG export, ``import``,
+column): ``minkowski`` without a sphere or circle (outside a ``hull``),
+``linear_extrude`` with a non-uniform scale, ``projection(cut = false)`` (the shadow:
+its distance, the smallest value along each vertical line, has no closed form), and,
+as in OpenSCAD's own CSG export, ``import``,
 ``surface``, ``text``, ``roof`` and ``fill`` (external data).
 
 Limits: :data:`MAX_CSG_BYTES` of text, :data:`MAX_CSG_NODES` nodes.
@@ -528,19 +547,206 @@ class _Converter:
                 np.any(sc_a < 0):
             raise self.err(n, f"scale must be a number or [sx, sy] >= 0, got {_show(sc)}")
         sc_a = np.broadcast_to(sc_a.reshape(-1), (2,))
-        if sc_a[0] != sc_a[1]:
-            raise self.err(n, f"a non-uniform scale = {_show(sc)} is not read yet")
         v = n.args.get("v", _UNDEF)
         if v is not _UNDEF and not np.allclose(_array(v), [0, 0, 1]):
             raise self.err(n, f"an extrusion direction v = {_show(v)} is not read yet")
+        twist = self.num(n, "twist", 0.0)
+        if not math.isfinite(twist):
+            raise self.err(n, f"twist must be a number, got {twist:g}")
+        if self.faceted and (twist != 0.0 or sc_a[0] != sc_a[1]):
+            ruled = self.ruled_extrusion(n, h, sc_a, twist)
+            if ruled is not None:
+                return ruled
+        if sc_a[0] != sc_a[1]:
+            raise self.err(n, f"a non-uniform scale = {_show(sc)} is read only with "
+                              "facets='openscad' and a child made of squares, circles and "
+                              "polygons (and shapely installed)")
         s = extrude(child, h).translate((0.0, 0.0, h / 2))
         if sc_a[0] != 1.0:  # the section scaled from 1 at the bottom to sc at the top
             s = s.taper((float(sc_a[0]) - 1.0) / h)
-        twist = self.num(n, "twist", 0.0)
         if twist != 0.0:
             # OpenSCAD turns clockwise (seen from +z) by `twist` degrees over the height
             s = s.twist(-math.radians(twist) / h)
         return s.translate((0.0, 0.0, -h / 2)) if self.flag(n, "center") else s
+
+    # -- OpenSCAD's ruled extrusions (facets='openscad') ---------------------------------
+    def ruled_extrusion(self, n: _Node, h: float, scale: np.ndarray, twist: float):
+        """A twisted or non-uniformly scaled ``linear_extrude`` as OpenSCAD builds it:
+        the outline copied to each slice (turned by ``-twist t`` degrees and scaled by
+        ``1 + (scale - 1) t``) and neighbouring slices joined by flat triangles, each
+        quad split along its shorter diagonal as OpenSCAD's export shows; the slice
+        count by OpenSCAD's rules (:func:`helix_slices`, :func:`diagonal_slices`);
+        a ``polyhedron`` of that surface (exact). None
+        when the child's outline cannot be had (a node other than square, circle,
+        polygon, transforms and booleans of them; or no shapely), or the top is
+        squashed flat in one axis only."""
+        try:
+            import shapely
+        except ImportError:
+            return None
+        geom = self.outline_group(n.children)
+        if geom is None or geom.is_empty:
+            return None
+        if (scale[0] == 0.0) != (scale[1] == 0.0):
+            return None
+        polys = [shapely.geometry.polygon.orient(p, 1.0)
+                 for p in getattr(geom, "geoms", [geom]) if not p.is_empty]
+        rings: list[tuple[np.ndarray, bool]] = []
+        for p in polys:
+            for k, ring in enumerate([p.exterior, *p.interiors]):
+                xy = np.asarray(ring.coords)[:-1, :2]
+                if len(xy) >= 3:
+                    rings.append((xy, k == 0))
+        if not rings:
+            return None
+        r2 = max(float((xy ** 2).sum(axis=1).max()) for xy, _ in rings)
+        if "slices" in n.args and twist != 0.0:
+            slices = max(int(self.num(n, "slices", 1.0)), 1)
+        elif twist != 0.0:
+            slices = helix_slices(r2, h, twist, self.num(n, "$fn", 0.0),
+                                  self.num(n, "$fs", 2.0), self.num(n, "$fa", 12.0))
+        elif "slices" in n.args:
+            slices = max(int(self.num(n, "slices", 1.0)), 1)
+        else:  # a non-uniform scale alone: OpenSCAD's "diagonal" slices
+            delta2 = max(float((((1.0 - scale) * xy) ** 2).sum(axis=1).max())
+                         for xy, _ in rings)
+            slices = diagonal_slices(delta2, h, self.num(n, "$fn", 0.0),
+                                     self.num(n, "$fs", 2.0))
+        if slices > 100_000:
+            raise self.err(n, f"{slices} slices; at most 100000 are read")
+        z0 = -h / 2 if self.flag(n, "center") else 0.0
+        apex = scale[0] == 0.0
+        rots = twist * np.arange(slices + 1) / slices
+        sn, cs = _sin_cos_deg(-rots)
+        levels = slices if apex else slices + 1  # a squashed top is one point
+        verts: list[np.ndarray] = []
+        base: list[list[int]] = []  # per level, the first index of each ring
+        start = 0
+        for i in range(levels):
+            t = i / slices
+            f = 1.0 + (scale - 1.0) * t
+            firsts = []
+            for xy, _ in rings:
+                x = xy[:, 0] * cs[i] - xy[:, 1] * sn[i]
+                y = xy[:, 0] * sn[i] + xy[:, 1] * cs[i]
+                verts.append(np.column_stack([x * f[0], y * f[1],
+                                              np.full(len(xy), z0 + h * t)]))
+                firsts.append(start)
+                start += len(xy)
+            base.append(firsts)
+        if apex:
+            verts.append(np.array([[0.0, 0.0, z0 + h]]))
+        V = np.concatenate(verts)
+        top = start  # the apex's index
+        faces: list[tuple[int, int, int]] = []
+        for i in range(slices):
+            split_first = math.sin(math.radians(rots[i] - rots[i + 1])) > 0.0
+            for r, (xy, _) in enumerate(rings):
+                k = len(xy)
+                for j in range(k):
+                    q = (j + 1) % k
+                    p1, c1 = base[i][r] + j, base[i][r] + q
+                    if apex and i == slices - 1:
+                        faces.append((p1, c1, top))
+                        continue
+                    p2, c2 = base[i + 1][r] + j, base[i + 1][r] + q
+                    # OpenSCAD splits each quad along its shorter diagonal (measured
+                    # on its STL export; a tie by the direction of the twist)
+                    d1 = float(((V[p1] - V[c2]) ** 2).sum())
+                    d2 = float(((V[p2] - V[c1]) ** 2).sum())
+                    if d1 < d2 or (d1 == d2 and not split_first):
+                        faces += [(p1, c1, c2), (p1, c2, p2)]
+                    else:
+                        faces += [(p1, c1, p2), (c1, c2, p2)]
+        index = {}
+        for r, (xy, _) in enumerate(rings):
+            for j, (x, y) in enumerate(xy.tolist()):
+                index[(x, y)] = j + base[0][r] - base[0][0]
+        for p in polys:
+            for tri in shapely.constrained_delaunay_triangles(p).geoms:
+                c = np.asarray(tri.exterior.coords)[:3, :2]
+                try:
+                    ids = [index[(float(x), float(y))] for x, y in c.tolist()]
+                except KeyError:
+                    return None
+                area = (c[1, 0] - c[0, 0]) * (c[2, 1] - c[0, 1]) - \
+                    (c[1, 1] - c[0, 1]) * (c[2, 0] - c[0, 0])
+                if area == 0.0:
+                    continue
+                a, b, d = ids if area > 0 else (ids[0], ids[2], ids[1])  # CCW
+                faces.append((a, d, b))  # the bottom faces down
+                if not apex:
+                    off = base[slices][0]
+                    faces.append((a + off, b + off, d + off))
+        from ..shapes.polyhedron import polyhedron
+
+        try:
+            return polyhedron(V, np.array(faces, dtype=np.int64))
+        except ShapeError as exc:
+            raise self.err(n, f"OpenSCAD's extrusion surface: {exc}") from None
+
+    def outline_group(self, children: list[_Node]):
+        """The union of the children's outlines (a shapely geometry), or None."""
+        import shapely
+
+        parts = []
+        for c in children:
+            if c.modifier in ("%", "*"):
+                continue
+            g = self.outline(c)
+            if g is None:
+                return None
+            parts.append(g)
+        if not parts:
+            return None
+        return shapely.union_all(parts)
+
+    def outline(self, n: _Node):
+        """The outline of a 2D node as a shapely polygon (OpenSCAD's vertices: squares,
+        faceted circles, polygons with even-odd paths, 2D transforms, unions,
+        differences and intersections), or None for anything else."""
+        import shapely
+        from shapely import affinity
+
+        name = n.name
+        if name in ("group", "union", "render", "color"):
+            return self.outline_group(n.children)
+        if name in ("difference", "intersection"):
+            kids = [c for c in n.children if c.modifier not in ("%", "*")]
+            gs = [self.outline(c) for c in kids]
+            if not gs or any(g is None for g in gs):
+                return None
+            if name == "intersection":
+                return shapely.intersection_all(gs)
+            return gs[0].difference(shapely.union_all(gs[1:])) if len(gs) > 1 else gs[0]
+        if name == "multmatrix":
+            g = self.outline_group(n.children)
+            M = _array(n.args.get("m", n.pos[0] if n.pos else _UNDEF))
+            if g is None or M is None or M.shape not in ((4, 4), (3, 4)):
+                return None
+            return affinity.affine_transform(g, [M[0, 0], M[0, 1], M[1, 0], M[1, 1],
+                                                 M[0, 3], M[1, 3]])
+        if name in ("square", "circle"):
+            pts = self.points(n)
+            return None if pts is None else shapely.Polygon(pts)
+        if name == "polygon":
+            pts = _array(n.args.get("points", n.pos[0] if n.pos else _UNDEF))
+            if pts is None or pts.ndim != 2 or len(pts) < 3:
+                return None
+            pts = pts[:, :2]
+            paths = n.args.get("paths", _UNDEF)
+            loops = [list(range(len(pts)))] if paths in (_UNDEF, None) else paths
+            area = None
+            for loop in loops:
+                idx = _array(loop)
+                if idx is None or idx.ndim != 1 or len(idx) < 3:
+                    continue
+                ring = shapely.Polygon(pts[idx.astype(int)])
+                if not ring.is_valid:
+                    return None
+                area = ring if area is None else area.symmetric_difference(ring)
+            return area
+        return None
 
     def n_rotate_extrude(self, n):
         from ..shapes.primitives2d import revolve
@@ -551,22 +757,33 @@ class _Converter:
         if child.dim != 2:
             raise self.err(n, "needs 2D children")
         angle = self.num(n, "angle", 360.0)
-        if abs(angle) < 360.0:
-            raise self.err(n, f"angle = {angle:g} (a partial turn) is not read yet")
+        if not math.isfinite(angle) or angle == 0.0:
+            raise self.err(n, f"angle must be a non-zero number, got {angle:g}")
+        partial = abs(angle) < 360.0
         b = child.bounds
         if b is not None and b[0, 0] < -1e-9 and b[1, 0] > 1e-9:
             raise self.err(n, "the 2D child crosses the axis (x < 0 and x > 0), which "
                               "OpenSCAD refuses too")
         if b is not None and b[1, 0] <= 1e-9:  # all on the negative side: mirror it
             child = child.transform([[-1, 0, 0], [0, 1, 0], [0, 0, 1]])
+        sweep = math.radians(angle) if partial else None
         if not self.faceted:
-            return revolve(child)
+            return revolve(child, angle=sweep)
         if b is None:
             raise self.err(n, "an unbounded 2D child cannot be faceted")
         pts = self.group_points(n)  # OpenSCAD counts the segments from the largest x
         xmax = float(np.abs(pts[:, 0]).max()) if pts is not None else float(
             np.abs(b[:, 0]).max())
         k = self.fragments(n, xmax)
+        if partial:
+            # OpenSCAD puts int(k |angle| / 360) segments (at least 1) on the sweep from
+            # +x: the faceted turn of 360 k' / |angle| segments has them where that is
+            # a whole number; otherwise the true curve is read
+            k_part = max(int(k * abs(angle) / 360.0), 1)
+            full = 360.0 * k_part / abs(angle)
+            if abs(full - round(full)) < 1e-9 and round(full) >= 3:
+                return revolve(child, segments=int(round(full)), angle=sweep)
+            return revolve(child, angle=sweep)  # (no whole faceting fits: the curve)
         # OpenSCAD puts its first section on -x (then every 360 / k degrees)
         s = revolve(child, segments=max(k, 3))
         return s.transform([[-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) \
@@ -821,12 +1038,18 @@ class _Converter:
         return pts, out
 
     def n_projection(self, n):
+        from ..shapes.primitives2d import cross_section
+
         child = self.group(n.children, n.name)
         if child is None:
             return None
         if child.dim != 3:
             raise self.err(n, "needs 3D children")
-        raise self.err(n, "not read yet")
+        if self.flag(n, "cut"):
+            return cross_section(child, 0.0)
+        raise self.err(n, "cut = false (the solid's shadow) is not read: its distance "
+                          "has no closed form (the smallest value along each vertical "
+                          "line); cut = true reads as the section at z = 0")
 
     def n_polyhedron(self, n):
         from ..shapes.convex import convex_polyhedron
@@ -842,7 +1065,35 @@ class _Converter:
             raise self.err(n, str(exc)) from None
 
     def n_resize(self, n):
-        raise self.err(n, "not read yet")
+        child = self.group(n.children, n.name)
+        if child is None:
+            return None
+        d = child.dim
+        new = self.vec(n, "newsize", 3, default=[0.0] * 3, index=0)
+        raw = n.args.get("auto", False)
+        flags = raw if isinstance(raw, list) else [raw] * 3
+        if len(flags) != 3 or any(isinstance(v, (list, str)) or v is _UNDEF
+                                  for v in flags):
+            raise self.err(n, f"auto must be true, false or 3 of them, got {_show(raw)}")
+        auto = [bool(v) for v in flags]
+        pts = self.group_points(n)  # the children's box is their hull's
+        if pts is None:
+            return None
+        size = np.zeros(3)
+        size[:d] = pts.max(axis=0) - pts.min(axis=0)
+        if np.any(new < 0) or not np.all(np.isfinite(new)):
+            raise self.err(n, f"newsize must be 3 numbers >= 0, got {_show(new.tolist())}")
+        scale = np.ones(3)
+        for i in range(d):
+            if new[i] > 0:
+                if size[i] <= 0:
+                    raise self.err(n, f"the children have no extent along axis {i}")
+                scale[i] = new[i] / size[i]
+        big = int(np.argmax(new[:d]))  # OpenSCAD's auto: the largest given size's factor
+        for i in range(d):
+            if new[i] == 0 and auto[i]:
+                scale[i] = scale[big]
+        return child.transform(np.diag(np.append(scale[:d], 1.0)).tolist())
 
 
 #: ``facets='ideal'`` hulls: curved children are replaced by points on them whose hull
@@ -887,6 +1138,35 @@ def _sin_cos_deg(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if cv is not None:
             c = np.where(hit, cv, c)
     return s, c
+
+
+def helix_slices(r2: float, h: float, twist: float, fn: float = 0.0, fs: float = 2.0,
+                 fa: float = 12.0) -> int:
+    """OpenSCAD 2021.01's number of slices of a twisted ``linear_extrude`` with no
+    ``slices`` given: at least ``ceil(|twist| / 120)``; with ``$fn`` > 0,
+    ``ceil(|twist| / 360 * $fn)``; else ``ceil(min(|twist| / $fa, L / $fs))`` with ``L``
+    the length of the helix of the outline's farthest vertex (``r2``: its squared
+    distance from the axis) over the height ``h``."""
+    t = abs(twist)
+    least = max(math.ceil(t / 120.0), 1)
+    if math.sqrt(r2) < _GRID_FINE or not math.isfinite(fn):
+        return least
+    if fn > 0.0:
+        return max(math.ceil(t / 360.0 * fn), least)
+    fa_slices = t / max(fa, 0.01)
+    fs_slices = math.sqrt(r2 * math.radians(t) ** 2 + h * h) / max(fs, 0.01)
+    return max(math.ceil(min(fa_slices, fs_slices)), least)
+
+
+def diagonal_slices(delta2: float, h: float, fn: float = 0.0, fs: float = 2.0) -> int:
+    """OpenSCAD 2021.01's number of slices of a ``linear_extrude`` scaled unevenly and
+    not twisted: ``$fn`` when > 0, else ``ceil(sqrt(delta2 + h^2) / $fs)``, ``delta2``
+    the largest squared move of an outline vertex between bottom and top (at least 1)."""
+    if math.sqrt(delta2) < _GRID_FINE or not math.isfinite(fn):
+        return 1
+    if fn > 0.0:
+        return max(int(fn), 1)
+    return max(math.ceil(math.sqrt(delta2 + h * h) / max(fs, 0.01)), 1)
 
 
 def circle_points(r: float, k: int) -> np.ndarray:
@@ -1116,3 +1396,4 @@ def load_scad(path: str | os.PathLike, facets: str = "ideal",
     """The csdf shape of an OpenSCAD ``.scad`` file: flattened by the ``openscad``
     program (:func:`scad_to_csg_text`), then read as ``.csg`` (:func:`loads_csg`)."""
     return loads_csg(scad_to_csg_text(path, timeout), f"{path} (as CSG)", facets)
+

@@ -19,6 +19,7 @@ from .domain import (
 from .polyhedron import from_mesh, polyhedron
 from .primitives2d import (
     circle,
+    cross_section,
     ellipse,
     equilateral_triangle,
     extrude,
@@ -66,7 +67,7 @@ __all__ = [
     "polyhedron", "from_mesh",
     "circle", "rectangle", "rounded_rectangle", "regular_polygon", "polygon", "triangle",
     "equilateral_triangle", "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse",
-    "extrude", "revolve",
+    "extrude", "revolve", "cross_section",
     "union", "intersection", "difference", "complement",
     "translate", "rotate", "orient", "transform", "scale", "mirror", "repeat",
     "repeat_mirrored", "repeat_polar",

@@ -46,7 +46,7 @@ from .primitives3d import primitive
 __all__ = [
     "circle", "rectangle", "rounded_rectangle", "regular_polygon", "polygon", "triangle",
     "hexagon", "ring", "segment", "trapezoid", "rhombus", "ellipse", "equilateral_triangle",
-    "extrude", "revolve",
+    "extrude", "revolve", "cross_section",
 ]
 
 
@@ -294,7 +294,7 @@ def extrude(shape, height=1.0) -> Shape:
 
 
 @register("operator")
-def revolve(shape, offset=0.0, segments=0) -> Shape:
+def revolve(shape, offset=0.0, segments=0, angle=None) -> Shape:
     """Revolve a 2D shape around the z axis: its x becomes the distance from the axis
     minus ``offset`` and its y becomes z. **Exact** when the 2D shape is exact and lies
     in ``x >= -offset``.
@@ -304,13 +304,20 @@ def revolve(shape, offset=0.0, segments=0) -> Shape:
     +x) joined by flat faces, that is the distance from the axis replaced by the
     regular ``n``-gon's gauge ``r cos(d) / cos(pi / n)`` (``d`` the angle from the
     middle of the nearest segment), times ``cos(pi / n)``: a **bound** (exact zero set,
-    Lipschitz that of the section) when the section lies in ``x >= -offset``."""
+    Lipschitz that of the section) when the section lies in ``x >= -offset``.
+
+    With ``angle`` (radians, a constant with ``0 < |angle| < 2 pi``; None for a full
+    turn) only the part swept from +x by that angle is kept (counter-clockwise seen
+    from +z; clockwise for a negative angle): the sweep intersected with the exact
+    distance to that wedge of the plane, a **bound** (the intersection of two fields
+    underestimates outside, near the cut faces' edges)."""
     _require2d(shape, "revolve")
     o = scalar_arg(offset, "revolve: offset")
     n = 0 if isinstance(segments, (int, np.integer)) and not isinstance(segments, bool) \
         and segments == 0 else int_arg(segments, "revolve: segments", 3, 10_000)
     half = math.pi / n if n else 0.0
     cos_half = math.cos(half)
+    sweep = None if angle is None else _sweep_angle(angle)
 
     def radial(p: Vec) -> Expr:
         r = length(Vec((p.x, p.y)))
@@ -323,7 +330,12 @@ def revolve(shape, offset=0.0, segments=0) -> Shape:
 
     def f(p: Vec, ctx) -> Expr:
         d = shape.sdf(Vec((radial(p) - o, p.z)), ctx)
-        return d * cos_half if n else d
+        d = d * cos_half if n else d
+        if sweep is None:
+            return d
+        from ..expr import maximum
+
+        return maximum(d, _wedge_distance(p.x, p.y, sweep))
 
     b = shape.bounds
     if b is None:
@@ -331,9 +343,77 @@ def revolve(shape, offset=0.0, segments=0) -> Shape:
     else:
         R = max(abs(b[0, 0]), abs(b[1, 0])) + mag(o)
         bounds = box_bounds([-R, -R, b[0, 1]], [R, R, b[1, 1]])
-    keeps = not n
+    keeps = not n and sweep is None
+    lip = shape.lipschitz if sweep is None else max(shape.lipschitz, 1.0)
+    kwargs: dict = {"segments": n} if n else {}
+    if sweep is not None:
+        kwargs["angle"] = angle
     return Shape(
-        "revolve", f, dim=3, lipschitz=shape.lipschitz, bounds=bounds,
-        args=(shape, offset), kwargs={"segments": n} if n else None, children=(shape,),
-        exactness=derive_exactness([shape], keeps_exact=keeps, lipschitz=shape.lipschitz),
+        "revolve", f, dim=3, lipschitz=lip, bounds=bounds,
+        args=(shape, offset), kwargs=kwargs or None, children=(shape,),
+        exactness=derive_exactness([shape], keeps_exact=keeps, lipschitz=lip),
+    )
+
+
+def _sweep_angle(angle) -> float:
+    """A partial turn's angle (radians), checked: a constant, ``0 < |angle| < 2 pi``."""
+    if isinstance(angle, Expr):
+        if angle.op != "const":
+            raise ShapeError("revolve: angle must be a number (the wedge is fixed)")
+        angle = angle.value
+    if isinstance(angle, bool) or not isinstance(angle, (int, float, np.integer,
+                                                         np.floating)):
+        raise ShapeError(f"revolve: angle must be a number, got {type(angle).__name__}")
+    a = float(angle)
+    if not (0.0 < abs(a) < 2.0 * math.pi):
+        raise ShapeError(f"revolve: angle must be within (-2 pi, 2 pi) and not 0 "
+                         f"(radians; None for a full turn), got {a:g}")
+    return a
+
+
+def _wedge_distance(x: Expr, y: Expr, angle: float) -> Expr:
+    """The exact signed distance in the plane to the wedge swept from +x by ``angle``
+    (radians; clockwise when negative): the distance to the nearer of its two boundary
+    rays, negative inside."""
+    from ..expr import maximum, minimum, select_ge, sqrt
+
+    a = abs(angle)
+    yy = y if angle > 0 else -y
+    c, s = math.cos(a), math.sin(a)
+    r2 = x * x + yy * yy
+
+    def ray(t: Expr) -> Expr:  # distance to the ray along a unit u with t = p . u
+        tp = maximum(t, 0.0)
+        return sqrt(maximum(r2 - tp * tp, 0.0))
+
+    d = minimum(ray(x), ray(x * c + yy * s))
+    s1, s2 = yy, x * s - yy * c  # >= 0: on the inner side of the first / last ray
+    inside = minimum(s1, s2) if a <= math.pi else maximum(s1, s2)
+    return select_ge(inside, -d, d)
+
+
+@register("operator")
+def cross_section(shape, z=0.0) -> Shape:
+    """The 2D section of a 3D shape by the plane ``z = z`` (a constant or parameter): the
+    field ``f(x, y, z)`` as a field of the plane. Its zero set is the section's
+    outline; as a distance in the plane it is a **bound** when ``shape`` is exact or a
+    bound (the distance in space to the surface is at most the distance in the plane
+    to the section's outline), else neither. OpenSCAD's ``projection(cut = true)``."""
+    from .base import require_dim
+
+    if require_dim([shape], "cross_section") != 3:
+        raise ShapeError("cross_section: needs a 3D shape")
+    zz = scalar_arg(z, "cross_section: z")
+
+    def f(p: Vec, ctx) -> Expr:
+        return shape.sdf(Vec((p.x, p.y, zz)), ctx)
+
+    b = shape.bounds
+    bounds = None if b is None else np.array([b[0, :2], b[1, :2]])
+    return Shape(
+        "cross_section", f, dim=2, lipschitz=shape.lipschitz, bounds=bounds,
+        args=(shape,), kwargs={"z": z} if not (isinstance(z, (int, float)) and z == 0)
+        else None, children=(shape,),
+        exactness=derive_exactness([shape], keeps_exact=False,
+                                   lipschitz=shape.lipschitz),
     )

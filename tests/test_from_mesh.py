@@ -79,6 +79,36 @@ def test_signs_inside_a_ring_with_a_hole(annulus):
     np.testing.assert_allclose(d[:2], [0.5, -0.2], atol=0.01)  # to the faceting
 
 
+def _plate_with_hole():
+    """A 4 x 4 x 1 plate with a 2 x 2 square hole through it, as quads."""
+    outer = [(-2, -2), (2, -2), (2, 2), (-2, 2)]
+    inner = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+    pts = [(x, y, z) for z in (0.0, 1.0) for x, y in outer + inner]
+    faces = []
+    for z0 in (0, 8):  # bottom (z0 = 0) and top rings between outer and inner squares
+        for i in range(4):
+            j = (i + 1) % 4
+            quad = [z0 + i, z0 + j, z0 + 4 + j, z0 + 4 + i]
+            faces.append(quad[::-1] if z0 == 0 else quad)
+    for base in (0, 4):  # the outer walls, and the hole's walls (facing into the hole)
+        for i in range(4):
+            j = (i + 1) % 4
+            quad = [base + i, base + j, base + 8 + j, base + 8 + i]
+            faces.append(quad if base == 0 else quad[::-1])
+    return pts, faces
+
+
+def test_signs_inside_a_plate_with_a_square_hole():
+    pts, faces = _plate_with_hole()
+    s = csdf.polyhedron(points=pts, faces=faces)
+    assert s.compile().data[0].volume == pytest.approx(12.0)
+    P = np.array([[0, 0, 0.5], [1.5, 0, 0.5], [0, -1.8, 0.9], [2.5, 0, 0.5], [0, 0, 2],
+                  [1.5, 1.5, -0.25]])
+    # the hole's middle, inside the rim, inside near a face, outside, above the hole
+    # (nearest: the hole's top edge), below the rim
+    np.testing.assert_allclose(s(P), [1.0, -0.5, -0.1, 0.5, np.sqrt(2), 0.25], atol=1e-12)
+
+
 def test_gradient_and_parameter_derivatives_through_the_call(torus):
     m, s = torus
     P = RNG.uniform(-1.5, 1.5, (400, 3))

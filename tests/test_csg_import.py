@@ -157,8 +157,8 @@ def test_extrusions_offset_minkowski_and_hull():
     assert cone.exactness == "neither"
     assert _f(cone, [[1.9, 0, 0.1]])[0] < 0 and _f(cone, [[1.9, 0, 9.9]])[0] > 0
     assert _f(cone, [[0.9, 0, 9.9]])[0] < 0
-    with pytest.raises(ModelError, match="non-uniform scale"):
-        loads_csg("linear_extrude(height = 1, scale = [1, 2]) { circle(r = 1); }")
+    oval = loads_csg("linear_extrude(height = 1, scale = [1, 2]) { circle(r = 1); }")
+    assert _f(oval, [[0, 1.9, 0.99]])[0] < 0 < _f(oval, [[1.1, 0, 0.99]])[0]
 
 
 #: an L-shaped prism (non-convex), as OpenSCAD prints it
@@ -434,6 +434,26 @@ def test_twisted_and_unevenly_scaled_extrusions_are_openscads_surface(scad, tmp_
     assert data.volume == pytest.approx(ref.volume, rel=1e-5)
     if "scale = [" not in scad:  # the ideal mode: a smooth twist (no uneven scale)
         assert csdf.io.load_scad(src).name != "polyhedron"
+
+
+def test_uneven_scale_in_the_ideal_mode_is_a_taper_of_x_and_y_apart(tmp_path):
+    scad = ("linear_extrude(height = 10, scale = [2, 0.5]) polygon([[0, 0], [10, 0], "
+            "[10, 5], [5, 2], [0, 5]]);")
+    src = tmp_path / "m.scad"
+    src.write_text(scad)
+    shape = loads_csg(scad.replace("polygon([", "polygon(points = ["))
+    assert shape.exactness == "neither" and np.isfinite(shape.lipschitz)
+    # the section at height z is the polygon scaled by (1 + z / 10, 1 - z / 20)
+    p = np.array([[14.0, 1.0, 5.0], [16.0, 1.0, 5.0], [7.5, 0.5, 10.0]])
+    v = _f(shape, p)
+    assert v[0] < 0 < v[1] and abs(v[2]) < 1e-12  # (the last on the top face)
+    taper = csdf.box(1).taper((0.5, -0.25))
+    assert csdf.loads(csdf.dumps(taper)).compile() == taper.compile()
+    with pytest.raises(csdf.ShapeError, match="pair"):
+        csdf.box(1).taper((0.1, 0.2, 0.3))
+    if shutil.which("openscad") is not None:  # OpenSCAD's slices lie on the taper
+        ref = _stl(tmp_path, scad)
+        assert abs(_f(csdf.io.load_scad(src), ref.vertices)).max() < 1e-4
 
 
 def test_openscad_slice_counts():

@@ -25,7 +25,7 @@ contract each keeps:
 ``square``, ``circle``, ``polygon``      ``rectangle``, ``circle``, ``polygon`` (paths
                                          combined even-odd: holes): **exact**
 ``linear_extrude``                       ``extrude`` (**exact**); with ``twist`` or a
-                                         uniform ``scale``, ``twist`` / ``taper``
+                                         ``scale``, ``twist`` / ``taper``
                                          (``facets='openscad'``: OpenSCAD's ruled
                                          surface, see below)
                                          (**neither**, with a Lipschitz bound)
@@ -87,7 +87,7 @@ fall short by about one such cell where the cut makes a sharp edge.
 
 Not yet read (a :class:`~csdf.errors.ModelError` naming the node, the file, line and
 column): ``minkowski`` without a sphere or circle (outside a ``hull``),
-``linear_extrude`` with a non-uniform scale, ``projection(cut = false)`` (the shadow:
+``projection(cut = false)`` (the shadow:
 its distance, the smallest value along each vertical line, has no closed form), and,
 as in OpenSCAD's own CSG export, ``import``,
 ``surface``, ``text``, ``roof`` and ``fill`` (external data).
@@ -557,12 +557,10 @@ class _Converter:
             ruled = self.ruled_extrusion(n, h, sc_a, twist)
             if ruled is not None:
                 return ruled
-        if sc_a[0] != sc_a[1]:
-            raise self.err(n, f"a non-uniform scale = {_show(sc)} is read only with "
-                              "facets='openscad' and a child made of squares, circles and "
-                              "polygons (and shapely installed)")
         s = extrude(child, h).translate((0.0, 0.0, h / 2))
-        if sc_a[0] != 1.0:  # the section scaled from 1 at the bottom to sc at the top
+        if sc_a[0] != sc_a[1]:  # x and y scaled apart from 1 at the bottom to sc at the top
+            s = s.taper(((float(sc_a[0]) - 1.0) / h, (float(sc_a[1]) - 1.0) / h))
+        elif sc_a[0] != 1.0:  # the section scaled from 1 at the bottom to sc at the top
             s = s.taper((float(sc_a[0]) - 1.0) / h)
         if twist != 0.0:
             # OpenSCAD turns clockwise (seen from +z) by `twist` degrees over the height

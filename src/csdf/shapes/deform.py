@@ -96,28 +96,39 @@ def bend(shape: Shape, rate) -> Shape:
 @register("method")
 def taper(shape: Shape, rate) -> Shape:
     """Taper along z: the cross-section at height z is scaled by ``s = 1 + rate * z``
-    (clamped to >= 0.001), i.e. ``f(x/s, y/s, z)``. **Neither**; Lipschitz bound from
-    the smallest ``s`` over the child's z range."""
+    (clamped to >= 0.001), i.e. ``f(x/s, y/s, z)``; ``rate`` may also be a pair
+    ``(rate_x, rate_y)`` scaling x and y apart (OpenSCAD's ``linear_extrude`` with
+    ``scale = [sx, sy]``). **Neither**; Lipschitz bound from the smallest ``s`` over
+    the child's z range."""
     _need3d(shape, "taper")
-    k = scalar_arg(rate, "taper: rate")
+    pair = isinstance(rate, (tuple, list, np.ndarray))
+    if pair:
+        if len(rate) != 2:
+            raise ShapeError(f"taper: rate must be a number or a pair (rate_x, rate_y), "
+                             f"got {len(rate)} numbers")
+        ks = [scalar_arg(r, f"taper: rate[{i}]") for i, r in enumerate(rate)]
+    else:
+        ks = [scalar_arg(rate, "taper: rate")] * 2
 
     def f(p: Vec, ctx) -> Expr:
-        s = maximum(1.0 + k * p.z, 0.001)
-        return shape.sdf(Vec((p.x / s, p.y / s, p.z)), ctx)
+        sx = maximum(1.0 + ks[0] * p.z, 0.001)
+        sy = sx if not pair else maximum(1.0 + ks[1] * p.z, 0.001)
+        return shape.sdf(Vec((p.x / sx, p.y / sy, p.z)), ctx)
 
     b = shape.bounds
     if b is None:
         lip, nb = math.inf, None
     else:
-        klo, khi = expr_range(k)
-        ends = [1.0 + kk * z for kk in (klo, khi) for z in (b[0, 2], b[1, 2])]
+        ranges = [expr_range(k) for k in ks]
+        ends = [1.0 + kk * z for lo_hi in ranges for kk in lo_hi for z in (b[0, 2], b[1, 2])]
         smin, smax = max(min(ends), 0.001), max(max(ends), 0.001)
         rho = _radial(b)
-        lip = shape.lipschitz * (max(1.0, 1.0 / smin) + mag(k) * rho / smin)
+        kmax = max(mag(k) for k in ks)
+        lip = shape.lipschitz * (max(1.0, 1.0 / smin) + kmax * rho / smin)
         r = rho * smax
         nb = box_bounds([-r, -r, b[0, 2]], [r, r, b[1, 2]])
-    return _derived(shape, "taper", f, args=(rate,), keeps_exact=False, lipschitz=lip,
-                    bounds=nb, neither=True)
+    return _derived(shape, "taper", f, args=(tuple(rate) if pair else rate,),
+                    keeps_exact=False, lipschitz=lip, bounds=nb, neither=True)
 
 
 @register("method")

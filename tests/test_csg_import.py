@@ -456,6 +456,24 @@ def test_uneven_scale_in_the_ideal_mode_is_a_taper_of_x_and_y_apart(tmp_path):
         assert abs(_f(csdf.io.load_scad(src), ref.vertices)).max() < 1e-4
 
 
+def test_colours_are_kept_on_the_shape():
+    from csdf.shapes.appearance import colors
+
+    s = loads_csg("color([1, 0, 0, 1]) { cube(size = [2, 2, 2]); }\n"
+                  "color([0.2, 0.4, 0.6, 0.5]) { sphere(r = 1); }\n"
+                  "color([-1, -1, -1, 1]) { cylinder(h = 1, r1 = 1, r2 = 1); }")
+    assert sorted(c for _, c in colors(s)) == [(0.2, 0.4, 0.6, 0.5), (1.0, 0.0, 0.0, 1.0)]
+    plain = loads_csg("cube(size = [2, 2, 2]); sphere(r = 1); cylinder(h = 1, r1 = 1, "
+                      "r2 = 1);")
+    assert s.compile() == plain.compile()  # the geometry is unchanged
+    back = csdf.loads(csdf.dumps(s))
+    assert sorted(c for _, c in colors(back)) == sorted(c for _, c in colors(s))
+    with pytest.raises(csdf.ShapeError, match=r"color\[1\] = 2 is outside"):
+        csdf.box(1).color((0.5, 2, 0))
+    with pytest.raises(csdf.ShapeError, match="3 or 4 numbers"):
+        csdf.box(1).color("red")
+
+
 def test_openscad_slice_counts():
     from csdf.lang.csg import diagonal_slices, helix_slices
 

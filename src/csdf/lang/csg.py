@@ -14,7 +14,8 @@ contract each keeps:
 
 =======================================  ================================================
 ``group``, ``union``, ``render``,        the union of the children (exact where the
-``color``                                children do not overlap; else a bound)
+``color``                                children do not overlap; else a bound); a
+                                         colour kept as :meth:`csdf.Shape.color`
 ``difference``, ``intersection``         csdf's ``-`` and ``&`` (a bound, as in csdf)
 ``multmatrix``                           :meth:`csdf.Shape.transform` of the matrix:
                                          **exact** for a rotation or reflection times a
@@ -378,7 +379,23 @@ class _Converter:
     def n_group(self, n):
         return self.group(n.children, n.name)
 
-    n_union = n_render = n_color = n_group
+    n_union = n_render = n_group
+
+    def n_color(self, n):
+        """The children's union with their colour kept (:meth:`csdf.Shape.color`):
+        OpenSCAD writes ``color([r, g, b, a])``; other forms, and values outside
+        ``[0, 1]`` (OpenSCAD's mark of an unknown colour name), add no colour."""
+        from ..shapes.appearance import color_arg
+
+        shape = self.group(n.children, n.name)
+        raw = n.args.get("c", n.pos[0] if n.pos else _UNDEF)
+        if shape is None or not isinstance(raw, list):
+            return shape
+        try:
+            rgba = color_arg([float(v) for v in raw], "color")
+        except (ShapeError, TypeError, ValueError):
+            return shape  # OpenSCAD draws an unknown colour name its default way too
+        return shape.color(rgba)
 
     def n_difference(self, n):
         kids = [s for s in (self.node(c) for c in n.children if c.modifier not in ("%", "*"))

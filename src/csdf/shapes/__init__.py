@@ -1,5 +1,6 @@
 """The modelling API: primitives, CSG, domain operations and deformations."""
 
+from . import appearance as _appearance  # noqa: F401  (registers Shape.color)
 from . import deform as _deform  # noqa: F401  (registers shape methods)
 from . import params as _params  # noqa: F401  (registers bind and rename)
 from .base import REGISTRY, ApiEntry, Shape

@@ -37,7 +37,7 @@ LAYERS: dict[str, int] = {
     # 3 evaluators
     "csdf.backends": 3, "csdf.backends.meshdist": 3,  # exact distance to a mesh
     # 4 the field layer
-    "csdf.field": 4, "csdf.fieldset": 4,
+    "csdf.field": 4, "csdf.fieldset": 4, "csdf.colors": 4,  # colours at points
     # 5 consumers
     "csdf.mesh": 5, "csdf.render": 5, "csdf.sample": 5, "csdf.slicing": 5, "csdf.scan": 5,
     "csdf.raster": 5, "csdf.scene": 5, "csdf.plan": 5, "csdf.synth": 5, "csdf.metrics": 5,

@@ -60,7 +60,7 @@ from .shapes import __all__ as _shape_names
 from .version import __version__
 
 if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type checkers
-    from . import io, metrics, synth, zoo
+    from . import colors, io, metrics, synth, zoo
     from .detect import (
         Detection,
         PrimitiveDetection,
@@ -97,6 +97,7 @@ if TYPE_CHECKING:  # what __getattr__ loads on first use (see _LAZY), for type c
 #: itself), loaded on first access by :func:`__getattr__`
 _LAZY: dict[str, tuple[str, str | None]] = {
     "io": (".io", None),
+    "colors": (".colors", None),
     "zoo": (".zoo", None),
     "synth": (".synth", None),
     "metrics": (".metrics", None),
@@ -196,7 +197,7 @@ class _Namespace(types.ModuleType):
 sys.modules[__name__].__class__ = _Namespace
 
 __all__ = [
-    "compile", "param", "Param", "mesh", "io", "zoo", "Expr", "Program", "Call", "Shape",
+    "compile", "param", "Param", "mesh", "io", "colors", "zoo", "Expr", "Program", "Call", "Shape",
     "REGISTRY", "CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
     "MeshWarning", "__version__", "sample_surface", "sample_volume", "save_slice", "Camera",
     "Render", "render", "scan", "raster", "load", "loads", "dumps", "to_glsl", "shadertoy",

@@ -320,6 +320,8 @@ def mesh(
                                          "Marching cubes only; no thin-part search; .ply "
                                          "and .stl are streamed to disk as tasks finish."),
     workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
+    colors: bool = typer.Option(False, "--colors", help="Vertex colours from the model's "
+                                "color() nodes (kept by .ply, .glb and .obj)."),
     super_brick: int | None = typer.Option(None, "--super-brick", help="With --scheduler/"
                                            "--workers: voxels along a task's cube (a power "
                                            "of two; default: at most 96 tasks)."),
@@ -341,7 +343,7 @@ def mesh(
                              method=method,
                              progress=not quiet and err.is_terminal,
                              max_resolution=max_resolution, min_feature=min_feature,
-                             check_thin=check_thin)
+                             check_thin=check_thin, colors=colors)
         dt = time.perf_counter() - t0
         for w in caught:
             if issubclass(w.category, MeshWarning):

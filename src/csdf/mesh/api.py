@@ -42,6 +42,7 @@ def mesh(
     min_feature: float | None = None,
     check_thin: bool = True,
     check_ranges: bool = True,
+    colors: bool = False,
 ):
     """Triangle mesh of the surface ``f = 0``.
 
@@ -76,6 +77,9 @@ def mesh(
             them, the warning says when the grid loses thin parts and how much.
             ``False`` skips the checks (128 by default).
         check_ranges: refuse parameter values outside their declared ranges.
+        colors: give the vertices the shape's colours (:func:`csdf.colors.colors_at`,
+            the nearest coloured surface; ``mesh.visual.vertex_colors``, RGBA uint8),
+            which PLY and GLB files keep.
 
     Returns:
         ``trimesh.Trimesh``: watertight, 2-manifold, consistently wound (normals point
@@ -91,6 +95,9 @@ def mesh(
     import trimesh
 
     if getattr(shape, "__csdf_scene__", False):  # a csdf.Scene meshes its instances
+        if colors:
+            raise CsdfError("colors=True meshes a shape; a scene's instances are "
+                            "coloured by their own meshes")
         if bounds is not None or params:
             raise CsdfError("a scene's instances carry their own parameters and bounds")
         return shape.mesh(resolution, voxel_size, method, progress,
@@ -146,6 +153,21 @@ def mesh(
         # within 1e-8) would then fuse them and make edges of 4 faces
         separate_close_vertices(verts, faces, min_edge_length(verts, h))
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
+    if colors:
+        from ..colors import colors_at
+
+        tree, cparams, local = shape, params, verts
+        if not hasattr(tree, "children"):  # a Field: its shape, values and pose
+            tree = getattr(shape, "shape", None)
+            cparams = dict(getattr(shape, "params", {}) or {}, **(params or {}))
+            pose = getattr(shape, "pose", None)
+            if pose is not None and not pose.is_identity():
+                local = pose.apply_inverse(verts)
+        if tree is None or not hasattr(tree, "children"):
+            raise CsdfError("colors=True needs a Shape (a compiled program has no colours)")
+        rgba = colors_at(tree, local, cparams, check_ranges=check_ranges) if len(verts) \
+            else np.zeros((0, 4))
+        m.visual.vertex_colors = np.rint(np.nan_to_num(rgba, nan=0.0) * 255).astype(np.uint8)
     m.metadata["csdf"] = {
         "method": method, "voxel_size": h, "dims": dims, "seconds": time.perf_counter() - t0,
         "resolution": resolution,

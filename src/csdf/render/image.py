@@ -131,8 +131,9 @@ def _srgb(linear: np.ndarray) -> np.ndarray:
 
 
 def _shade(fld: Field, cam: Camera, p: np.ndarray, n: np.ndarray, dirs: np.ndarray,
-           shadows: bool, ao: bool) -> np.ndarray:
-    """Linear RGB ``(M, 3)`` of hits ``p`` with world normals ``n`` seen along ``dirs``."""
+           shadows: bool, ao: bool, albedo: np.ndarray | None = None) -> np.ndarray:
+    """Linear RGB ``(M, 3)`` of hits ``p`` with world normals ``n`` seen along ``dirs``;
+    ``albedo`` ``(M, 3)`` linear RGB per hit (default :data:`ALBEDO`)."""
     light = cam.R @ LIGHT_CAM
     up = cam.R @ np.array([0.0, -1.0, 0.0])
     ndl = np.clip(n @ light, 0.0, None)
@@ -149,7 +150,29 @@ def _shade(fld: Field, cam: Camera, p: np.ndarray, n: np.ndarray, dirs: np.ndarr
         ndl = ndl * sh
     # a faint rim from the view direction keeps silhouettes of dark sides readable
     rim = 0.08 * np.clip(1.0 + (n * dirs).sum(1), 0.0, 1.0) ** 3
-    return ALBEDO[None, :] * (amb + KEY * ndl)[:, None] + rim[:, None]
+    base = ALBEDO[None, :] if albedo is None else albedo
+    return base * (amb + KEY * ndl)[:, None] + rim[:, None]
+
+
+def _linear(srgb: np.ndarray) -> np.ndarray:
+    c = np.clip(srgb, 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _albedo(shape, fld, p: np.ndarray, params, check_ranges: bool) -> np.ndarray | None:
+    """Linear RGB ``(M, 3)`` of a coloured shape at world hits ``p`` (its ``color``
+    nodes, :mod:`csdf.colors`; uncoloured parts keep :data:`ALBEDO`), or None."""
+    from ..colors import colors_at, has_colors
+
+    tree = shape if hasattr(shape, "children") else getattr(shape, "shape", None)
+    if tree is None or not hasattr(tree, "children") or not has_colors(tree):
+        return None
+    local = p if fld.pose.is_identity() else fld.pose.apply_inverse(p)
+    given = dict(fld.params)
+    given.update(params or {})
+    rgba = colors_at(tree, local, given, check_ranges=check_ranges,
+                     default=tuple(_srgb(ALBEDO)) + (1.0,))
+    return _linear(np.nan_to_num(rgba[:, :3], nan=0.5))
 
 
 def _background(h: int, w: int) -> np.ndarray:
@@ -217,6 +240,8 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     Shading: Lambert from one key light (up and to the right of the camera) plus a
     hemisphere ambient term, in linear RGB, converted to sRGB; optional soft shadows
     (march towards the light) and ambient occlusion (field samples along the normal).
+    A shape with ``color`` nodes is drawn in its colours (:mod:`csdf.colors`: the
+    nearest coloured surface; uncoloured parts in the default blue).
 
     Args:
         shape: a 3D :class:`csdf.Shape`, a compiled :class:`csdf.Program`, or a
@@ -269,7 +294,8 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     hi = np.flatnonzero(hit)
     if hi.size:
         p = cam.t + t[hi, None] * dirs[hi]
-        color[hi] = _srgb(_shade(fld, cam, p, normals[hi], dirs[hi], shadows, ao))
+        albedo = None if ids is not None else _albedo(shape, fld, p, params, check_ranges)
+        color[hi] = _srgb(_shade(fld, cam, p, normals[hi], dirs[hi], shadows, ao, albedo))
     rgb = np.round(np.clip(color, 0.0, 1.0) * 255.0).astype(np.uint8)
     stats.update(seconds=time.perf_counter() - t_start,
                  backend=getattr(fld, "backend", "scene"))

@@ -85,6 +85,12 @@ class BuildContext:
 
     calls: dict[int, tuple[str, Expr, tuple[Expr, ...]]] = field(default_factory=dict)
     memo: dict[tuple, Expr] = field(default_factory=dict)
+    #: the surfaces that carry a colour, in build order (innermost first): ``(rgba or
+    #: None, distance)`` for each ``color`` node, and ``None`` for each leaf shape
+    #: outside any ``color`` node (see :mod:`csdf.colors`)
+    colored: list[tuple[tuple[float, ...] | None, Expr]] = field(default_factory=list)
+    #: how many ``color`` nodes enclose the shape being built
+    color_depth: int = 0
 
 
 class Shape:
@@ -147,7 +153,17 @@ class Shape:
         if hit is not None:
             return hit
         q = Vec(p.c[: self.dim])
-        out = self._fn(q, ctx)
+        if self.name == "color":
+            ctx.color_depth += 1
+            try:
+                out = self._fn(q, ctx)
+            finally:
+                ctx.color_depth -= 1
+            ctx.colored.append((tuple(self.args[0]), out))
+        else:
+            out = self._fn(q, ctx)
+            if not self.children and ctx.color_depth == 0:
+                ctx.colored.append((None, out))
         if self._primitive is not None and out.op not in ("x", "y", "z", "const", "param"):
             ctx.calls.setdefault(id(out), (self.name, out, tuple(q.c) + self._primitive))
         ctx.memo[key] = out

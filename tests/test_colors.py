@@ -1,0 +1,108 @@
+"""Colours on shapes (issue 24, first part): Shape.color, the nearest-coloured-surface
+rule through CSG (csdf.colors), coloured meshes and their files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+import csdf
+from csdf.cli import app
+from csdf.colors import DEFAULT_COLOR, color_program, colors_at
+
+RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+
+
+def _box_and_ball():
+    return (csdf.box(1).color(RED),
+            csdf.sphere(0.4).translate((0.5, 0, 0)).color(BLUE))
+
+
+def test_colours_follow_the_winning_operand_through_csg():
+    a, b = _box_and_ball()
+    # points on each operand's surface (or just off it)
+    on_a, on_b, cut = [-0.5, 0, 0], [0.9, 0, 0], [0.1, 0, 0]
+    u = colors_at(a | b, [on_a, on_b, [0, 0.5, 0]])
+    np.testing.assert_array_equal(u[:, :3], [RED, BLUE, RED])
+    i = colors_at(a & b, [[0.3, 0, np.sqrt(0.12)], [0.5, 0.0, 0.45]])  # ball; box's top
+    np.testing.assert_array_equal(i[:, :3], [BLUE, RED])
+    d = colors_at(a - b, [on_a, cut, [0, 0, 0.5]])  # the cut face is the cutter's
+    np.testing.assert_array_equal(d[:, :3], [RED, BLUE, RED])
+    s = colors_at(csdf.union(a, b, k=0.1), [on_a, on_b])  # a smooth blend: the nearer
+    np.testing.assert_array_equal(s[:, :3], [RED, BLUE])
+
+
+def test_uncoloured_parts_inner_colours_and_poses():
+    a, b = _box_and_ball()
+    plain = csdf.sphere(0.3).translate((-1.2, 0, 0))
+    c = colors_at(a | b | plain, [[-1.5, 0, 0], [-0.5, 0, 0]])
+    np.testing.assert_array_equal(c, [DEFAULT_COLOR, RED + (1.0,)])
+    # an inner colour wins over the outer one on its own surface
+    ball = csdf.sphere(0.4).translate((0.5, 0, 0))
+    nested = ((a | ball).color(GREEN) | plain).color((0.5, 0.5, 0.5, 0.25))
+    got = colors_at(nested, [[0.9, 0, 0], [-0.5, 0, 0], [-1.5, 0, 0]])
+    np.testing.assert_array_equal(got, [GREEN + (1.0,), RED + (1.0,), (0.5, 0.5, 0.5, 0.25)])
+    # colours move with the shape; no colour anywhere is the default; NaN in, NaN out
+    moved = (a | b).translate((10, 0, 0))
+    np.testing.assert_array_equal(colors_at(moved, [[10.9, 0, 0]])[0, :3], BLUE)
+    np.testing.assert_array_equal(colors_at(csdf.sphere(1), [[1, 0, 0]]), [DEFAULT_COLOR])
+    assert np.isnan(colors_at(a | b, [[np.nan, 0, 0]])).all()
+
+
+def test_geometry_is_untouched_by_colour():
+    a, b = _box_and_ball()
+    plain = csdf.box(1) - csdf.sphere(0.4).translate((0.5, 0, 0))
+    assert (a - b).compile().to_bytes() == plain.compile().to_bytes()
+    prog, palette = color_program(a - b)
+    assert palette.shape == (2, 4) and prog.dim == 3
+
+
+def test_coloured_meshes_round_trip_through_ply_glb_and_obj(tmp_path):
+    a, b = _box_and_ball()
+    m = csdf.mesh(a - b, resolution=48, colors=True, progress=False)
+    vc = np.asarray(m.visual.vertex_colors)
+    assert set(map(tuple, vc.tolist())) == {(255, 0, 0, 255), (0, 0, 255, 255)}
+    # the cut (inside the ball's reach) is blue, the rest red
+    blue = (vc[:, :3] == (0, 0, 255)).all(axis=1)
+    r = np.linalg.norm(m.vertices - [0.5, 0, 0], axis=1)
+    assert np.all(np.abs(r[blue] - 0.4) < 0.03)
+    for ext in ("ply", "glb", "obj"):
+        path = tmp_path / f"m.{ext}"
+        csdf.io.write_mesh(m, path)
+        back = trimesh.load(path, force="mesh", process=False)
+        got = np.asarray(back.visual.vertex_colors)
+        assert len(got) == len(vc) and set(map(tuple, got.tolist())) == set(
+            map(tuple, vc.tolist())), ext
+    with pytest.raises(csdf.CsdfError, match="needs a Shape"):
+        csdf.mesh((a - b).compile(), resolution=16, colors=True, progress=False)
+
+
+def test_cli_mesh_colors(tmp_path):
+    model = tmp_path / "m.csdf"
+    model.write_text("export box(1).color((1, 0, 0)) - sphere(0.4).translate((0.5, 0, 0))"
+                     ".color((0, 0, 1))\n")
+    out = tmp_path / "m.ply"
+    r = CliRunner().invoke(app, ["mesh", str(model), "-o", str(out), "--resolution", "32",
+                                 "--colors", "-q"])
+    assert r.exit_code == 0, r.output
+    vc = np.asarray(trimesh.load(out, process=False).visual.vertex_colors)
+    assert {(255, 0, 0, 255), (0, 0, 255, 255)} == set(map(tuple, vc.tolist()))
+
+
+def test_renders_are_drawn_in_the_shapes_colours():
+    from csdf.render.image import auto_camera
+
+    a, b = _box_and_ball()
+    plain = csdf.box(1) - csdf.sphere(0.4).translate((0.5, 0, 0))
+    cam = auto_camera(plain, 96, 72)
+    grey = csdf.render(plain, cam)
+    red = csdf.render(csdf.box(1).color(RED) - csdf.sphere(0.4).translate((0.5, 0, 0)),
+                      cam)
+    np.testing.assert_array_equal(red.depth, grey.depth)  # the same geometry
+    px = red.color[red.mask].astype(float)
+    # the box's faces are red, the (uncoloured) cut keeps the default blue
+    assert (px[:, 0] > 2 * px[:, 2] + 20).mean() > 0.5
+    both = csdf.render(a - b, cam).color[red.mask].astype(float)
+    assert (both[:, 2] > both[:, 0] + 20).sum() > 0 and (both[:, 0] > both[:, 2]).sum() > 0

@@ -43,16 +43,9 @@ def _entries(shape) -> list[tuple[tuple[float, ...] | None, Expr]]:
 
 def has_colors(shape) -> bool:
     """True when the shape tree holds a ``color`` node."""
-    stack, seen = [shape], set()
-    while stack:
-        s = stack.pop()
-        if id(s) in seen:
-            continue
-        seen.add(id(s))
-        if getattr(s, "name", None) == "color":
-            return True
-        stack.extend(getattr(s, "children", ()))
-    return False
+    from .shapes.base import walk_shapes
+
+    return any(s.name == "color" for s in walk_shapes(shape))
 
 
 def color_program(shape) -> tuple[Any, np.ndarray]:

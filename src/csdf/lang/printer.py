@@ -184,15 +184,10 @@ def _all_params(shape: Shape) -> list:
     """Parameters used anywhere in the call tree (also those a simplification removed
     from the expression, e.g. ``0 * r``), sorted by name."""
     from ..expr import expr_params
+    from ..shapes.base import walk_shapes
 
     exprs = []
-    stack, seen = [shape], set()
-    while stack:
-        s = stack.pop()
-        if id(s) in seen:
-            continue
-        seen.add(id(s))
-        stack.extend(s.children)
+    for s in walk_shapes(shape):
         vals = list(s.args) + list(s.kwargs.values())
         while vals:
             v = vals.pop()

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ShapeError
-from .base import Shape, register
+from .base import Shape, register, walk_shapes
 
 __all__ = ["color", "colors", "color_arg"]
 
@@ -60,13 +60,4 @@ def color(shape: Shape, rgb) -> Shape:
 
 def colors(shape: Shape) -> list[tuple[Shape, tuple[float, ...]]]:
     """Every ``color`` node of a shape tree with its colour, outermost first."""
-    out, stack, seen = [], [shape], set()
-    while stack:
-        s = stack.pop()
-        if id(s) in seen:
-            continue
-        seen.add(id(s))
-        if s.name == "color":
-            out.append((s, tuple(s.args[0])))
-        stack.extend(reversed(s.children))
-    return out
+    return [(s, tuple(s.args[0])) for s in walk_shapes(shape) if s.name == "color"]

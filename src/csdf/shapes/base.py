@@ -48,7 +48,7 @@ from ..vec import Vec
 __all__ = [
     "Shape", "BuildContext", "REGISTRY", "ApiEntry", "register", "scalar_arg", "vector_arg",
     "int_arg", "size_arg", "size_vector", "check_size", "derive_exactness", "Bounds",
-    "EXACTNESS", "MAX_EXPR_NODES", "MAX_EXPANSION",
+    "EXACTNESS", "MAX_EXPR_NODES", "MAX_EXPANSION", "walk_shapes",
 ]
 
 #: The most expression nodes that building one shape may create (shared
@@ -273,6 +273,19 @@ class ApiEntry:
 
 
 REGISTRY: dict[str, ApiEntry] = {}
+
+
+def walk_shapes(shape: Shape):
+    """Every node of a shape tree once (a shared subtree once), parents before their
+    children, children in order."""
+    stack, seen = [shape], set()
+    while stack:
+        s = stack.pop()
+        if id(s) in seen:
+            continue
+        seen.add(id(s))
+        yield s
+        stack.extend(reversed(s.children))
 
 
 def register(kind: str, name: str | None = None):

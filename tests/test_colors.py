@@ -106,3 +106,23 @@ def test_renders_are_drawn_in_the_shapes_colours():
     assert (px[:, 0] > 2 * px[:, 2] + 20).mean() > 0.5
     both = csdf.render(a - b, cam).color[red.mask].astype(float)
     assert (both[:, 2] > both[:, 0] + 20).sum() > 0 and (both[:, 0] > both[:, 2]).sum() > 0
+
+
+def test_scans_and_surface_samples_carry_colours():
+    a, b = _box_and_ball()
+    part = a - b
+    cam = csdf.Camera.look_at((2.5, -1.5, 1.5), (0, 0, 0), width=64, height=48)
+    p0, n0 = csdf.scan(part, cam, noise=0.002, outliers=0.05, seed=3)
+    p1, n1, c1 = csdf.scan(part, cam, noise=0.002, outliers=0.05, seed=3, colors=True)
+    np.testing.assert_array_equal(p0, p1)  # the same cloud, colours besides
+    np.testing.assert_array_equal(n0, n1)
+    assert c1.shape == (len(p1), 4) and np.all((c1 >= 0) & (c1 <= 1))
+    clean, _, cc = csdf.scan(part, cam, colors=True)
+    world = clean @ cam.R.T + cam.t  # the camera frame back to the object's
+    blue = (cc[:, :3] == BLUE).all(axis=1)
+    assert blue.any() and (cc[:, :3] == RED).all(axis=1).any()
+    r = np.linalg.norm(world[blue] - [0.5, 0, 0], axis=1)
+    assert np.all(np.abs(r - 0.4) < 1e-3)  # the blue returns lie on the cut
+    pts, nrm, col = csdf.sample_surface(part, 500, seed=1, colors=True)
+    on_ball = np.abs(np.linalg.norm(pts - [0.5, 0, 0], axis=1) - 0.4) < 1e-6
+    np.testing.assert_array_equal((col[:, :3] == BLUE).all(axis=1), on_ball)

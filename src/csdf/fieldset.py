@@ -43,7 +43,10 @@ _CONTRACT = {"exact": 0, "bound": 1, "neither": 2}
 
 def _hard_union_operands(shape) -> list:
     """The operands of ``shape`` as nested hard unions, flattened (``[shape]`` when its
-    root is anything else)."""
+    root is anything else); a ``color`` node is looked through (its geometry is its
+    child's)."""
+    if getattr(shape, "name", None) == "color":
+        return _hard_union_operands(shape.children[0])
     if getattr(shape, "name", None) != "union" or shape.kwargs.get("k") is not None:
         return [shape]
     out = []

@@ -208,7 +208,8 @@ def sample_surface(
     resolution: int | None = None,
     backend: str = "auto",
     check_ranges: bool = True,
-) -> tuple[np.ndarray, np.ndarray]:
+    colors: bool = False,
+) -> tuple:
     """Points uniformly distributed by area on the surface ``f = 0``, with normals.
 
     Method: mesh the shape by dual contouring (``resolution`` voxels along the longest
@@ -233,6 +234,8 @@ def sample_surface(
         backend: evaluation backend for the projection (see :class:`csdf.Program`).
         check_ranges: refuse a parameter value outside its declared range
             (:class:`csdf.ParamError` naming the range); False samples it anyway.
+        colors: also each point's colour (:func:`csdf.colors.colors_at`), a third
+            array ``(n, 4)`` RGBA in ``[0, 1]``.
 
     Returns:
         ``(points (n, 3), normals (n, 3))`` float64: points in model units with
@@ -250,12 +253,28 @@ def sample_surface(
     if getattr(shape, "__csdf_scene__", False):  # a csdf.Scene samples its instances
         if params:
             raise CsdfError("a scene's instances carry their own parameters")
+        if colors:
+            raise CsdfError("colors=True samples a shape; a scene's colours are not "
+                            "drawn yet")
         return shape.sample_surface(n, _rng(seed), resolution=resolution)
     fld = _field(shape, "sample_surface", params, backend, n, check_ranges=check_ranges)
+    tree = None
+    if colors:
+        tree = shape if hasattr(shape, "children") else getattr(shape, "shape", None)
+        if tree is None or not hasattr(tree, "children"):
+            raise CsdfError("colors=True needs a Shape (a compiled program has no colours)")
     rng = _rng(seed)
     if n == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    return _surface(fld, n, rng, resolution)
+        out = np.zeros((0, 3)), np.zeros((0, 3))
+    else:
+        out = _surface(fld, n, rng, resolution)
+    if not colors:
+        return out
+    from .colors import colors_at
+
+    local = out[0] if fld.pose.is_identity() else fld.pose.apply_inverse(out[0])
+    return out[0], out[1], colors_at(tree, local, dict(fld.params),
+                                     check_ranges=check_ranges)
 
 
 def sample_volume(

@@ -39,7 +39,7 @@ def _fraction(v, name: str, hi: float = math.inf) -> float:
 def scan(shape, camera: Camera, width: int | None = None, height: int | None = None,
          noise: float = 0.0, outliers: float = 0.0, seed=None, object_pose=None,
          params: dict | None = None, *, min_cos: float = MIN_COS, backend: str = "auto",
-         bounds=None, check_ranges: bool = True) -> tuple[np.ndarray, np.ndarray]:
+         bounds=None, check_ranges: bool = True, colors: bool = False) -> tuple:
     """Simulate a depth sensor: the visible surface points of a shape as a point cloud.
 
     Args:
@@ -68,6 +68,10 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
             shapes).
         check_ranges: refuse a parameter value outside its declared range
             (:class:`csdf.ParamError` naming the range); False scans it anyway.
+        colors: an RGB-D sensor: also each point's colour, the shape's at the surface
+            point the ray hit (:func:`csdf.colors.colors_at`; outliers get a random
+            colour drawn after everything else, so the points are those of
+            ``colors=False``).
 
     Returns:
         ``(points (M, 3), normals (M, 3))`` float64 in the **camera frame** (OpenCV),
@@ -75,7 +79,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         (``n . (0 - p) > 0``). ``M`` is 0 when nothing is seen. For a
         :class:`csdf.Scene` (traced by :meth:`csdf.Scene.raycast`, ``object_pose``
         placing the whole scene): ``(points, normals, instance (M,))``, the id of the
-        instance each point lies on (-1 for outliers).
+        instance each point lies on (-1 for outliers). With ``colors``, ``(points,
+        normals, colors (M, 4))`` RGBA in ``[0, 1]``.
 
     Raises:
         CsdfError: bad resolution, non-finite or negative noise, an outlier fraction
@@ -94,6 +99,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     scene = getattr(shape, "__csdf_scene__", False)
     if scene and (params or bounds is not None):
         raise CsdfError("a scene's instances carry their own parameters and bounds")
+    if scene and colors:
+        raise CsdfError("colors=True scans a shape; a scene's colours are not drawn yet")
 
     dcam = cam.pixel_directions()  # (N, 3) unit, camera frame
     M = pose.rotation.T @ cam.R  # camera frame -> object frame (rotation)
@@ -111,6 +118,16 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         keep = np.isfinite(t) & (facing >= min_cos)
     t, dk = t[keep], dcam[keep]
     ids = ids[keep] if scene else None
+    rgba = None
+    if colors:
+        from .colors import colors_at
+
+        tree = shape if hasattr(shape, "children") else getattr(shape, "shape", None)
+        if tree is None or not hasattr(tree, "children"):
+            raise CsdfError("colors=True needs a Shape (a compiled program has no colours)")
+        hit_obj = o_obj + t[:, None] * d_obj[keep]
+        given = dict(getattr(fld, "params", {}) or {})
+        rgba = colors_at(tree, hit_obj, given, check_ranges=check_ranges)
     normals = n_obj[keep] @ M  # object frame -> camera frame: M^T n
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     m = len(t)
@@ -133,4 +150,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         normals[sel] = rn
         if scene:
             ids[sel] = -1
+        if rgba is not None:
+            rgba[sel] = np.column_stack([rng.random((k, 3)), np.ones(k)])
+    if rgba is not None:
+        return points, normals, rgba
     return (points, normals, ids) if scene else (points, normals)

@@ -29,6 +29,7 @@ bindings) come with ``pip install 'csdf[bench]'``; without them their rows are s
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import sys
@@ -89,7 +90,35 @@ def _open3d_objects(sc: dict, clouds: dict) -> tuple[list, float]:
             time.perf_counter() - t0)
 
 
-def objects(n_scenes: int, use_open3d: bool) -> list[str]:
+def _cached_scene(seed: int, cache: str | None) -> dict:
+    """``clutter_scene(seed)``, or with ``cache`` (a folder) the copy saved there by an
+    earlier run (points, noise and the truth: model, pose, parameters, diameter,
+    symmetries), made and saved when missing. csdf.scan's output has been seen to
+    differ between runs (a scene of 49,054 points in one run had 48,919 in another),
+    so comparisons between versions of the detector use one saved copy."""
+    if cache is None:
+        return clutter_scene(seed)
+    path = Path(cache) / f"clutter_{seed}.npz"
+    if not path.exists():
+        sc = clutter_scene(seed)
+        Path(cache).mkdir(parents=True, exist_ok=True)
+        truth = [{"model": t["model"], "params": t["params"], "diameter": t["diameter"],
+                  "pose": t["pose"].matrix.tolist(),
+                  "symmetries": None if t["symmetries"] is None
+                  else np.asarray(t["symmetries"]).tolist()} for t in sc["truth"]]
+        np.savez(path, points=sc["points"], noise=sc["noise"],
+                 truth=json.dumps(truth))
+    z = np.load(path)
+    truth = json.loads(str(z["truth"]))
+    for t in truth:
+        m = np.asarray(t["pose"])
+        t["pose"] = csdf.Pose(m[:3, :3], m[:3, 3])
+        if t["symmetries"] is not None:
+            t["symmetries"] = np.asarray(t["symmetries"])
+    return {"points": z["points"], "noise": float(z["noise"]), "truth": truth}
+
+
+def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[str]:
     rows = {"csdf.detect": [0, 0, 0, 0.0, 0]}
     clouds = {}
     if use_open3d:
@@ -107,7 +136,7 @@ def objects(n_scenes: int, use_open3d: bool) -> list[str]:
     # depend on what the process evaluated before (a scene made after some detections
     # had 0.3 % fewer points), so made in between, the scenes would change with the
     # detector's code
-    scenes = [clutter_scene(seed) for seed in range(n_scenes)]
+    scenes = [_cached_scene(seed, cache) for seed in range(n_scenes)]
     for seed, sc in enumerate(scenes):
         for tr in sc["truth"]:
             tr["_points"] = _model_points(tr["model"], tr["params"])
@@ -245,12 +274,14 @@ def main() -> None:
     ap.add_argument("--no-cgal", action="store_true")
     ap.add_argument("--skip-objects", action="store_true")
     ap.add_argument("--skip-primitives", action="store_true")
+    ap.add_argument("--scene-cache", default=None, metavar="DIR",
+                    help="save the clutter scenes here on the first run, load them after")
     a = ap.parse_args()
     lines = []
     if not a.skip_primitives:
         lines += ["## Primitives", ""] + primitives(a.primitive_seeds, not a.no_cgal) + [""]
     if not a.skip_objects:
-        lines += ["## Objects in clutter", ""] + objects(a.scenes, not a.no_open3d)
+        lines += ["## Objects in clutter", ""] + objects(a.scenes, not a.no_open3d, a.scene_cache)
     print("\n".join(lines))
 
 

@@ -103,11 +103,14 @@ def _cached_scene(seed: int, cache: str | None) -> dict:
         sc = clutter_scene(seed)
         Path(cache).mkdir(parents=True, exist_ok=True)
         truth = [{"model": t["model"], "params": t["params"], "diameter": t["diameter"],
-                  "pose": t["pose"].matrix.tolist(),
+                  "pose": t["pose"].matrix.tolist(), "instance": t["instance"],
                   "symmetries": None if t["symmetries"] is None
                   else np.asarray(t["symmetries"]).tolist()} for t in sc["truth"]]
-        np.savez(path, points=sc["points"], noise=sc["noise"],
-                 truth=json.dumps(truth))
+        extra = {"distractors": [{"kind": d["kind"], "instance": d["instance"]}
+                                 for d in sc["distractors"]],
+                 "floor_instance": sc["floor_instance"]}
+        np.savez(path, points=sc["points"], noise=sc["noise"], instance=sc["instance"],
+                 truth=json.dumps(truth), extra=json.dumps(extra))
     z = np.load(path)
     truth = json.loads(str(z["truth"]))
     for t in truth:
@@ -115,7 +118,8 @@ def _cached_scene(seed: int, cache: str | None) -> dict:
         t["pose"] = csdf.Pose(m[:3, :3], m[:3, 3])
         if t["symmetries"] is not None:
             t["symmetries"] = np.asarray(t["symmetries"])
-    return {"points": z["points"], "noise": float(z["noise"]), "truth": truth}
+    return {"points": z["points"], "noise": float(z["noise"]), "truth": truth,
+            "instance": z["instance"], **json.loads(str(z["extra"]))}
 
 
 def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[str]:

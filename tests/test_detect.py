@@ -387,3 +387,10 @@ def test_detect_finds_a_partly_hidden_chair(chair_scan):
     pts = csdf.metrics.model_points(csdf.zoo.load("chair"), 300)
     diam = csdf.metrics.diameter(pts)
     assert csdf.metrics.mssd(pts, dets[0].pose, gt) < 0.1 * diam
+
+
+def test_detect_on_a_bare_floor_finds_nothing():
+    rng = np.random.default_rng(0)
+    P = np.column_stack([rng.uniform(-1, 1, 3000), rng.uniform(-1, 1, 3000),
+                         2.0 + rng.normal(0, 0.002, 3000)])  # a plane facing the sensor
+    assert csdf.detect(P, ["stool"], viewpoint=(0, 0, 0), seed=0) == []

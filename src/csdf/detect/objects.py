@@ -493,7 +493,9 @@ class _Run:
         lab = components(self.nb, mask, linked_edges(self.nb, strict=True))
         sizes = np.bincount(lab[lab >= 0]) if (lab >= 0).any() else np.zeros(0, int)
         big = sizes >= self.mp
-        self.label = np.where(lab >= 0, np.where(big[np.maximum(lab, 0)], lab, -1), -1)
+        self.label = np.full(len(lab), -1)
+        if len(big):
+            self.label = np.where(lab >= 0, np.where(big[np.maximum(lab, 0)], lab, -1), -1)
         self.sizes = sizes
         order = np.argsort(-sizes, kind="stable")
         self.clusters = [np.flatnonzero(lab == i) for i in order if big[i]]

@@ -141,9 +141,9 @@ FIT_POINTS = 1200
 #: yaws (turns about the support's normal) at which a fit's explained mass is scanned
 YAW_STEPS = 72
 #: the scan's best yaws (local maxima, away from the fit's own) fitted again
-YAW_REFITS = 2
+YAW_REFITS = 1
 #: ... and for a failed model's placement
-YAW_REFITS_FAILED = 2
+YAW_REFITS_FAILED = 1
 #: a scanned yaw within this many degrees of the fit's own is the fit's own
 YAW_SAME = 15.0
 #: points that score a yaw scan at most (a seeded subsample)
@@ -444,6 +444,7 @@ class _Run:
         self.sizes = np.zeros(0, dtype=int)
         self.estimate_noise = True
         self.upright = True
+        self.band_rejected = False  # the band test rejected a large fit (best_for)
         if vp is not None:
             d = P - vp
             self.dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
@@ -694,6 +695,8 @@ class _Run:
         own = np.isin(lab, labs[counts >= max(self.mp, 0.1 * counts.sum())]) & off
         band = np.count_nonzero(own & (d <= BAND * self.sigma))
         if band and np.count_nonzero(own & close) < MIN_BAND_FRACTION * band:
+            if len(inl) >= 2 * self.mp:
+                self.band_rejected = True
             return False, 0.0, inl, res, gain
         ok, score, inl, checked = self._judge(m, res, pose, near, close, inl, c)
         # the sensor's free-space evidence in the same units: the points the model's
@@ -713,10 +716,12 @@ class _Run:
             return False, 0.0, inl, res
         # of the free points inside the fitted model's box (a neighbour's points outside
         # it are not the model's business), enough must lie on its surface
-        b = as_field(m.shape, res.params, backend=m.backend, what="detect",
-                     check_ranges=False).bounds
+        # (its box from its surface samples at the fitted parameters: cheaper than the
+        # field's bounds, which are computed anew for every parameter vector)
+        surf, _ = self._surface_at(m, res.params)
+        b = np.array([surf.min(axis=0), surf.max(axis=0)])
         q = (self.P[near] - pose.translation) @ pose.rotation
-        pad = 3.0 * self.sigma
+        pad = 3.0 * self.sigma + 0.02 * m.radius
         boxed = np.all((q >= b[0] - pad) & (q <= b[1] + pad), axis=1) & ~self.support[near]
         if close[boxed].sum() < MIN_INLIER_FRACTION * boxed.sum():
             return False, 0.0, inl, res
@@ -740,6 +745,7 @@ class _Run:
 
     def best_for(self, idx: np.ndarray) -> Detection | None:
         """Steps 4-7 for the points ``idx``: the best verified detection, or None."""
+        self.band_rejected = False
         ext = self.P[idx].max(axis=0) - self.P[idx].min(axis=0)
         span = float(np.linalg.norm(ext))
         fits = [m for m in self.models if span <= 2.0 * m.radius * SIZE_SLACK + 6 * self.sigma]
@@ -794,12 +800,14 @@ class _Run:
         return None if best is None else best[1]
 
     def best_in_parts(self, idx: np.ndarray) -> Detection | None:
-        """When no model explains the points ``idx`` as one object, and their footprint
-        on the support is wider than some model's (two objects side by side, which
-        one model stretched to its range limits covers best, and the band test then
-        rejects): :meth:`best_for` of each half of a 2-means split of the footprint,
-        the larger first; the first detection found, or None."""
-        if self.plane is None or not self.upright or len(idx) < 2 * self.mp:
+        """When no model explains the points ``idx`` as one object, the band test
+        rejected a fit that explained many of them (two objects side by side, which
+        one model stretched to its range limits covers best) and their footprint on
+        the support is wider than some model's: :meth:`best_for` of each half of a
+        2-means split of the footprint, the larger first; the first detection found,
+        or None."""
+        if self.plane is None or not self.upright or len(idx) < 2 * self.mp or \
+                not self.band_rejected:
             return None
         nrm, off = self.plane
         Q = self.P[idx]

@@ -374,10 +374,31 @@ def test_occluded_points_are_those_behind_scan_points(chair_scan):
 
 
 def test_detect_rejects_a_model_that_is_not_there(clutter):
-    # a chair's surfaces can be laid over a stool's points, but not without points
-    # a few noise levels off them: the band test rejects it
     P, *_ = clutter
     assert csdf.detect(P, ["chair"], viewpoint=(0, 0, 0), seed=0) == []
+
+
+def test_band_fraction_counts_the_fits_own_clusters():
+    from csdf.detect.objects import BAND, _band_fraction
+
+    s = 0.01
+    on = np.full(300, 1.0 * s)             # on the surface, cluster 0
+    off_own = np.full(100, 4.0 * s)        # just off it, cluster 0: structure it lacks
+    far = np.full(50, 2.0 * BAND * s)      # outside the band: not judged
+    d = np.concatenate([on, off_own, far])
+    lab = np.zeros(len(d), dtype=int)
+    keep = np.ones(len(d), dtype=bool)
+    assert _band_fraction(d, lab, keep, s, 50) == pytest.approx(0.75)
+    # the same points off the surface in a neighbour's cluster are no evidence
+    lab2 = lab.copy()
+    lab2[300:400] = 1
+    assert _band_fraction(d, lab2, keep, s, 50) == 1.0
+    # ... unless the fit also explains many of that cluster's points (its own too)
+    d3 = d.copy()
+    d3[300:360] = 0.5 * s
+    assert _band_fraction(d3, lab2, keep, s, 50) == pytest.approx(360 / 400)
+    # support points are not judged
+    assert _band_fraction(d, lab, np.arange(len(d)) < 300, s, 50) == 1.0
 
 
 def test_detect_finds_a_partly_hidden_chair(chair_scan):

@@ -17,11 +17,13 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    stand upright on it (their +z along *up*, their lowest point on the plane):
    ``YAWS`` turns about *up* at two positions each (the cluster's footprint centre, and
    pushed away from the sensor by a third of the model's radius: a single view sees the
-   near side), scored at once, both ways: the robust (Huber) cost of the model's exact
+   near side) and ``PARAM_STARTS + 1`` parameter sets (the defaults and the draws of a
+   ``PARAM_BANK`` Latin hypercube whose height is nearest the cluster's), scored at
+   once, both ways: the robust (Huber) cost of the model's exact
    signed distance at a fixed subsample of the cluster, plus the truncated squared
    distance from each of the model's surface samples that face the sensor to the
-   nearest scan point (a model standing where the sensor saw nothing pays); the best
-   ``REFINE_TOP`` get a few
+   nearest scan point (a model standing where the sensor saw nothing pays; a sample
+   hidden behind a nearer scan point does not); the best ``REFINE_TOP`` get a few
    pose-only Gauss-Newton steps (:func:`csdf.fit` on the subsample). Without a support,
    :func:`csdf.fit`'s ``multistart`` search replaces this step.
 5. **Refinement.** The best hypothesis is refined by :func:`csdf.fit` in pose and shape
@@ -31,12 +33,19 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    point in its direction, the support's included (:func:`csdf.fit.check_fit`): its
    visible surface must be seen (at most ``MAX_SEE_THROUGH`` of it where the sensor saw
    farther, through the model, and at most ``MAX_UNEXPLAINED`` see-through or empty in
-   all), and it must explain at least ``min_points`` points (within three noise levels).
+   all), and it must explain at least ``min_points`` points (within three noise levels);
+   of its own clusters' free points within ``BAND`` noise levels of its surface, at
+   least ``MIN_BAND_FRACTION`` must lie within three (the band test).
    Without a viewpoint only the points explained and the inlier rmse are judged.
-7. **Competition.** Of the models that pass for a cluster, the one that explains most
-   points wins (ties: the lower fit cost). Its inliers are claimed: other clusters that
+7. **Competition.** The fits that pass are ranked by their explained mass
+   (:func:`_gain` summed over the free points near them, less the free-space evidence
+   in the same units); the winner's best other yaw of a ``YAW_STEPS`` scan, and those
+   of failed models the screen ranked above it, are fitted again and compete too. The
+   winner's inliers are claimed: other clusters that
    are mostly claimed are skipped (one object split in two by an occluder), and a
-   cluster with enough unclaimed points left is searched again (two objects touching).
+   cluster with enough unclaimed points left is searched again (two objects touching);
+   a cluster no model explains as one, after the band test rejected a large fit, is
+   searched by the halves of its footprint (:meth:`_Run.best_in_parts`).
 
 Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``.
 """
@@ -690,11 +699,7 @@ class _Run:
         # have there (another object's, or this one's where the fit is wrong)
         # (its own clusters' points: a neighbour standing a few noise levels away is
         # another cluster, and no evidence against the fit)
-        lab = self.label[near]
-        labs, counts = np.unique(lab[off & close & (lab >= 0)], return_counts=True)
-        own = np.isin(lab, labs[counts >= max(self.mp, 0.1 * counts.sum())]) & off
-        band = np.count_nonzero(own & (d <= BAND * self.sigma))
-        if band and np.count_nonzero(own & close) < MIN_BAND_FRACTION * band:
+        if _band_fraction(d, self.label[near], off, self.sigma, self.mp) < MIN_BAND_FRACTION:
             if len(inl) >= 2 * self.mp:
                 self.band_rejected = True
             return False, 0.0, inl, res, gain
@@ -943,6 +948,28 @@ class _Run:
             if ok:
                 found.append((gain, sc, r, il, ch))
         return found
+
+
+def _band_fraction(d: np.ndarray, lab: np.ndarray, off: np.ndarray, sigma: float,
+                   mp: int) -> float:
+    """The band test's figure: of the points of a fit's own clusters within ``BAND``
+    noise levels of its surface, the fraction within three (1.0 when there are none).
+
+    Args:
+        d: ``(K,)`` unsigned distances of the free points near the fit to its surface
+            (scene units).
+        lab: ``(K,)`` their cluster labels (-1: none).
+        off: ``(K,)`` which of them are off the support.
+        sigma: the noise level (scene units).
+        mp: the fewest points a detection explains; a cluster is the fit's own when it
+            holds at least ``max(mp, 10 %)`` of the fit's close points (a neighbour that
+            only reaches into the band is not).
+    """
+    close = d <= 3.0 * sigma
+    labs, counts = np.unique(lab[off & close & (lab >= 0)], return_counts=True)
+    own = np.isin(lab, labs[counts >= max(mp, 0.1 * counts.sum())]) & off
+    band = np.count_nonzero(own & (d <= BAND * sigma))
+    return np.count_nonzero(own & close) / band if band else 1.0
 
 
 #: the explained mass of a point at the cap (``log(1 + GAIN_CAP^2)``)

@@ -556,12 +556,14 @@ class _Run:
             front = np.einsum("hki,hki->hk", Nw, self.vp - X) > 0
         else:
             front = np.ones(X.shape[:2], dtype=bool)
-        dd, _ = self.nb.tree.query(X.reshape(-1, 3), k=1, distance_upper_bound=fs)
-        dd = np.minimum(dd, fs).reshape(X.shape[:2])
+        dd = np.zeros(X.shape[:2])  # only the sensor-facing samples are looked up
+        q, _ = self.nb.tree.query(X[front], k=1, distance_upper_bound=fs)
+        q = np.minimum(q, fs)
         if self.vp is not None:
             # a sample whose ray shows a scan point nearer than it is hidden (by another
             # object): its missing points are no evidence against the pose
-            dd = np.where(self._occluded(X, fs), 0.0, dd)
+            q = np.where(self._occluded(X[front], fs), 0.0, q)
+        dd[front] = q
         back = (np.where(front, 0.5 * dd * dd, 0.0).sum(axis=1)
                 / np.maximum(front.sum(axis=1), 1))
         return (fwd + BACK_WEIGHT * back) / fs ** 2

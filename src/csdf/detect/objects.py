@@ -52,7 +52,6 @@ Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
@@ -630,19 +629,17 @@ class _Run:
                 if lab in own or k >= PIECE_INSIDE * self.sizes[lab]]
         return np.flatnonzero(inside & np.isin(self.label, keep))
 
-    def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | dict | None,
-                   held: bool = False) -> FitResult | None:
+    def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | dict | None
+                   ) -> FitResult | None:
         """Step 5: the refined fit of model ``m`` to the points ``idx`` from the placed
         hypothesis ``init`` (a result or a dict of ``rotation``, ``translation`` and
-        ``params``; None: :func:`csdf.fit`'s multistart search); ``held``: the pose
-        only, the parameters kept at ``init``'s."""
+        ``params``; None: :func:`csdf.fit`'s multistart search)."""
         if init is not None:
             idx = self._gather(m, idx, init)
         F = idx if len(idx) <= FIT_POINTS else np.sort(
             self.rng.choice(idx, FIT_POINTS, replace=False))
         try:
-            res = fit(m.shape, self.P[F], init=init,
-                      estimate=("pose",) if held else ("pose", "params"),
+            res = fit(m.shape, self.P[F], init=init, estimate=("pose", "params"),
                       loss="cauchy", f_scale=max(self.sigma, 0.005 * m.radius),
                       viewpoint=self.vp, multistart=init is None,
                       seed=int(self.rng.integers(2**31)), max_iter=40, escape=False,
@@ -651,14 +648,13 @@ class _Run:
             return None
         if init is None or self.plane is None:
             return res
-        return self._upright_fit(m, F, res, refit=not held)
+        return self._upright_fit(m, F, res)
 
-    def _upright_fit(self, m: _Model, F: np.ndarray, res: FitResult, refit: bool = True
-                     ) -> FitResult | None:
+    def _upright_fit(self, m: _Model, F: np.ndarray, res: FitResult) -> FitResult | None:
         """``res`` stood on the support (upright, the model's floor on the plane), then
-        (``refit``) its parameters fitted again with that pose held. None when ``res``
-        tilts more than ``UPRIGHT_SNAP`` degrees (it fell over: not an object standing
-        on the support)."""
+        its parameters fitted again with that pose held. None when ``res`` tilts more
+        than ``UPRIGHT_SNAP`` degrees (it fell over: not an object standing on the
+        support)."""
         nrm, off = self.plane
         R = res.rotation
         if R[:, 2] @ nrm < math.cos(math.radians(UPRIGHT_SNAP)):
@@ -668,8 +664,6 @@ class _Run:
         R = np.stack([x, np.cross(nrm, x), nrm], axis=1)
         t = np.asarray(res.translation, float)
         t = t - (t @ nrm - off + m.bounds[0, 2]) * nrm
-        if not refit:
-            return dataclasses.replace(res, rotation=R, translation=t)
         try:
             return fit(m.shape, self.P[F], init={"rotation": R, "translation": t,
                                                  "params": res.params},
@@ -789,12 +783,9 @@ class _Run:
                 ranked_above = done
             turn += [d for d in ranked_above if d[1] is not None and not d[3]][:TURN_MODELS]
             for m, init, _res, found in turn:
-                # a verified fit turns with its parameters held (its turns are then told
-                # apart by the few points that differ, not by how the parameters were
-                # fitted again); a failed placement is fitted in full from its turns
                 base = max(found, key=lambda f: f[0])[2] if found else init
                 self._turns(m, idx, base, found,
-                            YAW_REFITS if found else YAW_REFITS_FAILED, held=False)
+                            YAW_REFITS if found else YAW_REFITS_FAILED)
         best = None
         for m, _, _, found in done:
             if not found:
@@ -843,9 +834,11 @@ class _Run:
         g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
         return surf, g
 
-    def _ray_index(self):
-        """A KD-tree of the scan's unit ray directions and the angular tolerance of a
-        ray match (1.5 times the median angle to the nearest other ray), built once."""
+    def _ray_index(self) -> tuple[Any, float, np.ndarray]:
+        """``(tree, tolerance, ranges)``: a KD-tree of the scan's unit ray directions,
+        the angular tolerance of a ray match (radians, as a chord: 1.5 times the median
+        angle to the nearest other ray) and the points' ranges ``(N,)`` from the
+        viewpoint (scene units); built once."""
         if getattr(self, "_rays", None) is None:
             from scipy.spatial import cKDTree
 
@@ -905,7 +898,7 @@ class _Run:
         return angles, score, cw
 
     def _turns(self, m: _Model, idx: np.ndarray, base: FitResult, found: list,
-               refits: int, held: bool = False) -> list:
+               refits: int) -> list:
         """``found`` with the fits that pass verification (items ``(explained mass,
         score, result, inliers, checked)``) from ``base`` turned about the support's
         normal to the ``refits`` best yaws of :meth:`_yaw_scan` (local maxima at least
@@ -913,8 +906,7 @@ class _Run:
         the model's own symmetries, count once). A single view often leaves a box-like
         object's front and back, or its sides, nearly alike, and the turn of a nearly
         symmetric one (a lamp's spokes) rests on a few points: the screen's pick among
-        them is a close call. ``held``: the turned fits keep ``base``'s parameters
-        (pose-only steps)."""
+        them is a close call."""
         nrm = self.plane[0]
         angles, score, cw = self._yaw_scan(m, base.rotation, base.translation,
                                            dict(base.params))
@@ -943,7 +935,7 @@ class _Run:
             init = {"rotation": Rt @ base.rotation,
                     "translation": Rt @ (base.translation - cw) + cw,
                     "params": dict(base.params)}
-            r = self._candidate(m, idx, init, held=held)
+            r = self._candidate(m, idx, init)
             if r is None:
                 continue
             ok, sc, il, ch, gain = self._verify(m, r)

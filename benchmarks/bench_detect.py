@@ -13,6 +13,7 @@ that matches none is a false positive. Objects with fewer than 10 % of their sur
 samples visible are left out of recall as in BOP (none are here: every object has at
 least 300 points). Seconds per object: the call's wall time over the objects in the
 scene. The determinism check runs the first scene twice and compares the outputs.
+All scenes are made before the first detection.
 
 **Primitives** (``detect_scenes.primitive_scene``): 40k points on a plane patch and one
 or two each of spheres, cylinders, cones, tori and boxes, noise 1 mm along the normal.
@@ -28,6 +29,7 @@ bindings) come with ``pip install 'csdf[bench]'``; without them their rows are s
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import sys
@@ -88,7 +90,39 @@ def _open3d_objects(sc: dict, clouds: dict) -> tuple[list, float]:
             time.perf_counter() - t0)
 
 
-def objects(n_scenes: int, use_open3d: bool) -> list[str]:
+def _cached_scene(seed: int, cache: str | None) -> dict:
+    """``clutter_scene(seed)``, or with ``cache`` (a folder) the copy saved there by an
+    earlier run (points, noise and the truth: model, pose, parameters, diameter,
+    symmetries), made and saved when missing. csdf.scan's output has been seen to
+    differ between runs (a scene of 49,054 points in one run had 48,919 in another),
+    so comparisons between versions of the detector use one saved copy."""
+    if cache is None:
+        return clutter_scene(seed)
+    path = Path(cache) / f"clutter_{seed}.npz"
+    if not path.exists():
+        sc = clutter_scene(seed)
+        Path(cache).mkdir(parents=True, exist_ok=True)
+        truth = [{"model": t["model"], "params": t["params"], "diameter": t["diameter"],
+                  "pose": t["pose"].matrix.tolist(), "instance": t["instance"],
+                  "symmetries": None if t["symmetries"] is None
+                  else np.asarray(t["symmetries"]).tolist()} for t in sc["truth"]]
+        extra = {"distractors": [{"kind": d["kind"], "instance": d["instance"]}
+                                 for d in sc["distractors"]],
+                 "floor_instance": sc["floor_instance"]}
+        np.savez(path, points=sc["points"], noise=sc["noise"], instance=sc["instance"],
+                 truth=json.dumps(truth), extra=json.dumps(extra))
+    z = np.load(path)
+    truth = json.loads(str(z["truth"]))
+    for t in truth:
+        m = np.asarray(t["pose"])
+        t["pose"] = csdf.Pose(m[:3, :3], m[:3, 3])
+        if t["symmetries"] is not None:
+            t["symmetries"] = np.asarray(t["symmetries"])
+    return {"points": z["points"], "noise": float(z["noise"]), "truth": truth,
+            "instance": z["instance"], **json.loads(str(z["extra"]))}
+
+
+def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[str]:
     rows = {"csdf.detect": [0, 0, 0, 0.0, 0]}
     clouds = {}
     if use_open3d:
@@ -102,8 +136,12 @@ def objects(n_scenes: int, use_open3d: bool) -> list[str]:
             print("Open3D not installed: its row is skipped")
     deterministic = None
     per_model: dict[str, list[int]] = {}
-    for seed in range(n_scenes):
-        sc = clutter_scene(seed)
+    # every scene is made before any detection runs: csdf.scan's output was seen to
+    # depend on what the process evaluated before (a scene made after some detections
+    # had 0.3 % fewer points), so made in between, the scenes would change with the
+    # detector's code
+    scenes = [_cached_scene(seed, cache) for seed in range(n_scenes)]
+    for seed, sc in enumerate(scenes):
         for tr in sc["truth"]:
             tr["_points"] = _model_points(tr["model"], tr["params"])
         if seed == 0:  # untimed: loads the models' kernels; compared for determinism
@@ -240,12 +278,14 @@ def main() -> None:
     ap.add_argument("--no-cgal", action="store_true")
     ap.add_argument("--skip-objects", action="store_true")
     ap.add_argument("--skip-primitives", action="store_true")
+    ap.add_argument("--scene-cache", default=None, metavar="DIR",
+                    help="save the clutter scenes here on the first run, load them after")
     a = ap.parse_args()
     lines = []
     if not a.skip_primitives:
         lines += ["## Primitives", ""] + primitives(a.primitive_seeds, not a.no_cgal) + [""]
     if not a.skip_objects:
-        lines += ["## Objects in clutter", ""] + objects(a.scenes, not a.no_open3d)
+        lines += ["## Objects in clutter", ""] + objects(a.scenes, not a.no_open3d, a.scene_cache)
     print("\n".join(lines))
 
 

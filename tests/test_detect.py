@@ -297,3 +297,121 @@ def test_feet_split_a_cluster_wider_than_the_model():
     two = np.array(sorted(feet[1:3], key=lambda c: c[0]))
     assert np.allclose(two, [[0, 0, 0], [1, 0, 0]], atol=0.02)
     assert all(np.array_equal(a, b) for a, b in zip(feet, _feet(F, foot=0.3)))
+
+
+# -- detect: the pieces of the object detector ----------------------------------------
+
+def test_gain_is_a_capped_soft_count():
+    from csdf.detect.objects import GAIN_CAP, GAIN_CAP_LOG, _gain
+
+    d = np.array([0.0, 0.5, 1.0, 2.0, GAIN_CAP, 10.0]) * 0.01
+    g = _gain(d, 0.01)
+    assert g[0] == pytest.approx(GAIN_CAP_LOG)
+    assert np.all(np.diff(g) <= 0) and g[-2] == 0.0 and g[-1] == 0.0
+
+
+def test_model_heights_follow_their_parameters():
+    from csdf.detect.objects import _heights
+    from csdf.field import as_field
+
+    fld = as_field(csdf.zoo.load("table"), what="test")
+    b = np.array(fld.bounds)
+    h = _heights(fld, [None, {"height": 0.65}, {"height": 1.0}], b)
+    # the probe's tolerance is half a column spacing over the footprint
+    assert h == pytest.approx([0.75, 0.65, 1.0], abs=0.03)
+
+
+@pytest.fixture(scope="module")
+def chair_scan():
+    scene = csdf.Scene()
+    scene.add(csdf.box((6.0, 6.0, 0.05)), pose=csdf.Pose(translation=(0, 0, -0.025)),
+              name="floor")
+    c, s = math.cos(1.0), math.sin(1.0)
+    pose = csdf.Pose([[c, -s, 0], [s, c, 0], [0, 0, 1]], (0.0, 0.2, 0.0))
+    scene.add("chair", pose=pose, name="chair")
+    scene.add(csdf.box((0.4, 0.4, 0.4)), pose=csdf.Pose(translation=(0.1, -0.6, 0.2)),
+              name="crate")  # in front of the chair: hides part of it
+    cam = csdf.Camera.look_at(eye=(0.3, -2.6, 1.6), target=(0.0, 0.2, 0.4), fov=45,
+                              width=200, height=150)
+    P, N, inst = csdf.scan(scene, cam, noise=0.006, outliers=0.0, seed=2)
+    return P, inst, _camera_pose(cam, pose)
+
+
+def _prepared(P, models):
+    from csdf.detect.objects import _models_arg, _prepare
+
+    return _prepare(P, _models_arg(models), None, np.zeros(3), 0, None, None, True)
+
+
+def test_yaw_scan_turns_a_fit_back_to_the_seen_yaw(chair_scan):
+    P, inst, gt = chair_scan
+    run = _prepared(P, ["chair"])
+    m = run.models[0]
+    nrm = run.plane[0]
+    R0, t0 = gt.rotation, gt.translation
+    for turn in (math.pi / 2, math.pi):  # a side view's and a front/back confusion
+        K = np.array([[0, -nrm[2], nrm[1]], [nrm[2], 0, -nrm[0]], [-nrm[1], nrm[0], 0]])
+        Rt = np.eye(3) + math.sin(turn) * K + (1 - math.cos(turn)) * K @ K
+        c = R0 @ m.centre + t0
+        R, t = Rt @ R0, Rt @ (t0 - c) + c
+        angles, score, _ = run._yaw_scan(m, R, t, {})
+        best = float(angles[int(np.argmax(score))])
+        back = (best + turn) % (2 * math.pi)  # zero when the scan undoes the turn
+        assert min(back, 2 * math.pi - back) < math.radians(10)
+
+
+def test_occluded_points_are_those_behind_scan_points(chair_scan):
+    P, inst, gt = chair_scan
+    run = _prepared(P, ["chair"])
+    d = P / np.linalg.norm(P, axis=1, keepdims=True)
+    r = np.linalg.norm(P, axis=1)
+    pick = np.arange(0, len(P), 97)
+    behind = d[pick] * (r[pick] + 0.2)[:, None]
+    before = d[pick] * (r[pick] - 0.2)[:, None]
+    assert run._occluded(behind, 0.05).all()
+    assert not run._occluded(before, 0.05).any()
+    assert not run._occluded(P[pick], 0.05).any()
+
+
+def test_detect_rejects_a_model_that_is_not_there(clutter):
+    P, *_ = clutter
+    assert csdf.detect(P, ["chair"], viewpoint=(0, 0, 0), seed=0) == []
+
+
+def test_band_fraction_counts_the_fits_own_clusters():
+    from csdf.detect.objects import BAND, _band_fraction
+
+    s = 0.01
+    on = np.full(300, 1.0 * s)             # on the surface, cluster 0
+    off_own = np.full(100, 4.0 * s)        # just off it, cluster 0: structure it lacks
+    far = np.full(50, 2.0 * BAND * s)      # outside the band: not judged
+    d = np.concatenate([on, off_own, far])
+    lab = np.zeros(len(d), dtype=int)
+    keep = np.ones(len(d), dtype=bool)
+    assert _band_fraction(d, lab, keep, s, 50) == pytest.approx(0.75)
+    # the same points off the surface in a neighbour's cluster are no evidence
+    lab2 = lab.copy()
+    lab2[300:400] = 1
+    assert _band_fraction(d, lab2, keep, s, 50) == 1.0
+    # ... unless the fit also explains many of that cluster's points (its own too)
+    d3 = d.copy()
+    d3[300:360] = 0.5 * s
+    assert _band_fraction(d3, lab2, keep, s, 50) == pytest.approx(360 / 400)
+    # support points are not judged
+    assert _band_fraction(d, lab, np.arange(len(d)) < 300, s, 50) == 1.0
+
+
+def test_detect_finds_a_partly_hidden_chair(chair_scan):
+    P, inst, gt = chair_scan
+    dets = csdf.detect(P, ["chair", "table"], viewpoint=(0, 0, 0), seed=0)
+    assert [d.model for d in dets] == ["chair"], dets
+    pts = csdf.metrics.model_points(csdf.zoo.load("chair"), 300)
+    diam = csdf.metrics.diameter(pts)
+    assert csdf.metrics.mssd(pts, dets[0].pose, gt) < 0.1 * diam
+
+
+def test_detect_on_a_bare_floor_finds_nothing():
+    rng = np.random.default_rng(0)
+    P = np.column_stack([rng.uniform(-1, 1, 3000), rng.uniform(-1, 1, 3000),
+                         2.0 + rng.normal(0, 0.002, 3000)])  # a plane facing the sensor
+    assert csdf.detect(P, ["stool"], viewpoint=(0, 0, 0), seed=0) == []

@@ -17,11 +17,13 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    stand upright on it (their +z along *up*, their lowest point on the plane):
    ``YAWS`` turns about *up* at two positions each (the cluster's footprint centre, and
    pushed away from the sensor by a third of the model's radius: a single view sees the
-   near side), scored at once, both ways: the robust (Huber) cost of the model's exact
+   near side) and ``PARAM_STARTS + 1`` parameter sets (the defaults and the draws of a
+   ``PARAM_BANK`` Latin hypercube whose height is nearest the cluster's), scored at
+   once, both ways: the robust (Huber) cost of the model's exact
    signed distance at a fixed subsample of the cluster, plus the truncated squared
    distance from each of the model's surface samples that face the sensor to the
-   nearest scan point (a model standing where the sensor saw nothing pays); the best
-   ``REFINE_TOP`` get a few
+   nearest scan point (a model standing where the sensor saw nothing pays; a sample
+   hidden behind a nearer scan point does not); the best ``REFINE_TOP`` get a few
    pose-only Gauss-Newton steps (:func:`csdf.fit` on the subsample). Without a support,
    :func:`csdf.fit`'s ``multistart`` search replaces this step.
 5. **Refinement.** The best hypothesis is refined by :func:`csdf.fit` in pose and shape
@@ -31,12 +33,19 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    point in its direction, the support's included (:func:`csdf.fit.check_fit`): its
    visible surface must be seen (at most ``MAX_SEE_THROUGH`` of it where the sensor saw
    farther, through the model, and at most ``MAX_UNEXPLAINED`` see-through or empty in
-   all), and it must explain at least ``min_points`` points (within three noise levels).
+   all), and it must explain at least ``min_points`` points (within three noise levels);
+   of its own clusters' free points within ``BAND`` noise levels of its surface, at
+   least ``MIN_BAND_FRACTION`` must lie within three (the band test).
    Without a viewpoint only the points explained and the inlier rmse are judged.
-7. **Competition.** Of the models that pass for a cluster, the one that explains most
-   points wins (ties: the lower fit cost). Its inliers are claimed: other clusters that
+7. **Competition.** The fits that pass are ranked by their explained mass
+   (:func:`_gain` summed over the free points near them, less the free-space evidence
+   in the same units); the winner's best other yaw of a ``YAW_STEPS`` scan, and those
+   of failed models the screen ranked above it, are fitted again and compete too. The
+   winner's inliers are claimed: other clusters that
    are mostly claimed are skipped (one object split in two by an occluder), and a
-   cluster with enough unclaimed points left is searched again (two objects touching).
+   cluster with enough unclaimed points left is searched again (two objects touching);
+   a cluster no model explains as one, after the band test rejected a large fit, is
+   searched by the halves of its footprint (:meth:`_Run.best_in_parts`).
 
 Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``.
 """
@@ -69,7 +78,7 @@ from .surfaces import frame_z
 
 __all__ = ["Detection", "detect", "detections_to_scene", "YAWS", "REFINE_TOP",
            "SUPPORT_SPAN", "SUPPORT_MIN_FRACTION", "MAX_SEE_THROUGH", "MAX_UNEXPLAINED",
-           "MAX_MODELS"]
+           "MAX_MODELS", "YAW_STEPS", "YAW_REFITS", "BAND", "MIN_BAND_FRACTION"]
 
 #: upright hypotheses: turns about the support's normal
 YAWS = 16
@@ -92,6 +101,11 @@ CLUSTER_LEFT = 0.3
 #: the fitted parameters, padded by three noise levels) within three noise levels of
 #: its surface
 MIN_INLIER_FRACTION = 0.75
+#: the band around a fitted surface (noise levels) whose free points must mostly lie
+#: within three noise levels of it ...
+BAND = 5.0
+#: ... at least this fraction of them
+MIN_BAND_FRACTION = 0.9
 #: another cluster joins a fit when at least this fraction of it lies inside the placed
 #: model's bounding sphere
 PIECE_INSIDE = 0.5
@@ -105,8 +119,18 @@ MODEL_RESOLUTION = 48
 SURFACE_SAMPLES = 300
 #: weight of the model-to-scan term of the screening cost
 BACK_WEIGHT = 4.0
-#: parameter sets besides the defaults that the hypotheses are screened with
+#: parameter sets besides the defaults that the hypotheses are screened with: those of
+#: ``PARAM_BANK`` draws whose height is nearest the cluster's
 PARAM_STARTS = 4
+#: parameter draws per model (a Latin hypercube over its declared ranges)
+PARAM_BANK = 32
+#: the draws leave this fraction of each range out at both ends
+BANK_MARGIN = 0.1
+#: columns (per side) and levels of the probe of each draw's height, and the reach of
+#: the levels (times the model's height at the defaults)
+HEIGHT_COLUMNS = 7
+HEIGHT_LEVELS = 128
+HEIGHT_REACH = 2.5
 #: models refined per cluster: those whose best upright hypothesis costs least
 MODELS_REFINED = 3
 #: a fit whose up axis is within this many degrees of the support's normal is stood
@@ -117,16 +141,23 @@ UPRIGHT_SNAP = 15.0
 FEET_REACH = 1.2
 #: the most k-means groups tried (k = 2 .. FEET_SPLIT)
 FEET_SPLIT = 3
-#: the winner is also fitted from its turns by 360 / TURNS degrees about the support's
-#: normal
-TURNS = 4
 #: the most failed models (ranked above the winner by the screen) whose placements
 #: are turned
 TURN_MODELS = 2
-#: verification scores within this of the best tie (the lower fit cost wins)
-TURN_TIE = 0.02
 #: points of the final fit at most (a seeded subsample)
 FIT_POINTS = 1200
+#: yaws (turns about the support's normal) at which a fit's explained mass is scanned
+YAW_STEPS = 72
+#: the scan's best yaws (local maxima, away from the fit's own) fitted again
+YAW_REFITS = 1
+#: ... and for a failed model's placement
+YAW_REFITS_FAILED = 1
+#: a scanned yaw within this many degrees of the fit's own is the fit's own
+YAW_SAME = 15.0
+#: points that score a yaw scan at most (a seeded subsample)
+SCAN_POINTS = 1500
+#: the explained mass of a point saturates at this many noise levels from the surface
+GAIN_CAP = 3.0
 
 
 @dataclass
@@ -184,6 +215,7 @@ class _Model:
     normals: np.ndarray  # (K, 3) their outward unit normals
     starts: list  # parameter sets the hypotheses start from (None: the defaults)
     foot: float  # radius of the footprint (model xy) about the centre, at the defaults
+    heights: np.ndarray  # (S,) the model's top (model z) at each of ``starts``
 
 
 def _model(name: str, shape: Any, source: Any) -> _Model:
@@ -198,17 +230,43 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
     surf = model_points(fld, SURFACE_SAMPLES, resolution=MODEL_RESOLUTION)
     g = np.asarray(fld.gradient(surf), dtype=float)
     g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-    # the defaults, and seeded draws from the middle of the declared ranges
+    # the defaults, and a seeded stratified draw (a Latin hypercube) over the middle of
+    # the declared ranges, each with the model's height
     rng = np.random.default_rng(0)
     starts: list = [None]
     ranged = [p for p in fld.program.params if math.isfinite(p.lo) and math.isfinite(p.hi)]
-    for _ in range(PARAM_STARTS if ranged else 0):
-        starts.append({p.name: float(rng.uniform(p.lo + 0.2 * (p.hi - p.lo),
-                                                 p.hi - 0.2 * (p.hi - p.lo)))
-                       for p in ranged})
+    if ranged:
+        strata = np.array([rng.permutation(PARAM_BANK) for _ in ranged])  # (P, B)
+        u = (strata + rng.uniform(size=strata.shape)) / PARAM_BANK
+        for k in range(PARAM_BANK):
+            starts.append({p.name: float(p.lo + (p.hi - p.lo) * (BANK_MARGIN + (
+                1 - 2 * BANK_MARGIN) * u[i, k])) for i, p in enumerate(ranged)})
+    heights = _heights(fld, starts, b)
     return _Model(name, shape, source, b, c, float(np.linalg.norm(v - c, axis=1).max()),
                   fld, fld.backend, surf, g, starts,
-                  float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()))
+                  float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights)
+
+
+def _heights(fld: Any, starts: list, b: np.ndarray) -> np.ndarray:
+    """``(S,)`` the top (largest model z, model units) of the model at each parameter
+    set of ``starts`` (None: the defaults), from ``b`` ``(2, 3)``, its bounds at the
+    defaults: the highest point within half a column spacing of the surface on
+    ``HEIGHT_COLUMNS`` x ``HEIGHT_COLUMNS`` vertical columns over its footprint at the
+    defaults, ``HEIGHT_LEVELS`` levels up to ``HEIGHT_REACH`` times its default
+    height, less that tolerance."""
+    lo, hi = b[0], b[1]
+    xs = np.linspace(lo[0], hi[0], HEIGHT_COLUMNS)
+    ys = np.linspace(lo[1], hi[1], HEIGHT_COLUMNS)
+    tol = 0.5 * max(xs[1] - xs[0], ys[1] - ys[0])
+    zs = np.linspace(lo[2], lo[2] + HEIGHT_REACH * (hi[2] - lo[2]), HEIGHT_LEVELS)
+    X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
+    grid = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    out = np.empty(len(starts))
+    for k, pv in enumerate(starts):
+        f = fld if pv is None else fld.replace(params=pv, check_ranges=False)
+        near = np.asarray(f.value(grid), dtype=float) <= tol
+        out[k] = (grid[near, 2].max() - tol) if near.any() else hi[2]
+    return out
 
 
 def _load(spec: Any, what: str) -> tuple[str, Any, Any]:
@@ -280,6 +338,21 @@ def _feet(F: np.ndarray, foot: float) -> list[np.ndarray]:
     return feet
 
 
+def _two_means(F: np.ndarray) -> np.ndarray:
+    """``(N,)`` labels 0 and 1 of a deterministic 2-means split of the points ``F``
+    ``(N, 3)`` (farthest-point starts, a few Lloyd steps; label 0 holds the point
+    farthest from the centroid)."""
+    c0 = F.mean(axis=0)
+    a = F[int(np.argmax(np.linalg.norm(F - c0, axis=1)))]
+    C = np.array([a, F[int(np.argmax(np.linalg.norm(F - a, axis=1)))]])
+    lab = np.zeros(len(F), dtype=int)
+    for _ in range(8):
+        lab = np.argmin(((F[:, None, :] - C[None]) ** 2).sum(axis=2), axis=1)
+        C = np.array([F[lab == j].mean(axis=0) if (lab == j).any() else C[j]
+                      for j in range(2)])
+    return lab
+
+
 def _rz(yaw: float) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -318,11 +391,35 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
     """
     P = points_arg(points)
     ms = _models_arg(models)
-    n = len(P)
     vp = viewpoint_arg(viewpoint)
     cap = math.inf if max_instances is None else int(max_instances)
-    if cap <= 0 or n < 10:
+    if cap <= 0 or len(P) < 10:
         return []
+    run = _prepare(P, ms, normals, vp, seed, noise, min_points, upright)
+    out: list[Detection] = []
+    for members in run.clusters:
+        while len(out) < cap:
+            free = members[~run.claimed[members]]
+            if len(free) < run.mp or len(free) < CLUSTER_LEFT * len(members):
+                break
+            det = run.best_for(free)
+            if det is None:
+                det = run.best_in_parts(free)
+            if det is None:
+                break
+            run.claimed[det.inliers] = True
+            out.append(det)
+        if len(out) >= cap:
+            break
+    return out
+
+
+def _prepare(P: np.ndarray, ms: list[_Model], normals, vp: np.ndarray | None, seed,
+             noise, min_points, upright: bool) -> _Run:
+    """Steps 1-3 of :func:`detect` on checked points ``P`` ``(N, 3)``, models ``ms``
+    and viewpoint ``vp`` ``(3,)`` or None (the other arguments as :func:`detect`'s):
+    the run's state with its supports and clusters found."""
+    n = len(P)
     nb = neighbourhood(P, viewpoint=vp, want_normals=normals is None)
     if normals is None:
         N = nb.normals
@@ -338,20 +435,7 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
     run.upright = bool(upright)
     run.find_supports()
     run.find_clusters()
-    out: list[Detection] = []
-    for members in run.clusters:
-        while len(out) < cap:
-            free = members[~run.claimed[members]]
-            if len(free) < mp or len(free) < CLUSTER_LEFT * len(members):
-                break
-            det = run.best_for(free)
-            if det is None:
-                break
-            run.claimed[det.inliers] = True
-            out.append(det)
-        if len(out) >= cap:
-            break
-    return out
+    return run
 
 
 class _Run:
@@ -368,6 +452,7 @@ class _Run:
         self.sizes = np.zeros(0, dtype=int)
         self.estimate_noise = True
         self.upright = True
+        self.band_rejected = False  # the band test rejected a large fit (best_for)
         if vp is not None:
             d = P - vp
             self.dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
@@ -417,7 +502,9 @@ class _Run:
         lab = components(self.nb, mask, linked_edges(self.nb, strict=True))
         sizes = np.bincount(lab[lab >= 0]) if (lab >= 0).any() else np.zeros(0, int)
         big = sizes >= self.mp
-        self.label = np.where(lab >= 0, np.where(big[np.maximum(lab, 0)], lab, -1), -1)
+        self.label = np.full(len(lab), -1)
+        if len(big):
+            self.label = np.where(lab >= 0, np.where(big[np.maximum(lab, 0)], lab, -1), -1)
         self.sizes = sizes
         order = np.argsort(-sizes, kind="stable")
         self.clusters = [np.flatnonzero(lab == i) for i in order if big[i]]
@@ -468,11 +555,30 @@ class _Run:
             front = np.einsum("hki,hki->hk", Nw, self.vp - X) > 0
         else:
             front = np.ones(X.shape[:2], dtype=bool)
-        dd, _ = self.nb.tree.query(X.reshape(-1, 3), k=1, distance_upper_bound=fs)
-        dd = np.minimum(dd, fs).reshape(X.shape[:2])
+        dd = np.zeros(X.shape[:2])  # only the sensor-facing samples are looked up
+        q, _ = self.nb.tree.query(X[front], k=1, distance_upper_bound=fs)
+        q = np.minimum(q, fs)
+        if self.vp is not None:
+            # a sample whose ray shows a scan point nearer than it is hidden (by another
+            # object): its missing points are no evidence against the pose
+            q = np.where(self._occluded(X[front], fs), 0.0, q)
+        dd[front] = q
         back = (np.where(front, 0.5 * dd * dd, 0.0).sum(axis=1)
                 / np.maximum(front.sum(axis=1), 1))
         return (fwd + BACK_WEIGHT * back) / fs ** 2
+
+    def _occluded(self, X: np.ndarray, margin: float) -> np.ndarray:
+        """Which of the points ``X`` ``(..., 3)`` the sensor could not see: the scan
+        point on the ray through each (the nearest ray within the scan's angular
+        spacing) lies nearer the sensor by more than ``margin`` (scene units). Points
+        whose ray holds no scan point are not occluded (shape ``X.shape[:-1]``)."""
+        tree, tol, rng_scan = self._ray_index()
+        v = X - self.vp
+        r = np.linalg.norm(v, axis=-1)
+        dd, j = tree.query((v / np.maximum(r, 1e-300)[..., None]).reshape(-1, 3), k=1,
+                           distance_upper_bound=tol)
+        j = np.minimum(j, len(self.P) - 1).reshape(r.shape)
+        return np.isfinite(dd).reshape(r.shape) & (rng_scan[j] < r - margin)
 
     def _fs_wide(self, m: _Model) -> float:
         return max(3.0 * self.sigma, 0.02 * m.radius)
@@ -483,7 +589,13 @@ class _Run:
         and its screening cost (:meth:`_two_sided`)."""
         poses = self._upright(m, self.P[idx])
         cands = []  # (cost, pose index, parameter set)
-        for k, pv in enumerate(m.starts):
+        nrm, off = self.plane
+        top = float(np.percentile(self.P[idx] @ nrm - off, 99.0))
+        # the defaults, and the draws whose height is nearest the cluster's (the top of
+        # an object standing on the support is seen from above and rarely occluded)
+        order = 1 + np.argsort(np.abs(m.heights[1:] - top), kind="stable")
+        for k in [0, *order[:PARAM_STARTS].tolist()]:
+            pv = m.starts[k]
             cost = self._two_sided(m, poses, S, pv)
             cands += [(float(cost[i]), i, k) for i in range(len(poses))]
         cands.sort()
@@ -561,8 +673,11 @@ class _Run:
         except CsdfError:
             return res
 
-    def _verify(self, m: _Model, res: FitResult) -> tuple[bool, float, np.ndarray, FitResult]:
-        """Step 6: ``(accepted, score, inliers, checked result)``."""
+    def _verify(self, m: _Model, res: FitResult
+                ) -> tuple[bool, float, np.ndarray, FitResult, float]:
+        """Step 6: ``(accepted, score, inliers, checked result, explained mass)``; the
+        explained mass (:func:`_gain` of the free points off the support) ranks the
+        verified fits of a cluster, whatever points each was fitted to."""
         pose = res.pose
         fld = as_field(m.shape, res.params, pose=pose, backend=m.backend, what="detect",
                        check_ranges=False)
@@ -573,14 +688,41 @@ class _Run:
         d = np.abs(np.asarray(fld.value(self.P[near]), dtype=float))
         close = d <= 3.0 * self.sigma
         inl = near[close & ~self.support[near]]
+        off = ~self.support[near]
+        gain = float(_gain(d[off], self.sigma).sum())
+        # of the free points in a band around the fitted surface, nearly all must lie on
+        # it: points a few noise levels off a surface are structure the model does not
+        # have there (another object's, or this one's where the fit is wrong)
+        # (its own clusters' points: a neighbour standing a few noise levels away is
+        # another cluster, and no evidence against the fit)
+        if _band_fraction(d, self.label[near], off, self.sigma, self.mp) < MIN_BAND_FRACTION:
+            if len(inl) >= 2 * self.mp:
+                self.band_rejected = True
+            return False, 0.0, inl, res, gain
+        ok, score, inl, checked = self._judge(m, res, pose, near, close, inl, c)
+        # the sensor's free-space evidence in the same units: the points the model's
+        # visible surface should have shown where it saw through or nothing, each
+        # costing what an explained point gains
+        unexpl = min(max(1.0 - score, 0.0), 0.9)
+        gain -= GAIN_CAP_LOG * len(inl) * unexpl / (1.0 - unexpl)
+        return ok, score, inl, checked, gain
+
+    def _judge(self, m: _Model, res: FitResult, pose: Pose, near: np.ndarray,
+               close: np.ndarray, inl: np.ndarray, c: np.ndarray
+               ) -> tuple[bool, float, np.ndarray, FitResult]:
+        """The tests of :meth:`_verify` on the free points ``near`` the placed model
+        (``close``: within three noise levels of its surface; ``inl``: those off the
+        support; ``c``: its centre ``(3,)``)."""
         if len(inl) < self.mp:
             return False, 0.0, inl, res
         # of the free points inside the fitted model's box (a neighbour's points outside
         # it are not the model's business), enough must lie on its surface
-        b = as_field(m.shape, res.params, backend=m.backend, what="detect",
-                     check_ranges=False).bounds
+        # (its box from its surface samples at the fitted parameters: cheaper than the
+        # field's bounds, which are computed anew for every parameter vector)
+        surf, _ = self._surface_at(m, res.params)
+        b = np.array([surf.min(axis=0), surf.max(axis=0)])
         q = (self.P[near] - pose.translation) @ pose.rotation
-        pad = 3.0 * self.sigma
+        pad = 3.0 * self.sigma + 0.02 * m.radius
         boxed = np.all((q >= b[0] - pad) & (q <= b[1] + pad), axis=1) & ~self.support[near]
         if close[boxed].sum() < MIN_INLIER_FRACTION * boxed.sum():
             return False, 0.0, inl, res
@@ -604,6 +746,7 @@ class _Run:
 
     def best_for(self, idx: np.ndarray) -> Detection | None:
         """Steps 4-7 for the points ``idx``: the best verified detection, or None."""
+        self.band_rejected = False
         ext = self.P[idx].max(axis=0) - self.P[idx].min(axis=0)
         span = float(np.linalg.norm(ext))
         fits = [m for m in self.models if span <= 2.0 * m.radius * SIZE_SLACK + 6 * self.sigma]
@@ -623,52 +766,170 @@ class _Run:
             found = []
             res = self._candidate(m, idx, init)
             if res is not None:
-                ok, score, inl, checked = self._verify(m, res)
+                ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
-                    found.append((score, float(res.cost), res, inl, checked))
+                    found.append((gain, score, res, inl, checked))
             done.append((m, init, res, found))
         if self.plane is not None and self.upright:
-            # the winner's quarter turns, and those of the placements of models the
+            # the winner's best other yaws, and those of the placements of models the
             # screen ranked higher but whose fits failed (at most TURN_MODELS)
             win = [d for d in done if d[3]]
             turn = []
             if win:
-                w = max(win, key=lambda d: (len(d[3][0][3]), -d[3][0][1]))
+                w = max(win, key=lambda d: max(f[0] for f in d[3]))
                 turn = [w]
                 ranked_above = done[:next(i for i, d in enumerate(done) if d is w)]
             else:
                 ranked_above = done
-            # models the screen ranked above the winner (or all, when none passed)
-            turn += [d for d in ranked_above if d[1] is not None][:TURN_MODELS]
-            for m, init, res, found in turn:
-                # a verified fit is checked against its half turn (front and back
-                # alike from one view); a failed placement tries every quarter turn
-                steps = (TURNS // 2,) if found else range(1, TURNS)
-                self._turns(m, idx, res if found else init, found, steps)
+            turn += [d for d in ranked_above if d[1] is not None and not d[3]][:TURN_MODELS]
+            for m, init, _res, found in turn:
+                base = max(found, key=lambda f: f[0])[2] if found else init
+                self._turns(m, idx, base, found,
+                            YAW_REFITS if found else YAW_REFITS_FAILED)
         best = None
         for m, _, _, found in done:
             if not found:
                 continue
-            score, cost, res, inl, checked = _pick(found)
-            key = (len(inl), -cost)
-            if best is None or key > best[0]:
-                best = (key, Detection(model=m.name, pose=Pose(res.rotation, res.translation),
-                                       params=dict(res.params), score=score, inliers=inl,
-                                       shape=m.shape, source=m.source, fit=checked))
+            gain, score, res, inl, checked = max(found, key=lambda f: f[0])
+            if best is None or gain > best[0]:
+                best = (gain, Detection(model=m.name, pose=Pose(res.rotation, res.translation),
+                                        params=dict(res.params), score=score, inliers=inl,
+                                        shape=m.shape, source=m.source, fit=checked))
         return None if best is None else best[1]
 
-    def _turns(self, m: _Model, idx: np.ndarray, base: FitResult, found: list,
-               steps=range(1, TURNS)) -> list:
-        """``found`` with the fits from ``base`` turned about the support's normal by
-        ``steps`` times ``360 / TURNS`` degrees (through the model's centre) that pass verification
-        (items ``(score, cost, result, inliers, checked)``). A single view often leaves
-        a box-like object's front and back, or its sides, nearly alike, and the screen's
-        pick among them is a close call."""
+    def best_in_parts(self, idx: np.ndarray) -> Detection | None:
+        """When no model explains the points ``idx`` as one object, the band test
+        rejected a fit that explained many of them (two objects side by side, which
+        one model stretched to its range limits covers best) and their footprint on
+        the support is wider than some model's: :meth:`best_for` of each half of a
+        2-means split of the footprint, the larger first; the first detection found,
+        or None."""
+        if self.plane is None or not self.upright or len(idx) < 2 * self.mp or \
+                not self.band_rejected:
+            return None
+        nrm, off = self.plane
+        Q = self.P[idx]
+        F = Q - np.outer(Q @ nrm - off, nrm)
+        c0 = F.mean(axis=0)
+        reach = float(np.linalg.norm(F - c0, axis=1).max())
+        if reach <= FEET_REACH * min(m.foot for m in self.models):
+            return None
+        lab = _two_means(F)
+        parts = sorted((idx[lab == j] for j in (0, 1)), key=lambda a: -len(a))
+        for part in parts:
+            if len(part) >= self.mp:
+                det = self.best_for(part)
+                if det is not None:
+                    return det
+        return None
+
+    def _surface_at(self, m: _Model, params: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The model's surface samples ``(K, 3)`` and their unit normals ``(K, 3)`` moved
+        onto the model at ``params`` (one projection step along the gradient; model
+        frame)."""
+        fld = m.fld.replace(params=params, check_ranges=False)
+        g = np.asarray(fld.gradient(m.surface), dtype=float)
+        surf = m.surface - np.asarray(fld.value(m.surface), dtype=float)[:, None] * g
+        g = np.asarray(fld.gradient(surf), dtype=float)
+        g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+        return surf, g
+
+    def _ray_index(self) -> tuple[Any, float, np.ndarray]:
+        """``(tree, tolerance, ranges)``: a KD-tree of the scan's unit ray directions,
+        the angular tolerance of a ray match (radians, as a chord: 1.5 times the median
+        angle to the nearest other ray) and the points' ranges ``(N,)`` from the
+        viewpoint (scene units); built once."""
+        if getattr(self, "_rays", None) is None:
+            from scipy.spatial import cKDTree
+
+            tree = cKDTree(self.dirs)
+            step = max(1, len(self.dirs) // 2000)
+            dd, _ = tree.query(self.dirs[::step], k=2)
+            self._rays = (tree, 1.5 * float(np.median(dd[:, 1])),
+                          np.linalg.norm(self.P - self.vp, axis=1))
+        return self._rays
+
+    def _yaw_scan(self, m: _Model, R: np.ndarray, t: np.ndarray, params: dict
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The explained mass of model ``m`` at ``params`` turned about the support's
+        normal through its centre by each of ``YAW_STEPS`` yaws from the pose ``(R, t)``:
+        ``(angles (Y,) radians, scores (Y,), centre (3,))``. A score is the summed
+        :func:`_gain` of the free points near the model (a fixed seeded subsample of at
+        most ``SCAN_POINTS``), less, with a viewpoint, that sum's whole scale
+        (``GAIN_CAP`` per point) times the fraction of the model's sensor-facing surface
+        samples that the sensor saw through (a scan point on their ray lies farther by
+        over three noise levels)."""
         nrm = self.plane[0]
-        cw = base.rotation @ m.centre + base.translation
+        surf, sn = self._surface_at(m, params)
+        lo, hi = surf.min(axis=0), surf.max(axis=0)
+        cm = 0.5 * (lo + hi)
+        cw = R @ cm + t
+        rad = float(np.linalg.norm(surf - cm, axis=1).max())
+        near = np.flatnonzero(~self.claimed & ~self.support & (
+            np.linalg.norm(self.P - cw, axis=1) <= 1.1 * rad + 3 * self.sigma))
+        if len(near) > SCAN_POINTS:
+            near = np.sort(self.rng.choice(near, SCAN_POINTS, replace=False))
+        fld = m.fld.replace(params=params, check_ranges=False)
         X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
-        for k in steps:
-            th = 2.0 * math.pi * k / TURNS
+        angles = 2.0 * math.pi * np.arange(YAW_STEPS) / YAW_STEPS
+        poses = []
+        for th in angles:
+            Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
+                nrm, nrm)
+            poses.append((Rt @ R, Rt @ (t - cw) + cw))
+        Q = self.P[near]
+        q = np.concatenate([(Q - tt) @ RR for RR, tt in poses])
+        d = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(poses), len(near))
+        score = _gain(d, self.sigma).sum(axis=1)
+        if self.vp is not None and len(near):
+            tree, tol, rng_scan = self._ray_index()
+            Xw = np.stack([surf @ RR.T + tt for RR, tt in poses])  # (Y, K, 3)
+            Nw = np.stack([sn @ RR.T for RR, _ in poses])
+            v = Xw - self.vp
+            r = np.linalg.norm(v, axis=2)
+            front = np.einsum("yki,yki->yk", Nw, -v) > 0
+            dd, j = tree.query((v / r[..., None]).reshape(-1, 3), k=1,
+                               distance_upper_bound=tol)
+            hit = np.isfinite(dd).reshape(r.shape) & front
+            jj = np.minimum(j, len(self.P) - 1).reshape(r.shape)
+            through = hit & (rng_scan[jj] > r + 3.0 * self.sigma)
+            frac = through.sum(axis=1) / np.maximum(hit.sum(axis=1), 1)
+            score = score - frac * GAIN_CAP_LOG * len(near)
+        return angles, score, cw
+
+    def _turns(self, m: _Model, idx: np.ndarray, base: FitResult, found: list,
+               refits: int) -> list:
+        """``found`` with the fits that pass verification (items ``(explained mass,
+        score, result, inliers, checked)``) from ``base`` turned about the support's
+        normal to the ``refits`` best yaws of :meth:`_yaw_scan` (local maxima at least
+        ``YAW_SAME`` degrees from ``base``'s own yaw and from each other; equal scores,
+        the model's own symmetries, count once). A single view often leaves a box-like
+        object's front and back, or its sides, nearly alike, and the turn of a nearly
+        symmetric one (a lamp's spokes) rests on a few points: the screen's pick among
+        them is a close call."""
+        nrm = self.plane[0]
+        angles, score, cw = self._yaw_scan(m, base.rotation, base.translation,
+                                           dict(base.params))
+        n = len(angles)
+        peaks = [i for i in range(n) if score[i] >= score[(i - 1) % n]
+                 and score[i] >= score[(i + 1) % n]]
+        peaks.sort(key=lambda i: (-score[i], i))
+        same = math.radians(YAW_SAME)
+        chosen: list[int] = []
+        for i in peaks:
+            a = angles[i]
+            if min(a, 2 * math.pi - a) < same:
+                continue
+            if any(min(abs(a - angles[j]), 2 * math.pi - abs(a - angles[j])) < same
+                   or abs(score[i] - score[j]) <= 1e-9 * max(abs(score[j]), 1.0)
+                   for j in chosen):
+                continue
+            chosen.append(i)
+            if len(chosen) >= refits:
+                break
+        X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
+        for i in chosen:
+            th = float(angles[i])
             Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
                 nrm, nrm)
             init = {"rotation": Rt @ base.rotation,
@@ -677,17 +938,46 @@ class _Run:
             r = self._candidate(m, idx, init)
             if r is None:
                 continue
-            ok, sc, il, ch = self._verify(m, r)
+            ok, sc, il, ch, gain = self._verify(m, r)
             if ok:
-                found.append((sc, float(r.cost), r, il, ch))
+                found.append((gain, sc, r, il, ch))
         return found
 
 
-def _pick(found: list) -> tuple:
-    """The best of verified fits ``(score, cost, result, inliers, checked)``: scores
-    within ``TURN_TIE`` of the best tie, and the lower cost wins."""
-    top = max(f[0] for f in found)
-    return min((f for f in found if f[0] >= top - TURN_TIE), key=lambda f: f[1])
+def _band_fraction(d: np.ndarray, lab: np.ndarray, off: np.ndarray, sigma: float,
+                   mp: int) -> float:
+    """The band test's figure: of the points of a fit's own clusters within ``BAND``
+    noise levels of its surface, the fraction within three (1.0 when there are none).
+
+    Args:
+        d: ``(K,)`` unsigned distances of the free points near the fit to its surface
+            (scene units).
+        lab: ``(K,)`` their cluster labels (-1: none).
+        off: ``(K,)`` which of them are off the support.
+        sigma: the noise level (scene units).
+        mp: the fewest points a detection explains; a cluster is the fit's own when it
+            holds at least ``max(mp, 10 %)`` of the fit's close points (a neighbour that
+            only reaches into the band is not).
+    """
+    close = d <= 3.0 * sigma
+    labs, counts = np.unique(lab[off & close & (lab >= 0)], return_counts=True)
+    own = np.isin(lab, labs[counts >= max(mp, 0.1 * counts.sum())]) & off
+    band = np.count_nonzero(own & (d <= BAND * sigma))
+    return np.count_nonzero(own & close) / band if band else 1.0
+
+
+#: the explained mass of a point at the cap (``log(1 + GAIN_CAP^2)``)
+GAIN_CAP_LOG = math.log1p(GAIN_CAP ** 2)
+
+
+def _gain(d: np.ndarray, sigma: float) -> np.ndarray:
+    """The explained mass of points at unsigned distances ``d`` (any shape, scene units)
+    from a model's surface, noise level ``sigma``: ``cap - min(log(1 + (d / sigma)^2),
+    cap)`` with ``cap = log(1 + GAIN_CAP^2)`` (a Cauchy loss capped at ``GAIN_CAP`` noise
+    levels): the cap for a point on the surface, zero from ``GAIN_CAP`` noise levels
+    out. Summed over a fixed set of points it is a soft count of the points explained,
+    sharper near the surface (same shape as ``d``)."""
+    return GAIN_CAP_LOG - np.minimum(np.log1p((d / sigma) ** 2), GAIN_CAP_LOG)
 
 
 def detections_to_scene(detections, scene=None):

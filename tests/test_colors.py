@@ -126,3 +126,45 @@ def test_scans_and_surface_samples_carry_colours():
     pts, nrm, col = csdf.sample_surface(part, 500, seed=1, colors=True)
     on_ball = np.abs(np.linalg.norm(pts - [0.5, 0, 0], axis=1) - 0.4) < 1e-6
     np.testing.assert_array_equal((col[:, :3] == BLUE).all(axis=1), on_ball)
+
+
+def test_preview_shader_colours_compile_and_fall_back_to_a_default():
+    import os
+
+    from csdf.colors import albedo_glsl
+    from glsl_runner import ES_PRELUDE, glslang, validate
+
+    r = csdf.param("r", 0.4, 0.1, 0.6)
+    shape = csdf.box(1).color(RED) - csdf.sphere(r).translate((0.5, 0, 0)).color(BLUE) \
+        | csdf.sphere(0.2).translate((-1, 0, 0))
+    geometry = csdf.to_glsl(shape)
+    src = albedo_glsl(shape, declared=geometry, default=(0.8, 0.76, 0.7))
+    assert "uniform float u_r" not in src  # declared once, by the geometry
+    assert "vec3 sdf_albedo(vec3 p)" in src and "vec3(1.0, 0.0, 0.0)" in src
+    assert "vec3(0.8, 0.76, 0.7)" in src  # the uncoloured ball
+    plain = albedo_glsl(csdf.sphere(1), default=(0.8, 0.76, 0.7))
+    assert "float" not in plain and "vec3(0.8, 0.76, 0.7)" in plain
+    if glslang() is None:
+        if os.environ.get("CSDF_REQUIRE_TOOLS") == "1":
+            pytest.fail("CSDF_REQUIRE_TOOLS=1 but glslangValidator is not installed")
+        pytest.skip("needs glslangValidator (apt-get install glslang-tools)")
+    main = "out vec4 c;\nvoid main() { c = vec4(sdf_albedo(vec3(0.5)), sdf(vec3(0.0))); }\n"
+    ok, log = validate(ES_PRELUDE + geometry + src + main)
+    assert ok, log
+
+
+def test_materials_are_named_colours_with_a_roughness():
+    from csdf.shapes.appearance import MATERIALS, colors, node_roughness
+
+    a = csdf.box(1).material("wood")
+    b = csdf.sphere(0.4).translate((0.5, 0, 0)).material("glaze", color=BLUE, roughness=0.2)
+    part = a - b
+    got = colors_at(part, [[-0.5, 0, 0], [0.1, 0, 0]])
+    np.testing.assert_array_equal(got[:, :3], [MATERIALS["wood"][0], BLUE])
+    assert [node_roughness(n) for n, _ in colors(part)] == [MATERIALS["wood"][1], 0.2]
+    assert part.compile() == (csdf.box(1) - csdf.sphere(0.4).translate((0.5, 0, 0))).compile()
+    assert csdf.loads(csdf.dumps(part)).compile() == part.compile()
+    with pytest.raises(csdf.ShapeError, match="not one of"):
+        csdf.box(1).material("unobtainium")
+    with pytest.raises(csdf.ShapeError, match="roughness"):
+        csdf.box(1).material("wood", roughness=2)

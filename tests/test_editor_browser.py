@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import csdf
 from csdf import zoo
 from glsl_runner import CHROMIUM, CHROMIUM_ARGS
 
@@ -170,6 +171,35 @@ def test_preview_matches_cpu_render(page):
     info = page.inner_text("#info")
     assert f"{len(prog)} instructions" in info and str(prog.nbytes) in info
     assert str(prog.exactness) in info
+
+
+def test_preview_draws_the_models_colours_as_the_cpu_render_does(page):
+    from csdf.render import Camera, render
+
+    text = ("export box(1).color((0.9, 0.15, 0.1)) - sphere(0.45).translate((0.5, 0, "
+            "0.3)).color((0.1, 0.3, 0.95)) | cylinder(0.2, 1.4).translate((-0.8, 0, 0))"
+            ".color((0.1, 0.8, 0.2))\n")
+    n = _state(page, "compileCount")
+    page.evaluate("(t) => { const v = window.csdfEditor.view; v.dispatch({changes: "
+                  "{from: 0, to: v.state.doc.length, insert: t}}); }", text)
+    page.wait_for_function(f"window.csdfEditor.compileCount > {n}")
+    assert _state(page, "lastError") is None
+    gpu = _image(page).astype(int)
+    mask = _image(page, "mask")[..., 0] > 127
+    cam = _state(page, "camera()")
+    camera = Camera.look_at(cam["eye"], cam["target"], fov=cam["fov"], width=SIZE, height=SIZE)
+    cpu = render(csdf.loads(text), camera)
+    both = mask & cpu.mask
+    c = cpu.color[both].astype(int)
+    g = gpu[both]
+    # where the CPU render shows the red box, the blue cut or the green post, the
+    # preview shows that colour too (the dominant channel; the lighting differs)
+    for ch in range(3):
+        others = [k for k in range(3) if k != ch]
+        cpu_ch = (c[:, ch, None] > c[:, others] + 30).all(axis=1)
+        assert cpu_ch.mean() > 0.01, ch
+        gpu_ch = (g[cpu_ch, ch, None] > g[cpu_ch][:, others]).all(axis=1)
+        assert gpu_ch.mean() > 0.95, (ch, gpu_ch.mean())
 
 
 def test_typing_updates_the_preview(page):

@@ -56,6 +56,8 @@ CASES = {
     "revolve": ("revolve(circle(0.2), 1, angle=2)", lambda: C.revolve(C.circle(0.2), 1,
                                                                      angle=2)),
     "color": ("box(1).color((0.2, 0.4, 0.6))", lambda: C.box(1).color((0.2, 0.4, 0.6))),
+    "material": ('box(1).material("steel", roughness=0.2)',
+                 lambda: C.box(1).material("steel", roughness=0.2)),
     "cross_section": ("extrude(cross_section(sphere(1), 0.5), 1)",
                       lambda: C.extrude(C.cross_section(C.sphere(1), 0.5), 1)),
     "normalized": ("field(x * x + y * y + z * z - 1).normalized()",

@@ -30,7 +30,7 @@ from .compiler.tape import compile_expr
 from .errors import CsdfError
 from .expr import Expr, const, minimum, step
 
-__all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "has_colors"]
+__all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "has_colors", "albedo_glsl"]
 
 #: the colour of surfaces outside every ``color`` node (a light grey, opaque)
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
@@ -42,10 +42,13 @@ def _entries(shape) -> list[tuple[tuple[float, ...] | None, Expr]]:
 
 
 def has_colors(shape) -> bool:
-    """True when the shape tree holds a ``color`` node."""
+    """True when ``shape`` is a shape whose tree holds a ``color`` node (False for
+    anything else, such as a compiled program)."""
     from .shapes.base import walk_shapes
 
-    return any(s.name == "color" for s in walk_shapes(shape))
+    if not hasattr(shape, "children"):
+        return False
+    return any(s.name in ("color", "material") for s in walk_shapes(shape))
 
 
 def color_program(shape) -> tuple[Any, np.ndarray]:
@@ -128,3 +131,36 @@ def colors_at(shape, points: Any, params: dict | None = None, *,
         out[ok] = palette[np.clip(np.rint(idx[ok]).astype(np.int64), 0, len(palette) - 1)]
     out[np.isnan(pts).any(axis=1)] = np.nan
     return out.reshape(*batch, 4)
+
+
+def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
+                default: Any = None) -> str:
+    """GLSL ``vec3 <name>(vec3 p)``: the shape's colour (RGB) at ``p`` by this module's
+    rule, for a preview shader that already holds the geometry's snippet
+    (:func:`csdf.to_glsl`; ``declared`` is that snippet, whose parameter uniforms are
+    not declared again). Uncoloured surfaces, and a shape without colours, get
+    ``default`` (RGB; :data:`DEFAULT_COLOR`). The colour program's GLSL is emitted as
+    ``<name>_index``.
+
+    Raises:
+        CsdfError: a shape the GLSL export refuses (a mesh call).
+    """
+    from .field import glsl_float, to_glsl
+
+    def vec3(c) -> str:
+        return "vec3(" + ", ".join(glsl_float(float(v)) for v in c[:3]) + ")"
+
+    base = DEFAULT_COLOR if default is None else tuple(default)
+    if not has_colors(shape):
+        return f"vec3 {name}(vec3 p) {{\n    return {vec3(base)};\n}}\n"
+    prog, palette = color_program(shape)
+    palette = palette.copy()
+    palette[[c is None for c, _ in _entries_cached(shape)]] = (tuple(base) + (1.0,))[:4]
+    have = {ln.strip() for ln in declared.splitlines() if ln.startswith("uniform ")}
+    src = [ln for ln in to_glsl(prog, f"{name}_index", gradient=False).splitlines()
+           if not (ln.startswith("uniform ") and ln.strip() in have)]
+    body = [f"vec3 {name}(vec3 p) {{", f"    float k = {name}_index(p);"]
+    for k in range(len(palette) - 1):
+        body.append(f"    if (k < {k}.5) return {vec3(palette[k])};")
+    body += [f"    return {vec3(palette[-1])};", "}"]
+    return "\n".join(src + body) + "\n"

@@ -43,9 +43,9 @@ _CONTRACT = {"exact": 0, "bound": 1, "neither": 2}
 
 def _hard_union_operands(shape) -> list:
     """The operands of ``shape`` as nested hard unions, flattened (``[shape]`` when its
-    root is anything else); a ``color`` node is looked through (its geometry is its
-    child's)."""
-    if getattr(shape, "name", None) == "color":
+    root is anything else); a ``color`` or ``material`` node is looked through (its
+    geometry is its child's)."""
+    if getattr(shape, "name", None) in ("color", "material"):
         return _hard_union_operands(shape.children[0])
     if getattr(shape, "name", None) != "union" or shape.kwargs.get("k") is not None:
         return [shape]

@@ -60,6 +60,7 @@ from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, R
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
+from ..colors import albedo_glsl
 from ..errors import CsdfError, ModelError, ParamError
 from ..field import Field, as_field, glsl_float, glsl_params, shadertoy, to_glsl
 
@@ -68,6 +69,8 @@ __all__ = ["create_app", "serve", "free_port", "model_info", "MAX_BODY_BYTES",
 
 #: largest accepted request body (the model text and a few fields), in bytes
 MAX_BODY_BYTES = 256 * 1024
+#: the preview's colour of uncoloured surfaces (RGB), as its shader has always drawn them
+PREVIEW_ALBEDO = (0.80, 0.76, 0.70)
 #: largest mesh export resolution (voxels along the longest side)
 MAX_EXPORT_RESOLUTION = 256
 #: deepest accepted nesting of arrays and objects in a request body
@@ -424,6 +427,9 @@ def create_app(model_path: str | Path | None = None, *, root: str | Path | None 
             fld = _load_text(text, ed.name())
             prog = fld.program
             glsl = to_glsl(prog)
+            # the surface colours (the model's color() nodes; else the preview's grey)
+            glsl += albedo_glsl(fld.shape if fld.shape is not None else prog,
+                                declared=glsl, default=PREVIEW_ALBEDO)
             info = model_info(fld)
         except CsdfError as exc:
             return 422, {"ok": False, "error": _error_json(exc)}

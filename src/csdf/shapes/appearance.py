@@ -1,12 +1,11 @@
-"""Appearance kept on shapes: :meth:`Shape.color`.
+"""Appearance kept on shapes: :meth:`Shape.color` and :meth:`Shape.material`.
 
 A colour is metadata of the shape tree: the node keeps the child's geometry unchanged
 (the same expression, so the same bytecode, exactness, Lipschitz bound and bounds) and
-records the colour, which readers of other formats keep (OpenSCAD's ``color()``) and the
-``.csdf`` printer writes back. :func:`colors` lists the colours of a tree.
-
-Not yet: colour through CSG at evaluation time (the nearest operand's colour as a second
-output of the program), coloured renders and meshes (issue 24).
+records the colour (a material: a name, its colour and a roughness), which readers of
+other formats keep (OpenSCAD's ``color()``) and the ``.csdf`` printer writes back.
+:func:`colors` lists the colours of a tree; :mod:`csdf.colors` evaluates them at points
+(the nearest coloured surface), for meshes, renders, scans and the editor's preview.
 """
 
 from __future__ import annotations
@@ -18,8 +17,11 @@ import numpy as np
 
 from ..errors import ShapeError
 from .base import Shape, register, walk_shapes
+from .palette import MATERIALS, node_color, node_roughness
 
-__all__ = ["color", "colors", "color_arg"]
+__all__ = ["color", "material", "colors", "color_arg", "MATERIALS", "node_color",
+           "node_roughness"]
+
 
 
 def color_arg(rgb: Any, what: str = "color") -> tuple[float, ...]:
@@ -58,6 +60,41 @@ def color(shape: Shape, rgb) -> Shape:
                  args=(c,), children=(shape,))
 
 
+@register("method")
+def material(shape: Shape, name, color=None, roughness=None) -> Shape:
+    """The same shape with a named material: its colour (``color``, else the named
+    material's from :data:`MATERIALS`) and its ``roughness`` in ``[0, 1]`` (1 matte;
+    else the named material's, else 0.5). A ``color`` node (:func:`color`) with the
+    name and roughness kept: the geometry is the child's, unchanged.
+
+    Raises:
+        ShapeError: a name that is not an identifier, an unknown name without a
+            ``color``, a bad colour or roughness.
+    """
+    if not isinstance(shape, Shape):
+        raise ShapeError(f"material is a shape method; got {type(shape).__name__}")
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ShapeError(f"material: name must be an identifier, got {name!r}")
+    known = MATERIALS.get(name)
+    if color is None and known is None:
+        raise ShapeError(f"material {name!r} is not one of {', '.join(sorted(MATERIALS))}; "
+                         "give its color=(r, g, b)")
+    c = color_arg(known[0] if color is None else color, "material: color")
+    r = roughness if roughness is not None else (known[1] if known else 0.5)
+    if isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating)) \
+            or not 0.0 <= float(r) <= 1.0:
+        raise ShapeError(f"material: roughness must be a number in [0, 1], got {r!r}")
+    kwargs: dict = {}
+    if color is not None:
+        kwargs["color"] = c
+    if roughness is not None:
+        kwargs["roughness"] = float(r)
+    return Shape("material", lambda p, ctx: shape.sdf(p, ctx), dim=shape.dim,
+                 exactness=shape.exactness, lipschitz=shape.lipschitz, bounds=shape.bounds,
+                 args=(name,), kwargs=kwargs or None, children=(shape,))
+
+
 def colors(shape: Shape) -> list[tuple[Shape, tuple[float, ...]]]:
-    """Every ``color`` node of a shape tree with its colour, outermost first."""
-    return [(s, tuple(s.args[0])) for s in walk_shapes(shape) if s.name == "color"]
+    """Every ``color`` and ``material`` node of a shape tree with its colour, outermost
+    first."""
+    return [(s, c) for s in walk_shapes(shape) if (c := node_color(s)) is not None]

@@ -153,13 +153,15 @@ class Shape:
         if hit is not None:
             return hit
         q = Vec(p.c[: self.dim])
-        if self.name == "color":
+        if self.name in ("color", "material"):
+            from .palette import node_color
+
             ctx.color_depth += 1
             try:
                 out = self._fn(q, ctx)
             finally:
                 ctx.color_depth -= 1
-            ctx.colored.append((tuple(self.args[0]), out))
+            ctx.colored.append((node_color(self), out))
         else:
             out = self._fn(q, ctx)
             if not self.children and ctx.color_depth == 0:

@@ -1,7 +1,7 @@
 // csdf live editor: CodeMirror 6 text, WebGL2 sphere-traced preview, parameter sliders.
 //
 // Flow: text change -> (250 ms debounce) POST /api/compile -> GLSL `sdf`/`sdf_grad`
-// spliced into the tracer below -> one WebGL2 program. Sliders only call
+// and `sdf_albedo` (the surface colour) spliced into the tracer below -> one WebGL2 program. Sliders only call
 // gl.uniform1f and redraw (window.csdfEditor.compileCount counts shader compiles).
 // The camera follows csdf.Camera.look_at (OpenCV frame: x right, y down, z forward,
 // world z up), so a CPU render with the same eye/target/fov shows the same view.
@@ -355,7 +355,7 @@ void main() {
     float fil = clamp(dot(n, lf), 0.0, 1.0);
     float amb = 0.6 + 0.4 * n.z;
     float spe = pow(clamp(dot(reflect(rd, n), l), 0.0, 1.0), 32.0);
-    vec3 base = mix(vec3(0.80, 0.76, 0.70), 0.5 + 0.5 * n, 0.12);
+    vec3 base = mix(sdf_albedo(p), 0.5 + 0.5 * n, 0.12);  // the model's colours
     col = base * (0.25 * amb + 0.75 * dif + 0.18 * fil) + 0.15 * spe;
   }
   if (csdf_slice >= 0) {

@@ -16,8 +16,11 @@ a model this gives, through CSG:
 
 The rule is evaluated by a second program compiled from the same expression DAG (the
 distances of the coloured nodes, shared with the geometry): its value is the index of
-the winning entry of a palette. The geometry's own program is untouched, so evaluating
-a coloured model's distance costs exactly what it costs uncoloured.
+the winning entry of a palette. Both travel in the shape's compiled program
+(:attr:`csdf.Program.colors`, the colour section of the bytecode), so a program read
+back from bytes or text keeps its colours; evaluating the distance never runs the
+colour program, so a coloured model's distance costs exactly what it costs
+uncoloured.
 """
 
 from __future__ import annotations
@@ -26,80 +29,41 @@ from typing import Any
 
 import numpy as np
 
-from .compiler.tape import compile_expr
 from .errors import CsdfError
-from .expr import Expr, const, minimum, step
 
-__all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "has_colors", "albedo_glsl"]
+__all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "has_colors", "albedo_glsl",
+           "colour_source"]
 
 #: the colour of surfaces outside every ``color`` node (a light grey, opaque)
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 
 
-def _entries(shape) -> list[tuple[tuple[float, ...] | None, Expr]]:
-    _, ctx = shape.build()
-    return list(ctx.colored)
-
-
 def has_colors(shape) -> bool:
-    """True when ``shape`` is a shape whose tree holds a ``color`` node (False for
-    anything else, such as a compiled program)."""
-    from .shapes.base import walk_shapes
+    """True when ``shape`` (a shape, or a compiled program) has colours: a ``color`` or
+    ``material`` node in its tree, or a colour section in its program."""
+    if hasattr(shape, "children"):
+        from .shapes.base import walk_shapes
 
-    if not hasattr(shape, "children"):
-        return False
-    return any(s.name in ("color", "material") for s in walk_shapes(shape))
+        return any(s.name in ("color", "material") for s in walk_shapes(shape))
+    return getattr(shape, "colors", None) is not None
 
 
 def color_program(shape) -> tuple[Any, np.ndarray]:
-    """``(program, palette)``: a :class:`csdf.Program` whose value at a point is the
-    index (a whole number, as float) of the winning entry of ``palette`` ``(K, 4)``
-    float64 RGBA in ``[0, 1]`` (the nearest-coloured-surface rule of this module).
-    Cached on the shape.
+    """``(program, palette)``: the colour section of the shape's compiled program
+    (:attr:`csdf.Program.colors`): a :class:`csdf.Program` whose value at a point is
+    the index (a whole number, as float) of the winning row of ``palette`` ``(K, 4)``
+    float64 RGBA in ``[0, 1]`` (the nearest-coloured-surface rule of this module; NaN
+    rows: uncoloured parts, drawn in :data:`DEFAULT_COLOR`).
 
     Raises:
-        CsdfError: the shape is not a :class:`csdf.Shape`.
+        CsdfError: not a shape or program, or one without colours.
     """
-    if not hasattr(shape, "build") or not hasattr(shape, "children"):
-        raise CsdfError(f"colours need a Shape, got {type(shape).__name__}")
-
-    def make():
-        entries = _entries(shape)
-        palette = np.array([DEFAULT_COLOR if c is None else
-                            (tuple(c) + (1.0,))[:4] for c, _ in entries], dtype=np.float64)
-        best = abs(entries[0][1])
-        index: Expr = const(0.0)
-        for k, (_, d) in enumerate(entries[1:], start=1):
-            a = abs(d)
-            nearer = 1.0 - step(a - best)  # 1 where this entry is strictly nearer
-            index = index + nearer * (float(k) - index)
-            best = minimum(best, a)
-        prog = compile_expr(index, dim=shape.dim, exactness="neither")
-        _ENTRY_KINDS[id(shape)] = (shape, entries)
-        return prog, palette
-
-    hit = _CACHE.get(id(shape))
-    if hit is not None and hit[0] is shape:
-        return hit[1]
-    if len(_CACHE) >= 16:
-        old = next(iter(_CACHE))
-        _CACHE.pop(old)
-        _ENTRY_KINDS.pop(old, None)
-    got = make()
-    _CACHE[id(shape)] = (shape, got)
-    return got
-
-
-#: the colour programs of recent shapes (shapes have no attribute dictionary)
-_CACHE: dict[int, tuple[Any, tuple[Any, np.ndarray]]] = {}
-_ENTRY_KINDS: dict[int, tuple[Any, list]] = {}
-
-
-def _entries_cached(shape) -> list:
-    hit = _ENTRY_KINDS.get(id(shape))
-    if hit is None or hit[0] is not shape:
-        return _entries(shape)
-    return hit[1]
+    prog = shape.compile() if hasattr(shape, "children") else shape
+    colors = getattr(prog, "colors", None)
+    if colors is None:
+        raise CsdfError("the shape has no colours (no color() or material() node)")
+    cprog, palette = colors
+    return cprog, np.where(np.isnan(palette), np.array(DEFAULT_COLOR), palette)
 
 
 def colors_at(shape, points: Any, params: dict | None = None, *,
@@ -120,10 +84,9 @@ def colors_at(shape, points: Any, params: dict | None = None, *,
     if not has_colors(shape):
         out = np.tile(base, (n, 1))
     else:
-        prog, palette = color_program(shape)
-        if default is not None:
-            palette = palette.copy()
-            palette[[c is None for c, _ in _entries_cached(shape)]] = base
+        prog = shape.compile() if hasattr(shape, "children") else shape
+        prog, raw = prog.colors
+        palette = np.where(np.isnan(raw), base, raw)
         params = {k: v for k, v in (params or {}).items() if k in prog.param_names}
         idx = prog(pts, params, check_ranges=check_ranges)
         ok = np.isfinite(idx)
@@ -153,9 +116,9 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
     base = DEFAULT_COLOR if default is None else tuple(default)
     if not has_colors(shape):
         return f"vec3 {name}(vec3 p) {{\n    return {vec3(base)};\n}}\n"
-    prog, palette = color_program(shape)
-    palette = palette.copy()
-    palette[[c is None for c, _ in _entries_cached(shape)]] = (tuple(base) + (1.0,))[:4]
+    prog = shape.compile() if hasattr(shape, "children") else shape
+    prog, raw = prog.colors
+    palette = np.where(np.isnan(raw), np.array((tuple(base) + (1.0,))[:4]), raw)
     have = {ln.strip() for ln in declared.splitlines() if ln.startswith("uniform ")}
     src = [ln for ln in to_glsl(prog, f"{name}_index", gradient=False).splitlines()
            if not (ln.startswith("uniform ") and ln.strip() in have)]
@@ -164,3 +127,17 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
         body.append(f"    if (k < {k}.5) return {vec3(palette[k])};")
     body += [f"    return {vec3(palette[-1])};", "}"]
     return "\n".join(src + body) + "\n"
+
+
+def colour_source(model: Any, params: dict | None = None) -> tuple[Any, dict, Any]:
+    """``(shape or program, params, pose or None)`` to take colours from for a model a
+    consumer was given: a :class:`csdf.Shape` or :class:`csdf.Program` as is, a
+    :class:`csdf.Field` by its shape (else its program), its parameter values (updated
+    by ``params``) and its pose (points in the world frame are mapped back by it)."""
+    if hasattr(model, "children") or hasattr(model, "colors"):
+        return model, dict(params or {}), None
+    src = getattr(model, "shape", None) or getattr(model, "program", None)
+    merged = dict(getattr(model, "params", {}) or {})
+    merged.update(params or {})
+    pose = getattr(model, "pose", None)
+    return src, merged, None if pose is None or pose.is_identity() else pose

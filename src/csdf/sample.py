@@ -258,11 +258,6 @@ def sample_surface(
                             "drawn yet")
         return shape.sample_surface(n, _rng(seed), resolution=resolution)
     fld = _field(shape, "sample_surface", params, backend, n, check_ranges=check_ranges)
-    tree = None
-    if colors:
-        tree = shape if hasattr(shape, "children") else getattr(shape, "shape", None)
-        if tree is None or not hasattr(tree, "children"):
-            raise CsdfError("colors=True needs a Shape (a compiled program has no colours)")
     rng = _rng(seed)
     if n == 0:
         out = np.zeros((0, 3)), np.zeros((0, 3))
@@ -270,11 +265,11 @@ def sample_surface(
         out = _surface(fld, n, rng, resolution)
     if not colors:
         return out
-    from .colors import colors_at
+    from .colors import colors_at, colour_source
 
-    local = out[0] if fld.pose.is_identity() else fld.pose.apply_inverse(out[0])
-    return out[0], out[1], colors_at(tree, local, dict(fld.params),
-                                     check_ranges=check_ranges)
+    src, given, pose = colour_source(fld)
+    local = out[0] if pose is None else pose.apply_inverse(out[0])
+    return out[0], out[1], colors_at(src, local, given, check_ranges=check_ranges)
 
 
 def sample_volume(

@@ -120,14 +120,11 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     ids = ids[keep] if scene else None
     rgba = None
     if colors:
-        from .colors import colors_at
+        from .colors import colors_at, colour_source
 
-        tree = shape if hasattr(shape, "children") else getattr(shape, "shape", None)
-        if tree is None or not hasattr(tree, "children"):
-            raise CsdfError("colors=True needs a Shape (a compiled program has no colours)")
+        src, given, _ = colour_source(fld)  # (rays are in the object's frame already)
         hit_obj = o_obj + t[:, None] * d_obj[keep]
-        given = dict(getattr(fld, "params", {}) or {})
-        rgba = colors_at(tree, hit_obj, given, check_ranges=check_ranges)
+        rgba = colors_at(src, hit_obj, given, check_ranges=check_ranges)
     normals = n_obj[keep] @ M  # object frame -> camera frame: M^T n
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     m = len(t)

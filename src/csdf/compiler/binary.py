@@ -9,16 +9,19 @@ Layout (little-endian)::
     code     n_instr x 8 bytes: u8 opcode, u8 reserved (0), u16 dst, u16 a, u16 b
     calls    n_calls x (u8 name length, name, u32 out instruction, u16 n_in, n_in x u32)
     bounds   version 2, and version 3 with flag 8: dim x f64 lo, then dim x f64 hi
-    data     version 3 only: u32 n_blocks, then per block u8 kind (1: a closed
+    data     version 3 with flag 16: u32 n_blocks, then per block u8 kind (1: a closed
              triangle mesh), u32 n_vertices, u32 n_triangles, n_vertices x 3 f64,
              n_triangles x 3 u32 (vertex indices, oriented outwards)
+    colors   version 3 with flag 32: u32 K, K x 4 f64 palette (RGBA; NaN rows for
+             uncoloured parts), u32 n_bytes, the colour program's own bytecode (a
+             version 1-3 program without colours)
     crc32    u32 of everything before it
 
-Version 2 added the bounds section, version 3 the data blocks of mesh calls. A program
-with data blocks is written as version 3 (flag 8 when it has bounds); one without, with
-bounds, as version 2; one with neither as version 1, byte for byte what earlier csdf
-wrote, so each program has one encoding. All three versions are read (version 1 gives
-``bounds=None``).
+Version 2 added the bounds section, version 3 the data blocks of mesh calls and the
+colour section. A program with either is written as version 3 (flags 8, 16 and 32 say
+which of bounds, data and colours it holds); one without, with bounds, as version 2;
+one with neither as version 1, byte for byte what earlier csdf wrote, so each program
+has one encoding. All three versions are read (version 1 gives ``bounds=None``).
 
 :func:`decode_fields` checks every field and raises :class:`~csdf.BytecodeError` naming
 the byte offset; :func:`validate` checks a program built from them (every operand refers
@@ -57,8 +60,12 @@ VERSIONS = (1, 2, 3)
 _BOUNDS_VERSION = 2
 #: the version that has data blocks (and flags the bounds section)
 _DATA_VERSION = 3
-#: flag (version 3): the bounds section is present
+#: flags (version 3): the bounds, data and colour sections are present
 FLAG_BOUNDS = 8
+FLAG_DATA = 16
+FLAG_COLORS = 32
+#: the most palette entries (coloured nodes and uncoloured leaves) of a program
+MAX_PALETTE = 1_000_000
 #: data block kind: a closed triangle mesh
 MESH_BLOCK = 1
 HEADER = struct.Struct("<4sHHHHHHIId")
@@ -75,9 +82,11 @@ def encode(prog: Any) -> bytes:
     """Serialise a :class:`csdf.Program` (see the module docstring for the layout)."""
     flags = EXACTNESS_CODES[prog.exactness] | (FLAG_DIM2 if prog.dim == 2 else 0)
     data = getattr(prog, "data", ())
-    if data:
+    colors = getattr(prog, "colors", None)
+    if data or colors is not None:
         version = _DATA_VERSION
-        flags |= FLAG_BOUNDS if prog.bounds is not None else 0
+        flags |= (FLAG_BOUNDS if prog.bounds is not None else 0) | \
+            (FLAG_DATA if data else 0) | (FLAG_COLORS if colors is not None else 0)
     else:
         version = 1 if prog.bounds is None else _BOUNDS_VERSION
     out = bytearray(
@@ -104,6 +113,11 @@ def encode(prog: Any) -> bytes:
             out += struct.pack("<BII", MESH_BLOCK, len(block.vertices), len(block.faces))
             out += block.vertices.astype("<f8").tobytes()
             out += block.faces.astype("<u4").tobytes()
+    if colors is not None:
+        cprog, palette = colors
+        inner = encode(cprog)
+        out += struct.pack("<I", len(palette)) + np.asarray(palette, "<f8").tobytes()
+        out += struct.pack("<I", len(inner)) + inner
     out += struct.pack("<I", zlib.crc32(out) & 0xFFFFFFFF)
     return bytes(out)
 
@@ -164,7 +178,11 @@ def decode_fields(data: bytes) -> dict[str, Any]:
     if version not in VERSIONS:
         known = " and ".join(str(v) for v in VERSIONS)
         raise BytecodeError(f"byte 4: unsupported version {version} (this csdf reads {known})")
-    allowed = 3 | FLAG_DIM2 | (FLAG_BOUNDS if version == _DATA_VERSION else 0)
+    allowed = 3 | FLAG_DIM2 | (FLAG_BOUNDS | FLAG_DATA | FLAG_COLORS
+                               if version == _DATA_VERSION else 0)
+    if version == _DATA_VERSION and not flags & (FLAG_DATA | FLAG_COLORS):
+        raise BytecodeError("byte 6: a version-3 program holds data or colours (flag 16 "
+                            "or 32); one with neither is written as version 1 or 2")
     if flags & ~allowed or (flags & 3) == 3:
         raise BytecodeError(f"byte 6: invalid flags 0x{flags:04x}")
     params = []
@@ -195,7 +213,7 @@ def decode_fields(data: bytes) -> dict[str, Any]:
         raw_box = r.take(16 * dim, "bounds")
         bounds = np.frombuffer(raw_box, dtype="<f8").astype(np.float64).reshape(2, dim)
     data = []
-    if version == _DATA_VERSION:
+    if version == _DATA_VERSION and flags & FLAG_DATA:
         at = r.pos
         (n_blocks,) = r.unpack("<I", "data block count")
         if not 1 <= n_blocks <= max(n_instr, 1):
@@ -216,12 +234,36 @@ def decode_fields(data: bytes) -> dict[str, Any]:
             except CsdfError as exc:
                 raise BytecodeError(f"byte {at}: data block {i}: {exc}") from None
             data.append(block)
+    colors = None
+    if version == _DATA_VERSION and flags & FLAG_COLORS:
+        at = r.pos
+        (k,) = r.unpack("<I", "palette size")
+        if not 1 <= k <= MAX_PALETTE:
+            raise BytecodeError(f"byte {at}: a palette of {k} colours (1 to {MAX_PALETTE})")
+        palette = np.frombuffer(r.take(32 * k, "palette"), dtype="<f8").astype(
+            np.float64).reshape(k, 4)
+        ok = np.isnan(palette).all(axis=1) | ((palette >= 0) & (palette <= 1)).all(axis=1)
+        if not ok.all():
+            raise BytecodeError(f"byte {at}: palette colour {int(np.argmin(ok))} is not "
+                                "RGBA in [0, 1]")
+        (n,) = r.unpack("<I", "colour program size")
+        at = r.pos
+        inner = r.take(n, "colour program")
+        try:
+            fields = decode_fields(inner)
+        except BytecodeError as exc:
+            raise BytecodeError(f"byte {at}: the colour program: {exc}") from None
+        if fields["colors"] is not None or fields["data"]:
+            raise BytecodeError(f"byte {at}: the colour program holds its own colours "
+                                "or mesh data")
+        colors = (fields, palette)
     if r.pos != len(r.data):
         raise BytecodeError(f"byte {r.pos}: {len(r.data) - r.pos} unexpected trailing bytes")
     return dict(
         params=tuple(params), consts=consts, code=code, output=output, n_regs=n_regs,
         dim=dim, exactness=EXACTNESS_NAMES[flags & 3],
         lipschitz=lipschitz, calls=tuple(calls), bounds=bounds, data=tuple(data),
+        colors=colors,
     )
 
 
@@ -305,6 +347,14 @@ def validate(prog: Any) -> None:
         raise BytecodeError("a 2D program reads z")
     if len(data) and any(not isinstance(d, MeshData) for d in data):
         raise BytecodeError("a program's data blocks must be MeshData")
+    colors = getattr(prog, "colors", None)
+    if colors is not None:
+        cprog, palette = colors
+        validate(cprog)
+        if np.shape(palette) != (np.shape(palette)[0], 4) or not len(palette):
+            raise BytecodeError("the palette must be (K, 4) RGBA rows")
+        if cprog.dim != prog.dim:
+            raise BytecodeError("the colour program must have the program's dimension")
     used_blocks = {rows[k][3] for k in range(len(rows)) if rows[k][0] == ARG_CODE}
     if used_blocks != set(range(len(data))):
         raise BytecodeError(f"the program has {len(data)} data blocks but its mesh calls "

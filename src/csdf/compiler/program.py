@@ -78,6 +78,10 @@ class Program:
             :attr:`~csdf.Shape.bounds`, kept in the bytecode since format version 2).
         data: the data blocks of the program's mesh calls
             (:class:`csdf.meshdata.MeshData`; format version 3), empty for most.
+        colors: ``(program, palette)`` of the shape's colours (:mod:`csdf.colors`:
+            a program whose value is the index of the winning row of ``palette``
+            ``(K, 4)`` RGBA, NaN rows for uncoloured parts; format version 3), or None.
+            Evaluating the distance never runs it.
 
     With its metadata (exactness, Lipschitz bound, bounds) a program alone is enough
     for every consumer; :meth:`to_bytes` and :meth:`disassemble` keep all of it, and two
@@ -98,9 +102,11 @@ class Program:
         calls: tuple[Call, ...] = (),
         bounds: np.ndarray | None = None,
         data: tuple = (),
+        colors: tuple | None = None,
     ):
         self.params = tuple(params)
         self.data = tuple(data)
+        self.colors = colors
         self.consts = np.asarray(consts, dtype=np.float64)
         self.code = np.asarray(code, dtype=np.int64).reshape(-1, 4)
         self.output = int(output)
@@ -178,6 +184,7 @@ class Program:
             params=self.params, consts=self.consts, code=self.code, output=self.output,
             n_regs=self.n_regs, dim=self.dim, exactness=self.exactness,
             lipschitz=self.lipschitz, calls=self.calls, bounds=bounds, data=self.data,
+            colors=self.colors,
         )
 
     # ------------------------------------------------------------------ parameters
@@ -377,7 +384,11 @@ class Program:
         """Decode and validate bytecode (format version 1 or 2; a version-1 program has
         no bounds). Raises :class:`csdf.BytecodeError` on any flaw; a program it returns
         is safe to evaluate."""
-        prog = cls(**decode_fields(data))
+        fields = decode_fields(data)
+        if fields.get("colors") is not None:  # the colour program's own fields
+            inner, palette = fields["colors"]
+            fields["colors"] = (cls(**inner), palette)
+        prog = cls(**fields)
         validate(prog)
         return prog
 
@@ -391,6 +402,9 @@ class Program:
         :meth:`from_bytes` (raises BytecodeError naming the line)."""
         fields = assemble_fields(text)
         try:
+            if fields.get("colors") is not None:  # the colour program's own fields
+                inner, palette = fields["colors"]
+                fields["colors"] = (cls(**inner), palette)
             prog = cls(**fields)
         except (ValueError, OverflowError) as exc:
             raise BytecodeError(f"invalid program: {exc}") from None

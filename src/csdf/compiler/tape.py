@@ -31,7 +31,7 @@ from .calls import INSTR_REF, Call
 from .program import Program
 from .regalloc import linear_scan
 
-__all__ = ["compile_shape", "compile_expr", "MAX_SLOTS", "MAX_PARAMS"]
+__all__ = ["compile_shape", "compile_expr", "color_section", "MAX_SLOTS", "MAX_PARAMS"]
 
 
 
@@ -45,10 +45,38 @@ def compile_shape(shape) -> Program:
     """
     root, ctx = shape.build()
     calls = [(name, out, inputs) for name, out, inputs in ctx.calls.values()]
-    return compile_expr(
+    prog = compile_expr(
         root, dim=shape.dim, exactness=shape.exactness, lipschitz=shape.lipschitz,
         calls=calls, bounds=shape.bounds,
     )
+    colored = list(getattr(ctx, "colored", ()))
+    if any(c is not None for c, _ in colored):
+        prog.colors = color_section(colored, shape.dim)
+    return prog
+
+
+def color_section(colored, dim: int = 3) -> tuple[Program, np.ndarray]:
+    """``(program, palette)`` of a shape's colours: ``colored`` lists ``(rgba or None,
+    distance expression)`` per coloured node and per leaf outside any (the shapes
+    layer's build context, innermost first). The program's value at a point is the
+    index of the entry whose ``|distance|`` is smallest there (the first on ties): the
+    nearest coloured surface (:mod:`csdf.colors`). ``palette`` ``(K, 4)`` float64 RGBA,
+    NaN rows for the uncoloured leaves."""
+    from ..expr import const, minimum, step
+
+    palette = np.array([(np.nan,) * 4 if c is None else (tuple(c) + (1.0,))[:4]
+                        for c, _ in colored], dtype=np.float64).reshape(-1, 4)
+    if all(c is not None for c, _ in colored) and len(np.unique(palette, axis=0)) == 1:
+        # one colour everywhere: the index is the constant 0
+        return compile_expr(const(0.0), dim=dim, exactness="neither"), palette[:1]
+    best = abs(colored[0][1])
+    index: Expr = const(0.0)
+    for k, (_, d) in enumerate(colored[1:], start=1):
+        a = abs(d)
+        nearer = 1.0 - step(a - best)  # 1 where this entry is strictly nearer
+        index = index + nearer * (float(k) - index)
+        best = minimum(best, a)
+    return compile_expr(index, dim=dim, exactness="neither"), palette
 
 
 def compile_expr(

@@ -102,6 +102,14 @@ def disassemble(prog: Any) -> str:
         ins = [f"@{s & ~INSTR_REF}" if s & INSTR_REF else _slot_name(layout, prog, s)
                for s in c.inputs]
         lines.append(f"call {c.name} @{c.out} {' '.join(ins)}".rstrip())
+    colors = getattr(prog, "colors", None)
+    if colors is not None:
+        cprog, palette = colors
+        lines.append(f"colors {len(palette)}")
+        lines += ["palette " + " ".join(_fmt(v) for v in row) for row in palette.tolist()]
+        lines.append("colors-program")
+        lines += disassemble(cprog).rstrip("\n").split("\n")
+        lines.append("end-colors")
     return "\n".join(lines) + "\n"
 
 
@@ -160,7 +168,22 @@ def assemble_fields(text: str) -> dict[str, Any]:
         block = None
 
     seen_magic = False
+    palette: list[list[float]] = []
+    colors_fields: dict | None = None
+    nested: list[str] | None = None  # the colour program's lines while they are read
+    nested_at = 0
     for ln, line in enumerate(raw_lines, 1):
+        if nested is not None:
+            if line.strip() == "end-colors":
+                try:
+                    colors_fields = assemble_fields("\n".join(nested))
+                except BytecodeError as exc:
+                    raise BytecodeError(f"line {nested_at}: the colour program: "
+                                        f"{exc}") from None
+                nested = None
+            else:
+                nested.append(line)
+            continue
         line = line.split(";", 1)[0].strip()
         if not line:
             continue
@@ -205,6 +228,12 @@ def assemble_fields(text: str) -> dict[str, Any]:
             output_tok = (ln, toks[1])
         elif kw == "call" and len(toks) >= 3:
             call_rows.append((ln, toks[1:]))
+        elif kw == "colors" and len(toks) == 2 and toks[1].isdigit():
+            pass  # (the palette lines that follow give the count)
+        elif kw == "palette" and len(toks) == 5:
+            palette.append([_float(t, ln) for t in toks[1:]])
+        elif kw == "colors-program" and len(toks) == 1:
+            nested, nested_at = [], ln
         elif len(toks) == 7 and toks[1] == "=" and toks[2] == "mesh":
             reg_rows.append((ln, toks[0], "mesh", " ".join(toks[3:])))
         elif len(toks) in (4, 5) and toks[1] == "=":
@@ -217,6 +246,12 @@ def assemble_fields(text: str) -> dict[str, Any]:
         else:
             raise BytecodeError(f"line {ln}: cannot read {line[:60]!r}")
     close_block()
+    if nested is not None:
+        raise BytecodeError(f"line {nested_at}: the colour program has no 'end-colors' "
+                            "line")
+    if (colors_fields is None) != (not palette):
+        raise BytecodeError("a colour program needs its palette lines, and palette lines "
+                            "their colour program")
     if not seen_magic:
         raise BytecodeError("line 1: empty listing (expected 'csdf-program 1')")
     layout = SlotLayout(len(params), len(consts))
@@ -286,4 +321,6 @@ def assemble_fields(text: str) -> dict[str, Any]:
         output=output, n_regs=n_regs, dim=int(header["dim"]),
         exactness=str(header["exactness"]), lipschitz=float(header["lipschitz"]),
         calls=tuple(calls), bounds=bounds, data=tuple(data),
+        colors=None if colors_fields is None else (
+            colors_fields, np.array(palette, dtype=np.float64).reshape(-1, 4)),
     )

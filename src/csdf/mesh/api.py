@@ -154,18 +154,11 @@ def mesh(
         separate_close_vertices(verts, faces, min_edge_length(verts, h))
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     if colors:
-        from ..colors import colors_at
+        from ..colors import colors_at, colour_source
 
-        tree, cparams, local = shape, params, verts
-        if not hasattr(tree, "children"):  # a Field: its shape, values and pose
-            tree = getattr(shape, "shape", None)
-            cparams = dict(getattr(shape, "params", {}) or {}, **(params or {}))
-            pose = getattr(shape, "pose", None)
-            if pose is not None and not pose.is_identity():
-                local = pose.apply_inverse(verts)
-        if tree is None or not hasattr(tree, "children"):
-            raise CsdfError("colors=True needs a Shape (a compiled program has no colours)")
-        rgba = colors_at(tree, local, cparams, check_ranges=check_ranges) if len(verts) \
+        src, cparams, pose = colour_source(shape, params)
+        local = verts if pose is None else pose.apply_inverse(verts)
+        rgba = colors_at(src, local, cparams, check_ranges=check_ranges) if len(verts) \
             else np.zeros((0, 4))
         m.visual.vertex_colors = np.rint(np.nan_to_num(rgba, nan=0.0) * 255).astype(np.uint8)
     m.metadata["csdf"] = {

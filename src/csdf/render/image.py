@@ -159,18 +159,16 @@ def _linear(srgb: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def _albedo(shape, fld, p: np.ndarray, params, check_ranges: bool) -> np.ndarray | None:
+def _albedo(fld, p: np.ndarray, params, check_ranges: bool) -> np.ndarray | None:
     """Linear RGB ``(M, 3)`` of a coloured shape at world hits ``p`` (its ``color``
     nodes, :mod:`csdf.colors`; uncoloured parts keep :data:`ALBEDO`), or None."""
-    from ..colors import colors_at, has_colors
+    from ..colors import colors_at, colour_source, has_colors
 
-    tree = shape if hasattr(shape, "children") else getattr(shape, "shape", None)
-    if tree is None or not hasattr(tree, "children") or not has_colors(tree):
+    src, given, pose = colour_source(fld, params)
+    if src is None or not has_colors(src):
         return None
-    local = p if fld.pose.is_identity() else fld.pose.apply_inverse(p)
-    given = dict(fld.params)
-    given.update(params or {})
-    rgba = colors_at(tree, local, given, check_ranges=check_ranges,
+    local = p if pose is None else pose.apply_inverse(p)
+    rgba = colors_at(src, local, given, check_ranges=check_ranges,
                      default=tuple(_srgb(ALBEDO)) + (1.0,))
     return _linear(np.nan_to_num(rgba[:, :3], nan=0.5))
 
@@ -294,7 +292,7 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     hi = np.flatnonzero(hit)
     if hi.size:
         p = cam.t + t[hi, None] * dirs[hi]
-        albedo = None if ids is not None else _albedo(shape, fld, p, params, check_ranges)
+        albedo = None if ids is not None else _albedo(fld, p, params, check_ranges)
         color[hi] = _srgb(_shade(fld, cam, p, normals[hi], dirs[hi], shadows, ao, albedo))
     rgb = np.round(np.clip(color, 0.0, 1.0) * 255.0).astype(np.uint8)
     stats.update(seconds=time.perf_counter() - t_start,

@@ -1,7 +1,7 @@
 """Appearance kept on shapes: :meth:`Shape.color` and :meth:`Shape.material`.
 
 A colour is metadata of the shape tree: the node keeps the child's geometry unchanged
-(the same expression, so the same bytecode, exactness, Lipschitz bound and bounds) and
+(the same expression, so the same tape, exactness, Lipschitz bound and bounds) and
 records the colour (a material: a name, its colour and a roughness), which readers of
 other formats keep (OpenSCAD's ``color()``) and the ``.csdf`` printer writes back.
 :func:`colors` lists the colours of a tree; :mod:`csdf.colors` evaluates them at points
@@ -50,7 +50,7 @@ def color_arg(rgb: Any, what: str = "color") -> tuple[float, ...]:
 @register("method")
 def color(shape: Shape, rgb) -> Shape:
     """The same shape with a colour: ``rgb`` is ``(r, g, b)`` or ``(r, g, b, a)`` in
-    ``[0, 1]``. The geometry is the child's, unchanged (same bytecode, contract and
+    ``[0, 1]``. The geometry is the child's, unchanged (same tape, contract and
     bounds); the colour is kept on the tree (:func:`colors`)."""
     if not isinstance(shape, Shape):
         raise ShapeError(f"color is a shape method; got {type(shape).__name__}")

@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 import csdf
 from csdf.cli import app
 from csdf.colors import DEFAULT_COLOR, color_program, colors_at
+from test_bytecode_versions import _with_crc
 
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 
@@ -75,11 +76,8 @@ def test_geometry_is_untouched_by_colour_and_colours_survive_the_bytecode():
     i = len(bad) - len(inner) - 4 - 32 * len(coloured.colors[1])  # the palette's start
     assert bad[i:i + 8] == np.float64(1.0).tobytes()  # red's red
     bad[i:i + 8] = np.float64(2.0).tobytes()
-    import struct
-    import zlib
-    bad += struct.pack("<I", zlib.crc32(bytes(bad)) & 0xFFFFFFFF)
     with pytest.raises(csdf.BytecodeError, match="palette colour 0"):
-        csdf.Program.from_bytes(bytes(bad))
+        csdf.Program.from_bytes(_with_crc(bytes(bad)))
 
 
 def test_coloured_meshes_round_trip_through_ply_glb_and_obj(tmp_path):

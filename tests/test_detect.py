@@ -204,13 +204,24 @@ def test_detect_primitives_bad_input(kw, match):
 
 # -- detect: known models in a scan ---------------------------------------------------
 
-@pytest.fixture(scope="module")
-def clutter():
+def _floor_scene() -> csdf.Scene:
+    """A scene holding a 6 m x 6 m floor slab whose top is z = 0."""
     scene = csdf.Scene()
     scene.add(csdf.box((6.0, 6.0, 0.05)), pose=csdf.Pose(translation=(0, 0, -0.025)),
               name="floor")
-    c, s = math.cos(0.4), math.sin(0.4)
-    stool_pose = csdf.Pose([[c, -s, 0], [s, c, 0], [0, 0, 1]], (0.1, 0.0, 0.0))
+    return scene
+
+
+def _yawed(angle: float, t) -> csdf.Pose:
+    """A pose turned by ``angle`` radians about z and moved by ``t``."""
+    c, s = math.cos(angle), math.sin(angle)
+    return csdf.Pose([[c, -s, 0], [s, c, 0], [0, 0, 1]], t)
+
+
+@pytest.fixture(scope="module")
+def clutter():
+    scene = _floor_scene()
+    stool_pose = _yawed(0.4, (0.1, 0.0, 0.0))
     params = {"height": 0.6, "seat_radius": 0.17}
     scene.add("stool", pose=stool_pose, params=params, name="stool")
     scene.add(csdf.sphere(0.15), pose=csdf.Pose(translation=(-0.7, 0.3, 0.15)), name="ball")
@@ -323,11 +334,8 @@ def test_model_heights_follow_their_parameters():
 
 @pytest.fixture(scope="module")
 def chair_scan():
-    scene = csdf.Scene()
-    scene.add(csdf.box((6.0, 6.0, 0.05)), pose=csdf.Pose(translation=(0, 0, -0.025)),
-              name="floor")
-    c, s = math.cos(1.0), math.sin(1.0)
-    pose = csdf.Pose([[c, -s, 0], [s, c, 0], [0, 0, 1]], (0.0, 0.2, 0.0))
+    scene = _floor_scene()
+    pose = _yawed(1.0, (0.0, 0.2, 0.0))
     scene.add("chair", pose=pose, name="chair")
     scene.add(csdf.box((0.4, 0.4, 0.4)), pose=csdf.Pose(translation=(0.1, -0.6, 0.2)),
               name="crate")  # in front of the chair: hides part of it

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import pickle
 import struct
-import zlib
 
 import numpy as np
 import pytest
@@ -19,6 +18,7 @@ from csdf.expr import mesh_call
 from csdf.interval import _ARG, _MESH
 from csdf.meshdata import MeshData
 from csdf.ops import ARG_CODE, MESH_CODE
+from test_bytecode_versions import _with_crc
 from test_meshdist import brute_unsigned
 
 RNG = np.random.default_rng(7)
@@ -160,10 +160,6 @@ def test_binary_and_text_round_trips(torus):
     assert "= mesh d0 " in p.disassemble()
     # a program without meshes keeps its old encoding
     assert struct.unpack_from("<H", csdf.sphere(1).compile().to_bytes(), 4)[0] == 2
-
-
-def _with_crc(body: bytes) -> bytes:
-    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
 
 
 def test_bad_data_blocks_are_refused(torus):

@@ -31,21 +31,24 @@ import numpy as np
 
 from .errors import CsdfError
 
-__all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "has_colors", "albedo_glsl",
-           "colour_source"]
+__all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "colors_of", "has_colors",
+           "albedo_glsl"]
 
 #: the colour of surfaces outside every ``color`` node (a light grey, opaque)
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 
 
+def _section(model) -> tuple[Any, np.ndarray] | None:
+    """The colour section ``(program, palette with NaN rows)`` of a shape's compiled
+    program (compiled once, cached on the shape) or of a program; None without."""
+    prog = model.compile() if hasattr(model, "children") else model
+    return getattr(prog, "colors", None)
+
+
 def has_colors(shape) -> bool:
     """True when ``shape`` (a shape, or a compiled program) has colours: a ``color`` or
-    ``material`` node in its tree, or a colour section in its program."""
-    if hasattr(shape, "children"):
-        from .shapes.base import walk_shapes
-
-        return any(s.name in ("color", "material") for s in walk_shapes(shape))
-    return getattr(shape, "colors", None) is not None
+    ``material`` node in its tree, so a colour section in its program."""
+    return _section(shape) is not None
 
 
 def color_program(shape) -> tuple[Any, np.ndarray]:
@@ -58,11 +61,10 @@ def color_program(shape) -> tuple[Any, np.ndarray]:
     Raises:
         CsdfError: not a shape or program, or one without colours.
     """
-    prog = shape.compile() if hasattr(shape, "children") else shape
-    colors = getattr(prog, "colors", None)
-    if colors is None:
+    section = _section(shape)
+    if section is None:
         raise CsdfError("the shape has no colours (no color() or material() node)")
-    cprog, palette = colors
+    cprog, palette = section
     return cprog, np.where(np.isnan(palette), np.array(DEFAULT_COLOR), palette)
 
 
@@ -81,11 +83,11 @@ def colors_at(shape, points: Any, params: dict | None = None, *,
     pts, batch, _ = as_points(points, getattr(shape, "dim", 3))
     n = pts.shape[0]
     base = np.array(DEFAULT_COLOR if default is None else default, dtype=np.float64)
-    if not has_colors(shape):
+    section = _section(shape)
+    if section is None:
         out = np.tile(base, (n, 1))
     else:
-        prog = shape.compile() if hasattr(shape, "children") else shape
-        prog, raw = prog.colors
+        prog, raw = section
         palette = np.where(np.isnan(raw), base, raw)
         params = {k: v for k, v in (params or {}).items() if k in prog.param_names}
         idx = prog(pts, params, check_ranges=check_ranges)
@@ -94,6 +96,22 @@ def colors_at(shape, points: Any, params: dict | None = None, *,
         out[ok] = palette[np.clip(np.rint(idx[ok]).astype(np.int64), 0, len(palette) - 1)]
     out[np.isnan(pts).any(axis=1)] = np.nan
     return out.reshape(*batch, 4)
+
+
+def colors_of(model: Any, points: Any, params: dict | None = None, *,
+              check_ranges: bool = True, default: Any = None) -> np.ndarray:
+    """:func:`colors_at` for a model a consumer was given: a :class:`csdf.Shape` or
+    :class:`csdf.Program` as is, a :class:`csdf.Field` by its shape (else its
+    program) with its parameter values (updated by ``params``), ``points`` ``(N, 3)``
+    in the field's frame (mapped back by its pose)."""
+    if hasattr(model, "children") or hasattr(model, "colors"):
+        return colors_at(model, points, params, check_ranges=check_ranges, default=default)
+    src = getattr(model, "shape", None) or getattr(model, "program", None)
+    merged = dict(getattr(model, "params", {}) or {})
+    merged.update(params or {})
+    pose = getattr(model, "pose", None)
+    local = points if pose is None or pose.is_identity() else pose.apply_inverse(points)
+    return colors_at(src, local, merged, check_ranges=check_ranges, default=default)
 
 
 def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
@@ -114,10 +132,10 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
         return "vec3(" + ", ".join(glsl_float(float(v)) for v in c[:3]) + ")"
 
     base = DEFAULT_COLOR if default is None else tuple(default)
-    if not has_colors(shape):
+    section = _section(shape)
+    if section is None:
         return f"vec3 {name}(vec3 p) {{\n    return {vec3(base)};\n}}\n"
-    prog = shape.compile() if hasattr(shape, "children") else shape
-    prog, raw = prog.colors
+    prog, raw = section
     palette = np.where(np.isnan(raw), np.array((tuple(base) + (1.0,))[:4]), raw)
     have = {ln.strip() for ln in declared.splitlines() if ln.startswith("uniform ")}
     src = [ln for ln in to_glsl(prog, f"{name}_index", gradient=False).splitlines()
@@ -128,16 +146,3 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
     body += [f"    return {vec3(palette[-1])};", "}"]
     return "\n".join(src + body) + "\n"
 
-
-def colour_source(model: Any, params: dict | None = None) -> tuple[Any, dict, Any]:
-    """``(shape or program, params, pose or None)`` to take colours from for a model a
-    consumer was given: a :class:`csdf.Shape` or :class:`csdf.Program` as is, a
-    :class:`csdf.Field` by its shape (else its program), its parameter values (updated
-    by ``params``) and its pose (points in the world frame are mapped back by it)."""
-    if hasattr(model, "children") or hasattr(model, "colors"):
-        return model, dict(params or {}), None
-    src = getattr(model, "shape", None) or getattr(model, "program", None)
-    merged = dict(getattr(model, "params", {}) or {})
-    merged.update(params or {})
-    pose = getattr(model, "pose", None)
-    return src, merged, None if pose is None or pose.is_identity() else pose

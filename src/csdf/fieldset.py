@@ -26,6 +26,7 @@ from .cache import memo
 from .errors import CsdfError
 from .field import Field, field_bounds, numba_available
 from .parallel import N_THREADS, executor
+from .shapes.palette import COLOR_NODES
 
 __all__ = ["FieldSet", "build_bvh", "cell_depth", "union_parts", "LEAF_SIZE",
            "CELL_MIN_INSTRUCTIONS", "MAX_PARTS"]
@@ -45,7 +46,7 @@ def _hard_union_operands(shape) -> list:
     """The operands of ``shape`` as nested hard unions, flattened (``[shape]`` when its
     root is anything else); a ``color`` or ``material`` node is looked through (its
     geometry is its child's)."""
-    if getattr(shape, "name", None) in ("color", "material"):
+    if getattr(shape, "name", None) in COLOR_NODES:
         return _hard_union_operands(shape.children[0])
     if getattr(shape, "name", None) != "union" or shape.kwargs.get("k") is not None:
         return [shape]

@@ -265,11 +265,9 @@ def sample_surface(
         out = _surface(fld, n, rng, resolution)
     if not colors:
         return out
-    from .colors import colors_at, colour_source
+    from .colors import colors_of
 
-    src, given, pose = colour_source(fld)
-    local = out[0] if pose is None else pose.apply_inverse(out[0])
-    return out[0], out[1], colors_at(src, local, given, check_ranges=check_ranges)
+    return out[0], out[1], colors_of(fld, out[0], check_ranges=check_ranges)
 
 
 def sample_volume(

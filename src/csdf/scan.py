@@ -120,11 +120,10 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     ids = ids[keep] if scene else None
     rgba = None
     if colors:
-        from .colors import colors_at, colour_source
+        from .colors import colors_of
 
-        src, given, _ = colour_source(fld)  # (rays are in the object's frame already)
         hit_obj = o_obj + t[:, None] * d_obj[keep]
-        rgba = colors_at(src, hit_obj, given, check_ranges=check_ranges)
+        rgba = colors_of(fld, hit_obj, check_ranges=check_ranges)
     normals = n_obj[keep] @ M  # object frame -> camera frame: M^T n
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     m = len(t)

@@ -100,36 +100,13 @@ def evaluate_intervals(
 
 def mesh_rule(prog):
     """The interval rule of ``prog``'s mesh calls (for :func:`csdf.interval.tape_steps`):
-    over the box of its three operands, the distance at the box's centre plus or minus
-    its half diagonal (the distance is 1-Lipschitz), widened by rounding, then clipped
-    below by the distance from the box to the mesh's box (no point outside that box is
-    nearer) and by minus the mesh's half diagonal (no point is deeper). A box with an
-    infinite side gets those two lower bounds and ``+inf``; an empty (NaN) operand
-    gives an empty result."""
+    :meth:`csdf.backends.meshdist.MeshDistance.intervals` over the box of its three
+    operands."""
     from .meshdist import for_data
 
     def rule(block, alo, ahi, blo, bhi, clo, chi):
-        md = for_data(prog.data[block])
-        lo3 = np.stack(np.broadcast_arrays(alo, blo, clo), axis=1).astype(np.float64)
-        hi3 = np.stack(np.broadcast_arrays(ahi, bhi, chi), axis=1).astype(np.float64)
-        mlo, mhi = md.bounds
-        gap = np.maximum(np.maximum(mlo - hi3, lo3 - mhi), 0.0)
-        apart = np.linalg.norm(gap, axis=1)  # > 0: the box misses the mesh's box
-        deep = -0.5 * float(np.linalg.norm(mhi - mlo))
-        out_lo = np.where(apart > 0, apart, deep)
-        out_hi = np.full(len(lo3), math.inf)
-        with np.errstate(invalid="ignore", over="ignore"):
-            fin = np.isfinite(lo3).all(axis=1) & np.isfinite(hi3).all(axis=1)
-        if fin.any():
-            c = 0.5 * (lo3[fin] + hi3[fin])
-            r = 0.5 * np.linalg.norm(hi3[fin] - lo3[fin], axis=1)
-            v, _ = md.field(c[:, 0], c[:, 1], c[:, 2], False)
-            slack = 1e-12 * (np.abs(v) + r + np.abs(c).max(axis=1)) + 1e-300
-            out_lo[fin] = np.maximum(out_lo[fin], v - r - slack)
-            out_hi[fin] = v + r + slack
-        empty = np.isnan(lo3).any(axis=1) | np.isnan(hi3).any(axis=1)
-        out_lo[empty] = math.nan
-        out_hi[empty] = math.nan
-        return out_lo, out_hi
+        lo3 = np.stack(np.broadcast_arrays(alo, blo, clo), axis=1)
+        hi3 = np.stack(np.broadcast_arrays(ahi, bhi, chi), axis=1)
+        return for_data(prog.data[block]).intervals(lo3, hi3)
 
     return rule

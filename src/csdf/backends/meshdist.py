@@ -12,7 +12,7 @@ The distance is exact (the nearest point over all triangles, to rounding), the s
 exact for a closed oriented mesh (also inside thin and non-convex parts: it depends on
 the nearest feature only), the gradient the unit vector from the nearest point (exact
 wherever that point is unique), and the function is 1-Lipschitz, so ``value(c) +- r``
-bounds it on a ball of radius ``r`` about ``c`` (:meth:`MeshDistance.interval`).
+bounds it on a ball of radius ``r`` about ``c`` (:meth:`MeshDistance.intervals`).
 """
 
 from __future__ import annotations
@@ -79,21 +79,25 @@ class MeshDistance:
     def __repr__(self) -> str:
         return f"MeshDistance({len(self.faces)} triangles, volume {self.volume:g})"
 
-    def _run(self, points, want_grad: bool, want_closest: bool):
+    def _query(self, P: np.ndarray, want_grad: bool, want_closest: bool):
+        """``(values, gradients, nearest points)`` of finite, C-contiguous ``(N, 3)``
+        float64 points (empty ``(0, 3)`` arrays for what is not wanted)."""
         from .mesh_kernels import signed_distance
 
-        P = np.asarray(points, dtype=np.float64)
-        if P.ndim != 2 or P.shape[1] != 3:
-            raise CsdfError(f"points must be an (N, 3) array, got shape {P.shape}")
-        if not np.all(np.isfinite(P)):
-            raise CsdfError("points must be finite")
-        P = np.ascontiguousarray(P)
         n = len(P)
         out = np.empty(n)
         grad = np.empty((n if want_grad else 0, 3))
         near = np.empty((n if want_closest else 0, 3))
         signed_distance(P, *self._data, out, grad, near, want_grad, want_closest)
         return out, grad, near
+
+    def _run(self, points, want_grad: bool, want_closest: bool):
+        P = np.asarray(points, dtype=np.float64)
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise CsdfError(f"points must be an (N, 3) array, got shape {P.shape}")
+        if not np.all(np.isfinite(P)):
+            raise CsdfError("points must be finite")
+        return self._query(np.ascontiguousarray(P), want_grad, want_closest)
 
     def field(self, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
               want_grad: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -105,24 +109,14 @@ class MeshDistance:
         P = np.empty((max(np.size(p0), np.size(p1), np.size(p2)), 3))
         P[:, 0], P[:, 1], P[:, 2] = p0, p1, p2
         ok = np.isfinite(P).all(axis=1)
-        n = len(P)
-        out = np.empty(n)
-        grad = np.empty((n if want_grad else 0, 3))
         if ok.all():
-            Q = P
-        else:
-            Q = np.ascontiguousarray(P[ok])
-        o = np.empty(len(Q))
-        g = np.empty((len(Q) if want_grad else 0, 3))
-        from .mesh_kernels import signed_distance
-
-        signed_distance(Q, *self._data, o, g, np.empty((0, 3)), want_grad, False)
-        if ok.all():
-            return o, g
-        out[ok] = o
+            return self._query(P, want_grad, False)[:2]
+        o, g, _ = self._query(np.ascontiguousarray(P[ok]), want_grad, False)
         nan = np.isnan(P).any(axis=1)
         far = ~ok & ~nan
-        out[~ok] = np.where(far[~ok], np.inf, np.nan)
+        out = np.where(far, np.inf, np.nan)
+        out[ok] = o
+        grad = np.empty((len(P) if want_grad else 0, 3))
         if want_grad:
             grad[ok] = g
             with np.errstate(invalid="ignore"):
@@ -145,15 +139,41 @@ class MeshDistance:
         d, _, c = self._run(points, False, True)
         return d, c
 
-    def interval(self, lo, hi) -> tuple[float, float]:
-        """Bounds of the signed distance over the box ``[lo, hi]`` (``(3,)`` each): the
-        value at its centre plus or minus its half diagonal (the field is 1-Lipschitz)."""
-        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-        c = 0.5 * (lo + hi)
-        r = 0.5 * float(np.linalg.norm(hi - lo))
-        v = float(self.value(c[None])[0])
-        return v - r, v + r
+    def intervals(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds ``((M,), (M,))`` of the signed distance over boxes ``[lo, hi]`` (``(M,
+        3)`` each): the value at each box's centre plus or minus its half diagonal (the
+        field is 1-Lipschitz), widened by rounding, then clipped below by the distance
+        from the box to the mesh's box (no point outside that box is nearer) and by
+        minus the mesh's half diagonal (no point is deeper). A box with an infinite
+        side gets those two lower bounds and ``+inf``; one with a NaN bound is empty
+        (NaN, NaN)."""
+        lo3 = np.asarray(lo, dtype=np.float64).reshape(-1, 3)
+        hi3 = np.asarray(hi, dtype=np.float64).reshape(-1, 3)
+        mlo, mhi = self.bounds
+        gap = np.maximum(np.maximum(mlo - hi3, lo3 - mhi), 0.0)
+        apart = np.linalg.norm(gap, axis=1)  # > 0: the box misses the mesh's box
+        deep = -0.5 * float(np.linalg.norm(mhi - mlo))
+        out_lo = np.where(apart > 0, apart, deep)
+        out_hi = np.full(len(lo3), np.inf)
+        with np.errstate(invalid="ignore", over="ignore"):
+            fin = np.isfinite(lo3).all(axis=1) & np.isfinite(hi3).all(axis=1)
+        if fin.any():
+            c = 0.5 * (lo3[fin] + hi3[fin])
+            r = 0.5 * np.linalg.norm(hi3[fin] - lo3[fin], axis=1)
+            v, _ = self.field(c[:, 0], c[:, 1], c[:, 2], False)
+            slack = 1e-12 * (np.abs(v) + r + np.abs(c).max(axis=1)) + 1e-300
+            out_lo[fin] = np.maximum(out_lo[fin], v - r - slack)
+            out_hi[fin] = v + r + slack
+        empty = np.isnan(lo3).any(axis=1) | np.isnan(hi3).any(axis=1)
+        out_lo[empty] = np.nan
+        out_hi[empty] = np.nan
+        return out_lo, out_hi
 
+    def interval(self, lo, hi) -> tuple[float, float]:
+        """Bounds of the signed distance over the box ``[lo, hi]`` (``(3,)`` each), as
+        :meth:`intervals` gives them."""
+        out_lo, out_hi = self.intervals(lo, hi)
+        return float(out_lo[0]), float(out_hi[0])
 
 _BY_DIGEST: dict[str, MeshDistance] = {}
 

@@ -606,25 +606,23 @@ class _Converter:
             return None
         polys = [shapely.geometry.polygon.orient(p, 1.0)
                  for p in getattr(geom, "geoms", [geom]) if not p.is_empty]
-        rings: list[tuple[np.ndarray, bool]] = []
+        rings: list[np.ndarray] = []  # outer rings counter-clockwise, holes clockwise
         for p in polys:
-            for k, ring in enumerate([p.exterior, *p.interiors]):
+            for ring in [p.exterior, *p.interiors]:
                 xy = np.asarray(ring.coords)[:-1, :2]
                 if len(xy) >= 3:
-                    rings.append((xy, k == 0))
+                    rings.append(xy)
         if not rings:
             return None
-        r2 = max(float((xy ** 2).sum(axis=1).max()) for xy, _ in rings)
-        if "slices" in n.args and twist != 0.0:
+        r2 = max(float((xy ** 2).sum(axis=1).max()) for xy in rings)
+        if "slices" in n.args:
             slices = max(int(self.num(n, "slices", 1.0)), 1)
         elif twist != 0.0:
             slices = helix_slices(r2, h, twist, self.num(n, "$fn", 0.0),
                                   self.num(n, "$fs", 2.0), self.num(n, "$fa", 12.0))
-        elif "slices" in n.args:
-            slices = max(int(self.num(n, "slices", 1.0)), 1)
         else:  # a non-uniform scale alone: OpenSCAD's "diagonal" slices
             delta2 = max(float((((1.0 - scale) * xy) ** 2).sum(axis=1).max())
-                         for xy, _ in rings)
+                         for xy in rings)
             slices = diagonal_slices(delta2, h, self.num(n, "$fn", 0.0),
                                      self.num(n, "$fs", 2.0))
         if slices > 100_000:
@@ -641,7 +639,7 @@ class _Converter:
             t = i / slices
             f = 1.0 + (scale - 1.0) * t
             firsts = []
-            for xy, _ in rings:
+            for xy in rings:
                 x = xy[:, 0] * cs[i] - xy[:, 1] * sn[i]
                 y = xy[:, 0] * sn[i] + xy[:, 1] * cs[i]
                 verts.append(np.column_stack([x * f[0], y * f[1],
@@ -656,7 +654,7 @@ class _Converter:
         faces: list[tuple[int, int, int]] = []
         for i in range(slices):
             split_first = math.sin(math.radians(rots[i] - rots[i + 1])) > 0.0
-            for r, (xy, _) in enumerate(rings):
+            for r, xy in enumerate(rings):
                 k = len(xy)
                 for j in range(k):
                     q = (j + 1) % k
@@ -673,10 +671,10 @@ class _Converter:
                         faces += [(p1, c1, c2), (p1, c2, p2)]
                     else:
                         faces += [(p1, c1, p2), (c1, c2, p2)]
-        index = {}
-        for r, (xy, _) in enumerate(rings):
+        index = {}  # a bottom vertex's index by its position
+        for r, xy in enumerate(rings):
             for j, (x, y) in enumerate(xy.tolist()):
-                index[(x, y)] = j + base[0][r] - base[0][0]
+                index[(x, y)] = base[0][r] + j
         for p in polys:
             for tri in shapely.constrained_delaunay_triangles(p).geoms:
                 c = np.asarray(tri.exterior.coords)[:3, :2]

@@ -154,11 +154,9 @@ def mesh(
         separate_close_vertices(verts, faces, min_edge_length(verts, h))
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     if colors:
-        from ..colors import colors_at, colour_source
+        from ..colors import colors_of
 
-        src, cparams, pose = colour_source(shape, params)
-        local = verts if pose is None else pose.apply_inverse(verts)
-        rgba = colors_at(src, local, cparams, check_ranges=check_ranges) if len(verts) \
+        rgba = colors_of(shape, verts, params, check_ranges=check_ranges) if len(verts) \
             else np.zeros((0, 4))
         m.visual.vertex_colors = np.rint(np.nan_to_num(rgba, nan=0.0) * 255).astype(np.uint8)
     m.metadata["csdf"] = {

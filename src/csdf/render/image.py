@@ -162,13 +162,11 @@ def _linear(srgb: np.ndarray) -> np.ndarray:
 def _albedo(fld, p: np.ndarray, params, check_ranges: bool) -> np.ndarray | None:
     """Linear RGB ``(M, 3)`` of a coloured shape at world hits ``p`` (its ``color``
     nodes, :mod:`csdf.colors`; uncoloured parts keep :data:`ALBEDO`), or None."""
-    from ..colors import colors_at, colour_source, has_colors
+    from ..colors import colors_of
 
-    src, given, pose = colour_source(fld, params)
-    if src is None or not has_colors(src):
+    if fld.program.colors is None:
         return None
-    local = p if pose is None else pose.apply_inverse(p)
-    rgba = colors_at(src, local, given, check_ranges=check_ranges,
+    rgba = colors_of(fld, p, params, check_ranges=check_ranges,
                      default=tuple(_srgb(ALBEDO)) + (1.0,))
     return _linear(np.nan_to_num(rgba[:, :3], nan=0.5))
 

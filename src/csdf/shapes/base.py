@@ -44,6 +44,7 @@ from ..expr import Expr, Param, X, Y, Z, as_expr, describe_number, expr_params, 
 from ..interval import expr_range
 from ..ops import numpy_impl
 from ..vec import Vec
+from .palette import COLOR_NODES, node_color
 
 __all__ = [
     "Shape", "BuildContext", "REGISTRY", "ApiEntry", "register", "scalar_arg", "vector_arg",
@@ -153,8 +154,7 @@ class Shape:
         if hit is not None:
             return hit
         q = Vec(p.c[: self.dim])
-        if self.name in ("color", "material"):
-            from .palette import node_color
+        if self.name in COLOR_NODES:
 
             ctx.color_depth += 1
             try:

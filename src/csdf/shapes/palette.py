@@ -6,7 +6,10 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["MATERIALS", "node_color", "node_roughness"]
+__all__ = ["MATERIALS", "COLOR_NODES", "node_color", "node_roughness"]
+
+#: the shape nodes that give their subtree a colour (its geometry is the child's)
+COLOR_NODES = frozenset({"color", "material"})
 
 #: named materials: ``name -> (rgb, roughness)`` (roughness in [0, 1], 1 matte)
 MATERIALS: dict[str, tuple[tuple[float, float, float], float]] = {

@@ -27,7 +27,7 @@ def test_colours_follow_the_winning_operand_through_csg():
     on_a, on_b, cut = [-0.5, 0, 0], [0.9, 0, 0], [0.1, 0, 0]
     u = colors_at(a | b, [on_a, on_b, [0, 0.5, 0]])
     np.testing.assert_array_equal(u[:, :3], [RED, BLUE, RED])
-    i = colors_at(a & b, [[0.3, 0, np.sqrt(0.12)], [0.5, 0.0, 0.45]])  # ball; box's top
+    i = colors_at(a & b, [[0.3, 0, np.sqrt(0.12)], [0.5, 0.0, 0.1]])  # ball; box face
     np.testing.assert_array_equal(i[:, :3], [BLUE, RED])
     d = colors_at(a - b, [on_a, cut, [0, 0, 0.5]])  # the cut face is the cutter's
     np.testing.assert_array_equal(d[:, :3], [RED, BLUE, RED])
@@ -191,3 +191,114 @@ def test_materials_are_named_colours_with_a_roughness():
         csdf.box(1).material("unobtainium")
     with pytest.raises(csdf.ShapeError, match="roughness"):
         csdf.box(1).material("wood", roughness=2)
+
+
+def _two_balls():
+    return (csdf.sphere(0.5).translate((-0.4, 0, 0)).color(RED),
+            csdf.sphere(0.5).translate((0.4, 0, 0)).color(BLUE))
+
+
+def test_smooth_blends_mix_the_operands_colours_by_the_blend_weight():
+    a, b = _two_balls()
+    k = 0.3
+    u = csdf.union(a, b, k=k)
+    # on the plane x = 0 the two distances are equal: half and half (Quilez's h = 1/2)
+    mid = colors_at(u, [[0, 0.35, 0], [0, 0, 0.4]])
+    np.testing.assert_allclose(mid[:, :3], [[0.5, 0, 0.5]] * 2, atol=1e-12)
+    # elsewhere in the blend, the polynomial weights: h_b / 2 for the farther operand
+    p = np.array([[-0.1, 0.38, 0.0]])
+    da = np.linalg.norm(p - [-0.4, 0, 0]) - 0.5
+    db = np.linalg.norm(p - [0.4, 0, 0]) - 0.5
+    w_b = max(k - (db - da), 0) / k / 2
+    np.testing.assert_allclose(colors_at(u, p)[0, :3], [1 - w_b, 0, w_b], atol=1e-12)
+    # outside the blend the winner's colour, as in a hard union
+    np.testing.assert_array_equal(colors_at(u, [[-0.9, 0, 0], [0.9, 0, 0]])[:, :3],
+                                  [RED, BLUE])
+    # the exponential blend mixes by its softmax weights
+    e = colors_at(csdf.union(a, b, k=k, blend="exponential"), p)[0, :3]
+    w = np.exp(-np.array([da, db]) / k)
+    np.testing.assert_allclose(e, [w[0] / w.sum(), 0, w[1] / w.sum()], atol=1e-12)
+    # a hard union keeps the compact form: a palette index
+    assert color_program(a | b)[1] is not None and color_program(u)[1] is None
+    # blends of one colour are that colour, in the compact form
+    same = csdf.union(a, csdf.sphere(0.5).translate((0.4, 0, 0)).color(RED), k=k)
+    assert color_program(same)[1] is not None
+    np.testing.assert_array_equal(colors_at(same, [[0, 0.35, 0]])[0, :3], RED)
+
+
+def test_blended_colours_survive_the_bytecode_text_meshes_and_an_uncoloured_default():
+    a, b = _two_balls()
+    plain = csdf.sphere(0.3).translate((0, 0, 0.7))
+    shape = csdf.union(a, b, plain, k=0.2)
+    prog = shape.compile()
+    assert len(prog.colors[0]) == 5 and prog.colors[1] is None
+    pts = np.array([[0, 0.35, 0], [0, 0, 1.0], [-0.9, 0, 0], [0.0, 0.25, 0.55]])
+    want = colors_at(shape, pts)
+    np.testing.assert_array_equal(want[1], DEFAULT_COLOR)  # the uncoloured ball's top
+    grey = colors_at(shape, pts, default=(0, 1, 0, 1))
+    np.testing.assert_array_equal(grey[1], (0, 1, 0, 1))
+    for back in (csdf.Program.from_bytes(prog.to_bytes()),
+                 csdf.Program.from_text(prog.disassemble())):
+        assert back == prog
+        np.testing.assert_array_equal(colors_at(back, pts), want)
+    assert "colors channels 5" in prog.disassemble()
+    m = csdf.mesh(shape, resolution=32, colors=True, progress=False)
+    rgb = m.visual.vertex_colors[:, :3].astype(float) / 255
+    mixed = (rgb[:, 0] > 0.2) & (rgb[:, 2] > 0.2) & (rgb[:, 1] < 0.05)
+    assert mixed.sum() > 20  # the seam between red and blue is a gradient
+    # a channel section with the wrong number of programs is refused
+    bad = prog.disassemble().replace("colors channels 5", "colors channels 4")
+    with pytest.raises(csdf.BytecodeError, match="5 colour programs"):
+        csdf.Program.from_text(bad)
+
+
+def test_color_fields_are_procedural_colours_of_the_coordinates():
+    from csdf.expr import X, Z, sin
+
+    t = csdf.param("t", 4.0, 1.0, 8.0)
+    stripes = csdf.box(1).color_field((0.5 + 0.5 * sin(t * X), 0.2, Z + 0.5))
+    pts = np.array([[0.5, 0.1, 0.0], [-0.5, 0.0, 0.3], [0.1, 0.5, 0.9]])
+    want = np.c_[0.5 + 0.5 * np.sin(4 * pts[:, 0]), np.full(3, 0.2),
+                 np.clip(pts[:, 2] + 0.5, 0, 1), np.ones(3)]
+    np.testing.assert_allclose(colors_at(stripes, pts), want, atol=1e-12)
+    want6 = want.copy()
+    want6[:, 0] = 0.5 + 0.5 * np.sin(6 * pts[:, 0])
+    np.testing.assert_allclose(colors_at(stripes, pts, {"t": 6.0}), want6, atol=1e-12)
+    # the pattern moves with the shape; inner colours win on their own surfaces
+    moved = stripes.translate((2, 0, 0))
+    np.testing.assert_allclose(colors_at(moved, pts + [2, 0, 0]), want, atol=1e-12)
+    inner = (csdf.box(1) | csdf.sphere(0.3).translate((0.6, 0, 0)).color(GREEN)) \
+        .color_field(lambda x, y, z: (x * 0 + 1, y * 0, z * 0))
+    got = colors_at(inner, [[-0.5, 0, 0], [0.9, 0, 0]])
+    np.testing.assert_array_equal(got[:, :3], [RED, GREEN])
+    # the language writes and reads it; the geometry is untouched
+    back = csdf.loads(csdf.dumps(stripes))
+    np.testing.assert_allclose(colors_at(back, pts), want, atol=1e-12)
+    np.testing.assert_array_equal(stripes.compile().code, csdf.box(1).compile().code)
+    with pytest.raises(csdf.ShapeError, match="3 or 4 expressions"):
+        csdf.box(1).color_field((X, X))
+    with pytest.raises(csdf.ShapeError, match="not a shape"):
+        csdf.box(1).color_field((csdf.box(1), 0, 0))
+    with pytest.raises(csdf.ShapeError, match="may not use z"):
+        csdf.circle(1).color_field((Z, 0, 0))
+
+
+def test_channel_colours_in_the_preview_shader():
+    import os
+
+    from csdf.colors import albedo_glsl
+    from glsl_runner import ES_PRELUDE, glslang, validate
+
+    a, b = _two_balls()
+    shape = csdf.union(a, b, k=0.2).color_field((0.3, 0.3, 0.3)) \
+        | csdf.sphere(0.2).translate((0, 0, 1))
+    geometry = csdf.to_glsl(shape)
+    src = albedo_glsl(shape, declared=geometry, default=(0.8, 0.76, 0.7))
+    assert "sdf_albedo_u(p) * vec3(0.8, 0.76, 0.7)" in src
+    if glslang() is None:
+        if os.environ.get("CSDF_REQUIRE_TOOLS") == "1":
+            pytest.fail("CSDF_REQUIRE_TOOLS=1 but glslangValidator is not installed")
+        pytest.skip("needs glslangValidator (apt-get install glslang-tools)")
+    main = "out vec4 c;\nvoid main() { c = vec4(sdf_albedo(vec3(0.5)), sdf(vec3(0.0))); }\n"
+    ok, log = validate(ES_PRELUDE + geometry + src + main)
+    assert ok, log

@@ -58,6 +58,8 @@ CASES = {
     "color": ("box(1).color((0.2, 0.4, 0.6))", lambda: C.box(1).color((0.2, 0.4, 0.6))),
     "material": ('box(1).material("steel", roughness=0.2)',
                  lambda: C.box(1).material("steel", roughness=0.2)),
+    "color_field": ("box(1).color_field((0.5 + 0.5 * x, y * y, 0.3))",
+                    lambda: C.box(1).color_field((0.5 + 0.5 * C.x, C.y * C.y, 0.3))),
     "cross_section": ("extrude(cross_section(sphere(1), 0.5), 1)",
                       lambda: C.extrude(C.cross_section(C.sphere(1), 0.5), 1)),
     "normalized": ("field(x * x + y * y + z * z - 1).normalized()",

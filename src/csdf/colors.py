@@ -1,26 +1,29 @@
-"""Colours of shapes at points: the rule, and the small program that evaluates it.
+"""Colours of shapes at points: the rule, and the small programs that evaluate it.
 
-A shape's colours are its ``color`` nodes (:meth:`csdf.Shape.color`). At a point the
-colour is that of the **nearest coloured surface**: among the ``color`` nodes, and the
-leaf shapes outside any ``color`` node (which take :data:`DEFAULT_COLOR`), the one whose
-field has the smallest absolute value there (innermost first on ties). On the surface of
-a model this gives, through CSG:
+A shape's colours are its ``color``, ``material`` and ``color_field`` nodes
+(:meth:`csdf.Shape.color`, :meth:`csdf.Shape.material`, :meth:`csdf.Shape.color_field`).
+A leaf shape takes the colour of the innermost such node around it (outside every one it
+is uncoloured and drawn in :data:`DEFAULT_COLOR`, or a caller's default). Through
+operators (:mod:`csdf.shapes.colorrule`), an operator's children's colours are weighted
+by how much each child's distance moves the operator's output (``|d out / d d_i|``):
 
 * a union: the colour of the operand whose surface it is (the one with the smaller
-  value, which is 0 there);
-* an intersection: likewise the operand with the larger value (0 there, the other's
-  negative value is farther from 0 unless both surfaces meet);
+  value);
+* an intersection: likewise the operand with the larger value;
 * a difference ``a - b``: ``a``'s colour on ``a``'s faces, ``b``'s on the faces that
   ``b`` cut (as OpenSCAD draws them);
-* a smooth blend: the colour of the nearer operand, switching in the blend's middle.
+* a smooth blend: the operands' colours mixed by the blend's weights (for the smooth
+  union of two, Quilez's ``h``: half and half where their distances are equal); an
+  exponential blend by its softmax weights;
+* a ``color_field``: its red, green, blue (and alpha) expressions of the coordinates.
 
-The rule is evaluated by a second program compiled from the same expression DAG (the
-distances of the coloured nodes, shared with the geometry): its value is the index of
-the winning entry of a palette. Both travel in the shape's compiled program
-(:attr:`csdf.Program.colors`, the colour section of the bytecode), so a program read
-back from bytes or text keeps its colours; evaluating the distance never runs the
-colour program, so a coloured model's distance costs exactly what it costs
-uncoloured.
+The rule is evaluated by programs compiled from the same expression DAG as the distance:
+when every colour is a constant and no blend mixes two of them, one program whose value
+is the index of the winning row of a palette; otherwise five channel programs ``r, g,
+b, a, u``, the colour being ``(r, g, b, a) + u * default``. They travel in the shape's
+compiled program (:attr:`csdf.Program.colors`, the colour section of the bytecode), so
+a program read back from bytes or text keeps its colours; evaluating the distance never
+runs them, so a coloured model's distance costs exactly what it costs uncoloured.
 """
 
 from __future__ import annotations
@@ -51,20 +54,25 @@ def has_colors(shape) -> bool:
     return _section(shape) is not None
 
 
-def color_program(shape) -> tuple[Any, np.ndarray]:
-    """``(program, palette)``: the colour section of the shape's compiled program
-    (:attr:`csdf.Program.colors`): a :class:`csdf.Program` whose value at a point is
-    the index (a whole number, as float) of the winning row of ``palette`` ``(K, 4)``
-    float64 RGBA in ``[0, 1]`` (the nearest-coloured-surface rule of this module; NaN
-    rows: uncoloured parts, drawn in :data:`DEFAULT_COLOR`).
+def color_program(shape) -> tuple[Any, np.ndarray | None]:
+    """The colour section of the shape's compiled program (:attr:`csdf.Program.colors`):
+    ``(program, palette)``, a :class:`csdf.Program` whose value at a point is the index
+    (a whole number, as float) of the winning row of ``palette`` ``(K, 4)`` float64 RGBA
+    in ``[0, 1]`` (uncoloured rows filled with :data:`DEFAULT_COLOR`); or, for colours
+    that vary continuously (smooth blends of different colours, colour fields),
+    ``(programs, None)`` with the five channel programs ``r, g, b, a, u`` (the colour is
+    ``(r, g, b, a) + u * DEFAULT_COLOR``).
 
     Raises:
         CsdfError: not a shape or program, or one without colours.
     """
     section = _section(shape)
     if section is None:
-        raise CsdfError("the shape has no colours (no color() or material() node)")
+        raise CsdfError("the shape has no colours (no color(), material() or "
+                        "color_field() node)")
     cprog, palette = section
+    if palette is None:
+        return cprog, None
     return cprog, np.where(np.isnan(palette), np.array(DEFAULT_COLOR), palette)
 
 
@@ -86,16 +94,25 @@ def colors_at(shape, points: Any, params: dict | None = None, *,
     section = _section(shape)
     if section is None:
         out = np.tile(base, (n, 1))
+    elif section[1] is None:  # channel programs: (r, g, b, a) + u * default
+        vals = [_run(p, pts, params, check_ranges) for p in section[0]]
+        out = np.stack(vals[:4], axis=1) + vals[4][:, None] * base
+        out = np.clip(out, 0.0, 1.0)
     else:
         prog, raw = section
         palette = np.where(np.isnan(raw), base, raw)
-        params = {k: v for k, v in (params or {}).items() if k in prog.param_names}
-        idx = prog(pts, params, check_ranges=check_ranges)
+        idx = _run(prog, pts, params, check_ranges)
         ok = np.isfinite(idx)
         out = np.full((n, 4), np.nan)
         out[ok] = palette[np.clip(np.rint(idx[ok]).astype(np.int64), 0, len(palette) - 1)]
     out[np.isnan(pts).any(axis=1)] = np.nan
     return out.reshape(*batch, 4)
+
+
+def _run(prog, pts: np.ndarray, params: dict | None, check_ranges: bool) -> np.ndarray:
+    """A colour program's values ``(N,)`` at ``pts``, with the parameters it has."""
+    params = {k: v for k, v in (params or {}).items() if k in prog.param_names}
+    return prog(pts, params, check_ranges=check_ranges)
 
 
 def colors_of(model: Any, points: Any, params: dict | None = None, *,
@@ -121,7 +138,7 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
     (:func:`csdf.to_glsl`; ``declared`` is that snippet, whose parameter uniforms are
     not declared again). Uncoloured surfaces, and a shape without colours, get
     ``default`` (RGB; :data:`DEFAULT_COLOR`). The colour program's GLSL is emitted as
-    ``<name>_index``.
+    ``<name>_index`` (channel programs as ``<name>_r``, ``_g``, ``_b``, ``_u``).
 
     Raises:
         CsdfError: a shape the GLSL export refuses (a mesh call).
@@ -135,14 +152,28 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
     section = _section(shape)
     if section is None:
         return f"vec3 {name}(vec3 p) {{\n    return {vec3(base)};\n}}\n"
-    prog, raw = section
-    palette = np.where(np.isnan(raw), np.array((tuple(base) + (1.0,))[:4]), raw)
     have = {ln.strip() for ln in declared.splitlines() if ln.startswith("uniform ")}
-    src = [ln for ln in to_glsl(prog, f"{name}_index", gradient=False).splitlines()
-           if not (ln.startswith("uniform ") and ln.strip() in have)]
+
+    def snippet(prog, fname: str) -> list[str]:
+        lines = [ln for ln in to_glsl(prog, fname, gradient=False).splitlines()
+                 if not (ln.startswith("uniform ") and ln.strip() in have)]
+        have.update(ln.strip() for ln in lines if ln.startswith("uniform "))
+        return lines
+
+    progs, raw = section
+    if raw is None:  # channel programs
+        src: list[str] = []
+        for c, prog in zip("rgbu", (progs[0], progs[1], progs[2], progs[4])):
+            src += snippet(prog, f"{name}_{c}")
+        body = [f"vec3 {name}(vec3 p) {{",
+                f"    vec3 c = vec3({name}_r(p), {name}_g(p), {name}_b(p)) + "
+                f"{name}_u(p) * {vec3(base)};",
+                "    return clamp(c, 0.0, 1.0);", "}"]
+        return "\n".join(src + body) + "\n"
+    palette = np.where(np.isnan(raw), np.array((tuple(base) + (1.0,))[:4]), raw)
+    src = snippet(progs, f"{name}_index")
     body = [f"vec3 {name}(vec3 p) {{", f"    float k = {name}_index(p);"]
     for k in range(len(palette) - 1):
         body.append(f"    if (k < {k}.5) return {vec3(palette[k])};")
     body += [f"    return {vec3(palette[-1])};", "}"]
     return "\n".join(src + body) + "\n"
-

@@ -23,7 +23,7 @@ from .errors import CsdfError
 from .expr import Expr, X, Y, Z, as_expr, cos, floor, sign, sin, sqrt, step, walk
 from .ops import OPS, chain_tangent, tie_comparison
 
-__all__ = ["gradient"]
+__all__ = ["gradient", "partials"]
 
 Tangent = tuple  # one expression (or None) per variable
 
@@ -60,13 +60,48 @@ def gradient(e: Expr, wrt: Sequence[Expr] = (X, Y, Z)) -> tuple[Expr, ...]:
     """The partial derivatives of ``e`` with respect to the leaves ``wrt`` (the
     coordinates by default; parameters work too), as expressions (the constant 0 where
     ``e`` does not depend on one)."""
+    return _derivatives(as_expr(e), wrt, walk(as_expr(e)))
+
+
+def partials(e: Expr, nodes: Sequence[Expr]) -> tuple[Expr, ...]:
+    """The partial derivatives of ``e`` with respect to its subexpressions ``nodes``,
+    each held as an independent variable (what lies below them is not looked at): for
+    ``e = min(a, b)`` with ``nodes = (a, b)``, the steps that select the winner; for a
+    smooth blend of ``a`` and ``b``, its blend weights. The constant 0 where ``e`` does
+    not reach a node. The nodes must not lie below one another."""
     e = as_expr(e)
+    stop = {id(n) for n in nodes}
+    return _derivatives(e, nodes, _walk_until(e, stop))
+
+
+def _walk_until(root: Expr, stop: set[int]) -> list[Expr]:
+    """The nodes reachable from ``root`` without passing below a node of ``stop``,
+    children before parents."""
+    seen: set[int] = set()
+    out: list[Expr] = []
+    stack: list[tuple[Expr, bool]] = [(root, False)]
+    while stack:
+        node, expanded = stack.pop()
+        if id(node) in seen:
+            continue
+        if expanded or id(node) in stop:
+            seen.add(id(node))
+            out.append(node)
+            continue
+        stack.append((node, True))
+        for a in reversed(node.args):
+            if id(a) not in seen:
+                stack.append((a, False))
+    return out
+
+
+def _derivatives(e: Expr, wrt: Sequence[Expr], order) -> tuple[Expr, ...]:
     k = len(wrt)
     seeds = {id(w): i for i, w in enumerate(wrt)}
     alg = _Alg()
     tan: dict[int, Tangent | None] = {}
-    for node in walk(e):
-        if not node.args:
+    for node in order:
+        if not node.args or id(node) in seeds:
             i = seeds.get(id(node))
             tan[id(node)] = None if i is None else tuple(
                 as_expr(1.0) if j == i else None for j in range(k))

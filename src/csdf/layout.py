@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["SlotLayout", "MAX_SLOTS", "MAX_PARAMS", "N_COORDS"]
+__all__ = ["SlotLayout", "MAX_SLOTS", "MAX_PARAMS", "N_COORDS", "COLOR_CHANNELS"]
 
 #: slots a program may use (slot numbers are 16-bit in the bytecode)
 MAX_SLOTS = 65535
@@ -99,3 +99,7 @@ class SlotLayout:
         if self.is_reg(s):
             return "reg"
         raise ValueError(f"slot {s} is outside the file of {self.n_slots} slots")
+
+#: the channel programs of a colour section whose colours vary continuously (smooth
+#: blends, colour fields): red, green, blue, alpha and the weight of uncoloured surfaces
+COLOR_CHANNELS = 5

@@ -14,7 +14,9 @@ Layout (little-endian)::
              n_triangles x 3 u32 (vertex indices, oriented outwards)
     colors   version 3 with flag 32: u32 K, K x 4 f64 palette (RGBA; NaN rows for
              uncoloured parts), u32 n_bytes, the colour program's own bytecode (a
-             version 1-3 program without colours)
+             version 1-3 program without colours); or, for colours that vary
+             continuously (blends, colour fields), u32 0 (no palette), u8 5, then five
+             times u32 n_bytes and a channel program's bytecode (r, g, b, a, u)
     crc32    u32 of everything before it
 
 Version 2 added the bounds section, version 3 the data blocks of mesh calls and the
@@ -43,7 +45,7 @@ import numpy as np
 
 from ..errors import BytecodeError, CsdfError
 from ..expr import RESERVED_PARAM_NAMES, Param
-from ..layout import MAX_PARAMS, MAX_SLOTS
+from ..layout import COLOR_CHANNELS, MAX_PARAMS, MAX_SLOTS
 from ..meshdata import MAX_TRIANGLES, MeshData
 from ..ops import ARG_CODE, MESH_CODE, OPS_BY_CODE
 from .calls import INSTR_REF, Call
@@ -115,9 +117,15 @@ def encode(prog: Any) -> bytes:
             out += block.faces.astype("<u4").tobytes()
     if colors is not None:
         cprog, palette = colors
-        inner = encode(cprog)
-        out += struct.pack("<I", len(palette)) + np.asarray(palette, "<f8").tobytes()
-        out += struct.pack("<I", len(inner)) + inner
+        if palette is None:  # five channel programs
+            out += struct.pack("<IB", 0, len(cprog))
+            for channel in cprog:
+                inner = encode(channel)
+                out += struct.pack("<I", len(inner)) + inner
+        else:
+            inner = encode(cprog)
+            out += struct.pack("<I", len(palette)) + np.asarray(palette, "<f8").tobytes()
+            out += struct.pack("<I", len(inner)) + inner
     out += struct.pack("<I", zlib.crc32(out) & 0xFFFFFFFF)
     return bytes(out)
 
@@ -238,25 +246,24 @@ def decode_fields(data: bytes) -> dict[str, Any]:
     if version == _DATA_VERSION and flags & FLAG_COLORS:
         at = r.pos
         (k,) = r.unpack("<I", "palette size")
-        if not 1 <= k <= MAX_PALETTE:
-            raise BytecodeError(f"byte {at}: a palette of {k} colours (1 to {MAX_PALETTE})")
-        palette = np.frombuffer(r.take(32 * k, "palette"), dtype="<f8").astype(
-            np.float64).reshape(k, 4)
-        ok = np.isnan(palette).all(axis=1) | ((palette >= 0) & (palette <= 1)).all(axis=1)
-        if not ok.all():
-            raise BytecodeError(f"byte {at}: palette colour {int(np.argmin(ok))} is not "
-                                "RGBA in [0, 1]")
-        (n,) = r.unpack("<I", "colour program size")
-        at = r.pos
-        inner = r.take(n, "colour program")
-        try:
-            fields = decode_fields(inner)
-        except BytecodeError as exc:
-            raise BytecodeError(f"byte {at}: the colour program: {exc}") from None
-        if fields["colors"] is not None or fields["data"]:
-            raise BytecodeError(f"byte {at}: the colour program holds its own colours "
-                                "or mesh data")
-        colors = (fields, palette)
+        if k == 0:  # channel programs
+            (c,) = r.unpack("<B", "channel count")
+            if c != COLOR_CHANNELS:
+                raise BytecodeError(f"byte {at}: {c} colour channels (expected "
+                                    f"{COLOR_CHANNELS})")
+            colors = (tuple(_colour_program(r, f"colour channel {i}")
+                            for i in range(c)), None)
+        else:
+            if k > MAX_PALETTE:
+                raise BytecodeError(f"byte {at}: a palette of {k} colours (1 to "
+                                    f"{MAX_PALETTE})")
+            palette = np.frombuffer(r.take(32 * k, "palette"), dtype="<f8").astype(
+                np.float64).reshape(k, 4)
+            ok = np.isnan(palette).all(axis=1) | ((palette >= 0) & (palette <= 1)).all(axis=1)
+            if not ok.all():
+                raise BytecodeError(f"byte {at}: palette colour {int(np.argmin(ok))} is not "
+                                    "RGBA in [0, 1]")
+            colors = (_colour_program(r, "colour program"), palette)
     if r.pos != len(r.data):
         raise BytecodeError(f"byte {r.pos}: {len(r.data) - r.pos} unexpected trailing bytes")
     return dict(
@@ -265,6 +272,20 @@ def decode_fields(data: bytes) -> dict[str, Any]:
         lipschitz=lipschitz, calls=tuple(calls), bounds=bounds, data=tuple(data),
         colors=colors,
     )
+
+
+def _colour_program(r: Any, what: str) -> dict:
+    """The fields of a colour section's program (u32 size, then its bytecode)."""
+    (n,) = r.unpack("<I", f"{what} size")
+    at = r.pos
+    inner = r.take(n, what)
+    try:
+        fields = decode_fields(inner)
+    except BytecodeError as exc:
+        raise BytecodeError(f"byte {at}: the {what}: {exc}") from None
+    if fields["colors"] is not None or fields["data"]:
+        raise BytecodeError(f"byte {at}: the {what} holds its own colours or mesh data")
+    return fields
 
 
 def validate(prog: Any) -> None:
@@ -350,11 +371,19 @@ def validate(prog: Any) -> None:
     colors = getattr(prog, "colors", None)
     if colors is not None:
         cprog, palette = colors
-        validate(cprog)
-        if np.shape(palette) != (np.shape(palette)[0], 4) or not len(palette):
-            raise BytecodeError("the palette must be (K, 4) RGBA rows")
-        if cprog.dim != prog.dim:
-            raise BytecodeError("the colour program must have the program's dimension")
+        if palette is None:
+            if not isinstance(cprog, tuple) or len(cprog) != COLOR_CHANNELS:
+                raise BytecodeError(f"colours without a palette are {COLOR_CHANNELS} "
+                                    "channel programs")
+            programs = cprog
+        else:
+            if np.shape(palette) != (np.shape(palette)[0], 4) or not len(palette):
+                raise BytecodeError("the palette must be (K, 4) RGBA rows")
+            programs = (cprog,)
+        for p in programs:
+            validate(p)
+            if p.dim != prog.dim:
+                raise BytecodeError("a colour program must have the program's dimension")
     used_blocks = {rows[k][3] for k in range(len(rows)) if rows[k][0] == ARG_CODE}
     if used_blocks != set(range(len(data))):
         raise BytecodeError(f"the program has {len(data)} data blocks but its mesh calls "

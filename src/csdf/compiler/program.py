@@ -78,7 +78,9 @@ class Program:
             :attr:`~csdf.Shape.bounds`, kept in the bytecode since format version 2).
         data: the data blocks of the program's mesh calls
             (:class:`csdf.meshdata.MeshData`; format version 3), empty for most.
-        colors: ``(program, palette)`` of the shape's colours (:mod:`csdf.colors`:
+        colors: ``(program, palette)`` of the shape's colours, or ``(programs, None)``
+            with five channel programs for colours that vary continuously
+            (:mod:`csdf.colors`:
             a program whose value is the index of the winning row of ``palette``
             ``(K, 4)`` RGBA, NaN rows for uncoloured parts; format version 3), or None.
             Evaluating the distance never runs it.
@@ -385,9 +387,7 @@ class Program:
         no bounds). Raises :class:`csdf.BytecodeError` on any flaw; a program it returns
         is safe to evaluate."""
         fields = decode_fields(data)
-        if fields.get("colors") is not None:  # the colour program's own fields
-            inner, palette = fields["colors"]
-            fields["colors"] = (cls(**inner), palette)
+        _colour_programs(cls, fields)
         prog = cls(**fields)
         validate(prog)
         return prog
@@ -402,9 +402,7 @@ class Program:
         :meth:`from_bytes` (raises BytecodeError naming the line)."""
         fields = assemble_fields(text)
         try:
-            if fields.get("colors") is not None:  # the colour program's own fields
-                inner, palette = fields["colors"]
-                fields["colors"] = (cls(**inner), palette)
+            _colour_programs(cls, fields)
             prog = cls(**fields)
         except (ValueError, OverflowError) as exc:
             raise BytecodeError(f"invalid program: {exc}") from None
@@ -437,3 +435,15 @@ class Program:
         params = sum(1 + len(p.name.encode()) + 24 for p in self.params)
         data = sum(13 + d.nbytes for d in self.data) + (4 if self.data else 0)
         return 32 + params + 8 * n_consts + 8 * n_instr + 4 + data
+
+
+def _colour_programs(cls: type, fields: dict) -> None:
+    """Turn the colour section's program fields (one program, or the channel programs)
+    into programs, in place."""
+    if fields.get("colors") is None:
+        return
+    inner, palette = fields["colors"]
+    if palette is None:
+        fields["colors"] = (tuple(cls(**f) for f in inner), None)
+    else:
+        fields["colors"] = (cls(**inner), palette)

@@ -49,34 +49,22 @@ def compile_shape(shape) -> Program:
         root, dim=shape.dim, exactness=shape.exactness, lipschitz=shape.lipschitz,
         calls=calls, bounds=shape.bounds,
     )
-    colored = list(getattr(ctx, "colored", ()))
-    if any(c is not None for c, _ in colored):
-        prog.colors = color_section(colored, shape.dim)
+    rule = ctx.color_rule() if hasattr(ctx, "color_rule") else None
+    if rule is not None:
+        prog.colors = color_section(rule, shape.dim)
     return prog
 
 
-def color_section(colored, dim: int = 3) -> tuple[Program, np.ndarray]:
-    """``(program, palette)`` of a shape's colours: ``colored`` lists ``(rgba or None,
-    distance expression)`` per coloured node and per leaf outside any (the shapes
-    layer's build context, innermost first). The program's value at a point is the
-    index of the entry whose ``|distance|`` is smallest there (the first on ties): the
-    nearest coloured surface (:mod:`csdf.colors`). ``palette`` ``(K, 4)`` float64 RGBA,
-    NaN rows for the uncoloured leaves."""
-    from ..expr import const, minimum, step
-
-    palette = np.array([(np.nan,) * 4 if c is None else (tuple(c) + (1.0,))[:4]
-                        for c, _ in colored], dtype=np.float64).reshape(-1, 4)
-    if all(c is not None for c, _ in colored) and len(np.unique(palette, axis=0)) == 1:
-        # one colour everywhere: the index is the constant 0
-        return compile_expr(const(0.0), dim=dim, exactness="neither"), palette[:1]
-    best = abs(colored[0][1])
-    index: Expr = const(0.0)
-    for k, (_, d) in enumerate(colored[1:], start=1):
-        a = abs(d)
-        nearer = 1.0 - step(a - best)  # 1 where this entry is strictly nearer
-        index = index + nearer * (float(k) - index)
-        best = minimum(best, a)
-    return compile_expr(index, dim=dim, exactness="neither"), palette
+def color_section(rule, dim: int = 3) -> tuple:
+    """The colour section of a program from a shape's colour rule
+    (:class:`csdf.shapes.colorrule.ColorRule`, given duck-typed: ``index``, ``palette``,
+    ``channels``): ``(program, palette)`` (the program's value at a point is the row of
+    ``palette`` ``(K, 4)`` float64 RGBA, NaN rows for uncoloured surfaces), or
+    ``(programs, None)`` with the five channel programs ``r, g, b, a, u`` (colour
+    ``(r, g, b, a) + u * default``). See :mod:`csdf.colors`."""
+    if rule.index is not None:
+        return compile_expr(rule.index, dim=dim, exactness="neither"), rule.palette
+    return tuple(compile_expr(c, dim=dim, exactness="neither") for c in rule.channels), None
 
 
 def compile_expr(

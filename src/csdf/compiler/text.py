@@ -44,7 +44,7 @@ import numpy as np
 
 from ..errors import BytecodeError, CsdfError
 from ..expr import Param
-from ..layout import MAX_SLOTS, N_COORDS, SlotLayout
+from ..layout import COLOR_CHANNELS, MAX_SLOTS, N_COORDS, SlotLayout
 from ..meshdata import MeshData
 from ..ops import ARG_CODE, MESH_CODE, OPS, OPS_BY_CODE
 from .calls import INSTR_REF, Call
@@ -105,11 +105,18 @@ def disassemble(prog: Any) -> str:
     colors = getattr(prog, "colors", None)
     if colors is not None:
         cprog, palette = colors
-        lines.append(f"colors {len(palette)}")
-        lines += ["palette " + " ".join(_fmt(v) for v in row) for row in palette.tolist()]
-        lines.append("colors-program")
-        lines += disassemble(cprog).rstrip("\n").split("\n")
-        lines.append("end-colors")
+        if palette is None:
+            lines.append(f"colors channels {len(cprog)}")
+            programs = cprog
+        else:
+            lines.append(f"colors {len(palette)}")
+            lines += ["palette " + " ".join(_fmt(v) for v in row)
+                      for row in palette.tolist()]
+            programs = (cprog,)
+        for p in programs:
+            lines.append("colors-program")
+            lines += disassemble(p).rstrip("\n").split("\n")
+            lines.append("end-colors")
     return "\n".join(lines) + "\n"
 
 
@@ -169,14 +176,15 @@ def assemble_fields(text: str) -> dict[str, Any]:
 
     seen_magic = False
     palette: list[list[float]] = []
-    colors_fields: dict | None = None
+    colors_fields: list[dict] = []
+    channels: int | None = None  # 'colors channels N': that many channel programs
     nested: list[str] | None = None  # the colour program's lines while they are read
     nested_at = 0
     for ln, line in enumerate(raw_lines, 1):
         if nested is not None:
             if line.strip() == "end-colors":
                 try:
-                    colors_fields = assemble_fields("\n".join(nested))
+                    colors_fields.append(assemble_fields("\n".join(nested)))
                 except BytecodeError as exc:
                     raise BytecodeError(f"line {nested_at}: the colour program: "
                                         f"{exc}") from None
@@ -230,6 +238,9 @@ def assemble_fields(text: str) -> dict[str, Any]:
             call_rows.append((ln, toks[1:]))
         elif kw == "colors" and len(toks) == 2 and toks[1].isdigit():
             pass  # (the palette lines that follow give the count)
+        elif kw == "colors" and len(toks) == 3 and toks[1] == "channels" and \
+                toks[2].isdigit():
+            channels = int(toks[2])
         elif kw == "palette" and len(toks) == 5:
             palette.append([_float(t, ln) for t in toks[1:]])
         elif kw == "colors-program" and len(toks) == 1:
@@ -249,7 +260,11 @@ def assemble_fields(text: str) -> dict[str, Any]:
     if nested is not None:
         raise BytecodeError(f"line {nested_at}: the colour program has no 'end-colors' "
                             "line")
-    if (colors_fields is None) != (not palette):
+    if channels is not None:
+        if palette or len(colors_fields) != channels or channels != COLOR_CHANNELS:
+            raise BytecodeError(f"'colors channels' needs {COLOR_CHANNELS} colour programs "
+                                "and no palette lines")
+    elif len(colors_fields) != (1 if palette else 0):
         raise BytecodeError("a colour program needs its palette lines, and palette lines "
                             "their colour program")
     if not seen_magic:
@@ -321,6 +336,7 @@ def assemble_fields(text: str) -> dict[str, Any]:
         output=output, n_regs=n_regs, dim=int(header["dim"]),
         exactness=str(header["exactness"]), lipschitz=float(header["lipschitz"]),
         calls=tuple(calls), bounds=bounds, data=tuple(data),
-        colors=None if colors_fields is None else (
-            colors_fields, np.array(palette, dtype=np.float64).reshape(-1, 4)),
+        colors=None if not colors_fields else (tuple(colors_fields), None)
+        if channels is not None else (
+            colors_fields[0], np.array(palette, dtype=np.float64).reshape(-1, 4)),
     )

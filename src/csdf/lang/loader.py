@@ -70,7 +70,7 @@ MATH: dict[str, Any] = {
 CONSTANTS: dict[str, float] = {"pi": math.pi, "tau": 2 * math.pi, "inf": math.inf}
 #: the coordinates, named only inside the arguments of these calls
 _COORDS = {"x": E.X, "y": E.Y, "z": E.Z}
-_COORD_CALLS = ("field", "remap")
+_COORD_CALLS = ("field", "remap", "color_field")
 KEYWORDS = ("param", "let", "def", "export", "in")
 
 

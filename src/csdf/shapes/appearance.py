@@ -16,11 +16,12 @@ from typing import Any
 import numpy as np
 
 from ..errors import ShapeError
+from ..expr import Expr, X, Y, Z, walk
 from .base import Shape, register, walk_shapes
 from .palette import MATERIALS, node_color, node_roughness
 
-__all__ = ["color", "material", "colors", "color_arg", "MATERIALS", "node_color",
-           "node_roughness"]
+__all__ = ["color", "material", "color_field", "colors", "color_arg", "MATERIALS",
+           "node_color", "node_roughness"]
 
 
 
@@ -92,6 +93,43 @@ def material(shape: Shape, name, color=None, roughness=None) -> Shape:
     return Shape("material", lambda p, ctx: shape.sdf(p, ctx), dim=shape.dim,
                  exactness=shape.exactness, lipschitz=shape.lipschitz, bounds=shape.bounds,
                  args=(name,), kwargs=kwargs or None, children=(shape,))
+
+
+@register("method")
+def color_field(shape: Shape, rgb) -> Shape:
+    """The same shape with a procedural colour: ``rgb`` is 3 or 4 expressions in the
+    shape's coordinates ``x``, ``y``, ``z`` (red, green, blue[, alpha]; numbers work
+    too, parameters may appear), or a function ``f(x, y, z)`` returning them; each is
+    clamped to ``[0, 1]`` where it is evaluated. Surfaces inside the node without a
+    colour of their own take it; the coordinates are those the node is given (they
+    move with the shape). The geometry is the child's, unchanged.
+
+    Raises:
+        ShapeError: not 3 or 4 expressions, or one that is a shape or a non-finite
+            number.
+    """
+    from .userfield import _coords_expr
+
+    if not isinstance(shape, Shape):
+        raise ShapeError(f"color_field is a shape method; got {type(shape).__name__}")
+    if callable(rgb) and not isinstance(rgb, Expr):
+        try:
+            rgb = rgb(X, Y, Z)
+        except TypeError as exc:
+            raise ShapeError(f"color_field: a function of the colour must take (x, y, z): "
+                             f"{exc}") from None
+    if isinstance(rgb, (str, bytes, Expr)) or not isinstance(rgb, (tuple, list)) or \
+            len(rgb) not in (3, 4):
+        raise ShapeError("color_field: rgb must be 3 or 4 expressions in x, y, z (red, "
+                         f"green, blue[, alpha]), got {type(rgb).__name__}"
+                         + (f" of {len(rgb)}" if isinstance(rgb, (tuple, list)) else ""))
+    names = ("red", "green", "blue", "alpha")
+    channels = tuple(_coords_expr(v, f"color_field {names[i]}") for i, v in enumerate(rgb))
+    if shape.dim == 2 and any(n.op == "z" for e in channels for n in walk(e)):
+        raise ShapeError("color_field: a 2D shape's colour may not use z")
+    return Shape("color_field", lambda p, ctx: shape.sdf(p, ctx), dim=shape.dim,
+                 exactness=shape.exactness, lipschitz=shape.lipschitz, bounds=shape.bounds,
+                 args=(channels,), children=(shape,))
 
 
 def colors(shape: Shape) -> list[tuple[Shape, tuple[float, ...]]]:

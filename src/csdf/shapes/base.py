@@ -44,7 +44,7 @@ from ..expr import Expr, Param, X, Y, Z, as_expr, describe_number, expr_params, 
 from ..interval import expr_range
 from ..ops import numpy_impl
 from ..vec import Vec
-from .palette import COLOR_NODES, node_color
+from .palette import COLOR_NODES
 
 __all__ = [
     "Shape", "BuildContext", "REGISTRY", "ApiEntry", "register", "scalar_arg", "vector_arg",
@@ -86,12 +86,34 @@ class BuildContext:
 
     calls: dict[int, tuple[str, Expr, tuple[Expr, ...]]] = field(default_factory=dict)
     memo: dict[tuple, Expr] = field(default_factory=dict)
-    #: the surfaces that carry a colour, in build order (innermost first): ``(rgba or
-    #: None, distance)`` for each ``color`` node, and ``None`` for each leaf shape
-    #: outside any ``color`` node (see :mod:`csdf.colors`)
-    colored: list[tuple[tuple[float, ...] | None, Expr]] = field(default_factory=list)
-    #: how many ``color`` nodes enclose the shape being built
-    color_depth: int = 0
+    #: the evaluation of each shape node, by the ``memo`` key (the colour rule of
+    #: :mod:`csdf.colors` walks them from :attr:`root`)
+    frames: dict[tuple, Frame] = field(default_factory=dict)
+    #: the evaluations under way, innermost last
+    stack: list[Frame] = field(default_factory=list)
+    #: the evaluation of the shape that was built
+    root: Frame | None = None
+    #: a colour node (``color``, ``material``, ``color_field``) was built
+    colored: bool = False
+
+    def color_rule(self):
+        """The built shape's colour rule as expressions
+        (:class:`csdf.shapes.colorrule.ColorRule`), or None without colour nodes."""
+        from .colorrule import color_rule
+
+        return color_rule(self.root) if self.colored and self.root is not None else None
+
+
+@dataclass(eq=False)
+class Frame:
+    """One evaluation of a shape node while building: the node, the coordinates it was
+    given, its output, and the evaluations its function made (its children at their
+    coordinates, in call order, each once)."""
+
+    shape: Shape
+    p: tuple[Expr, ...]
+    out: Expr | None = None
+    children: list[Frame] = field(default_factory=list)
 
 
 class Shape:
@@ -150,22 +172,29 @@ class Shape:
         """The signed distance expression at coordinates ``p`` (a Vec of dim >= self.dim)."""
         ctx = ctx or BuildContext()
         key = (id(self), tuple(id(c) for c in p.c[: self.dim]))
+        parent = ctx.stack[-1] if ctx.stack else None
         hit = ctx.memo.get(key)
         if hit is not None:
+            frame = ctx.frames.get(key)
+            if parent is not None and frame is not None and \
+                    all(c is not frame for c in parent.children):
+                parent.children.append(frame)
             return hit
         q = Vec(p.c[: self.dim])
-        if self.name in COLOR_NODES:
-
-            ctx.color_depth += 1
-            try:
-                out = self._fn(q, ctx)
-            finally:
-                ctx.color_depth -= 1
-            ctx.colored.append((node_color(self), out))
-        else:
+        frame = Frame(self, tuple(q.c))
+        ctx.stack.append(frame)
+        try:
             out = self._fn(q, ctx)
-            if not self.children and ctx.color_depth == 0:
-                ctx.colored.append((None, out))
+        finally:
+            ctx.stack.pop()
+        frame.out = out
+        ctx.frames[key] = frame
+        if parent is None:
+            ctx.root = frame
+        else:
+            parent.children.append(frame)
+        if self.name in COLOR_NODES:
+            ctx.colored = True
         if self._primitive is not None and out.op not in ("x", "y", "z", "const", "param"):
             ctx.calls.setdefault(id(out), (self.name, out, tuple(q.c) + self._primitive))
         ctx.memo[key] = out

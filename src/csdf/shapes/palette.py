@@ -6,10 +6,12 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["MATERIALS", "COLOR_NODES", "node_color", "node_roughness"]
+from ..expr import Expr, as_expr, clamp
+
+__all__ = ["MATERIALS", "COLOR_NODES", "node_color", "node_roughness", "field_channels"]
 
 #: the shape nodes that give their subtree a colour (its geometry is the child's)
-COLOR_NODES = frozenset({"color", "material"})
+COLOR_NODES = frozenset({"color", "material", "color_field"})
 
 #: named materials: ``name -> (rgb, roughness)`` (roughness in [0, 1], 1 matte)
 MATERIALS: dict[str, tuple[tuple[float, float, float], float]] = {
@@ -24,7 +26,8 @@ MATERIALS: dict[str, tuple[tuple[float, float, float], float]] = {
 
 
 def node_color(node: Any) -> tuple[float, ...] | None:
-    """The colour a ``color`` or ``material`` node gives (None for other nodes)."""
+    """The colour a ``color`` or ``material`` node gives (None for other nodes, and
+    for a ``color_field``, whose colour varies: its channels are ``node.args[0]``)."""
     if node.name == "color":
         return tuple(node.args[0])
     if node.name == "material":
@@ -42,3 +45,10 @@ def node_roughness(node: Any) -> float | None:
         return float(r)
     known = MATERIALS.get(node.args[0])
     return known[1] if known else 0.5
+
+
+def field_channels(node: Any) -> tuple[Expr, Expr, Expr, Expr]:
+    """The ``(r, g, b, a)`` expressions in x, y, z of a ``color_field`` node, each
+    clamped to ``[0, 1]`` (alpha 1 when not given)."""
+    chans = tuple(node.args[0]) + ((as_expr(1.0),) if len(node.args[0]) == 3 else ())
+    return tuple(clamp(c, 0.0, 1.0) for c in chans)  # type: ignore[return-value]

@@ -8,6 +8,10 @@ Methods, on the same sequences:
 * ``track: depth + silhouette``: :class:`csdf.fit.Tracker` with the masks;
 * ``track: depth only``: the same without masks (clutter gated by distance to the
   predicted model);
+* ``track: depth + colour``: depth only plus the colour images
+  (``csdf.synth.sequence(colors=True)``: the object in its colours, the occluder in
+  another, before a random two-colour background) through ``fit_depth``'s
+  region-based colour term;
 * ``silhouette only``: :func:`csdf.fit_silhouette` on each frame's mask from the
   constant-velocity prediction;
 * ``csdf.fit per frame``: :func:`csdf.fit` on the frame's back-projected masked points
@@ -44,6 +48,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import machine_info, md_table  # noqa: E402
 
+from csdf.synth import NOISE_QUAD  # noqa: E402
+
 MODELS = ["chair", "cross_shaft", "flange", "gear", "electrical_box"]
 ROT_DEG, TRANS_FRAC = 5.0, 0.05
 OCCLUDED = 0.75
@@ -79,18 +85,20 @@ class _Method:
 
 
 class TrackMethod(_Method):
-    def __init__(self, shape, camera, init, masks: bool):
+    def __init__(self, shape, camera, init, masks: bool, colors: bool = False):
         from csdf.fit import Tracker
 
-        self.name = "track: depth + silhouette" if masks else "track: depth only"
-        self.masks = masks
+        self.name = "track: depth + silhouette" if masks else (
+            "track: depth + colour" if colors else "track: depth only")
+        self.masks, self.colors = masks, colors
         self.t = Tracker(shape, camera, init, masks=masks)
 
     def reset(self, pose) -> None:
         self.t.reset(pose)
 
-    def step(self, depth, mask):
-        return self.t.update(depth, mask if self.masks else None).pose
+    def step(self, depth, mask, color=None):
+        return self.t.update(depth, mask if self.masks else None,
+                             color if self.colors else None).pose
 
 
 class SilhouetteMethod(_Method):
@@ -180,7 +188,10 @@ def run_sequence(method, seq, pts, diam) -> dict:
     method.reset(seq.poses[0])
     for k in range(len(seq)):
         t0 = time.perf_counter()
-        pose = method.step(seq.depth[k], seq.masks[k])
+        if seq.colors is not None and isinstance(method, TrackMethod):
+            pose = method.step(seq.depth[k], seq.masks[k], seq.colors[k])
+        else:
+            pose = method.step(seq.depth[k], seq.masks[k])
         secs.append(time.perf_counter() - t0)
         gt = seq.poses[k]
         good = (_rot_err(pose.rotation, gt.rotation) < ROT_DEG
@@ -254,6 +265,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--height", type=int, default=240)
     p.add_argument("--models", default=",".join(MODELS))
     p.add_argument("--no-open3d", action="store_true")
+    p.add_argument("--noise-scale", type=float, default=1.0,
+                   help="depth noise as a multiple of Kinect v1's (csdf.synth.NOISE_QUAD)")
+    p.add_argument("--no-colors", action="store_true",
+                   help="no colour images, no depth + colour row")
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     import csdf
@@ -271,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
     print("\n".join(f"* {k}: {v}" for k, v in machine_info().items()))
     print(f"* sequences: {args.sequences} per model x {len(models)} models, {args.frames} "
           f"frames at {args.width}x{args.height}, occluder covering up to "
-          f"{args.occlusion:.0%}")
+          f"{args.occlusion:.0%}, depth noise {args.noise_scale:g} x Kinect v1's")
     stats: dict[str, list[dict]] = {}
     per_model: dict[tuple[str, str], list[dict]] = {}
     diam_of = {}
@@ -285,11 +300,14 @@ def main(argv: list[str] | None = None) -> int:
             seq = csdf.synth.sequence(shape, n_frames=args.frames,
                                       seed=args.seed + 1000 * mi + s,
                                       occlusion=args.occlusion, width=args.width,
-                                      height=args.height)
+                                      height=args.height, colors=not args.no_colors,
+                                      noise_quad=NOISE_QUAD * args.noise_scale)
             methods = [TrackMethod(shape, seq.camera, seq.poses[0], True),
-                       TrackMethod(shape, seq.camera, seq.poses[0], False),
-                       SilhouetteMethod(shape, seq.camera, seq.poses[0]),
-                       FitMethod(shape, seq.camera, seq.poses[0])]
+                       TrackMethod(shape, seq.camera, seq.poses[0], False)]
+            if not args.no_colors:
+                methods.append(TrackMethod(shape, seq.camera, seq.poses[0], False, True))
+            methods += [SilhouetteMethod(shape, seq.camera, seq.poses[0]),
+                        FitMethod(shape, seq.camera, seq.poses[0])]
             if o3d is not None:
                 methods.append(ICPMethod(o3d, shape, seq.camera, seq.poses[0]))
             for m in methods:

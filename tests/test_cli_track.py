@@ -80,3 +80,33 @@ def test_poses_that_are_not_rotations_and_missing_estimates(scene, tmp_path):
     empty.write_text("{}")
     r = runner.invoke(app, ["metrics", "cross_shaft", str(root / "scene"), str(empty)])
     assert r.exit_code != 0 and "no pose for any image" in r.output
+
+
+def test_track_with_colour_images_from_a_bop_folder(tmp_path):
+    from csdf.io.bop import read_bop
+
+    shape = csdf.zoo.load("cross_shaft")
+    seq = csdf.synth.sequence(shape, n_frames=4, seed=5, width=120, height=90,
+                              colors=True)
+    csdf.io.write_bop(seq, tmp_path / "scene")
+    back = read_bop(tmp_path / "scene")
+    assert back.colors.shape == (4, 90, 120, 3)
+    assert np.abs(back.colors - seq.colors).max() <= 0.5 / 255 + 1e-6  # 8-bit PNGs
+    gt = json.loads((tmp_path / "scene" / "scene_gt.json").read_text())
+    (tmp_path / "init.json").write_text(json.dumps(gt["0"][0]))
+    poses = tmp_path / "poses.json"
+    r = runner.invoke(app, ["track", "cross_shaft", str(tmp_path / "scene"), "-o",
+                            str(poses), "--init", str(tmp_path / "init.json"),
+                            "--no-masks"])
+    assert r.exit_code == 0, r.output
+    for f, truth in zip(json.loads(poses.read_text())["frames"], seq.poses):
+        assert f["success"]
+        assert np.linalg.norm(np.array(f["cam_t_m2c"]) / 1000 - truth.translation) < 0.005
+    (tmp_path / "scene" / "rgb" / "000002.png").write_bytes(b"not a png")
+    r = runner.invoke(app, ["track", "cross_shaft", str(tmp_path / "scene"), "-o",
+                            str(poses), "--init", str(tmp_path / "init.json")])
+    assert r.exit_code != 0 and "000002.png: not a readable PNG" in r.output
+    r = runner.invoke(app, ["track", "cross_shaft", str(tmp_path / "scene"), "-o",
+                            str(poses), "--init", str(tmp_path / "init.json"),
+                            "--no-colors"])
+    assert r.exit_code == 0, r.output

@@ -195,3 +195,57 @@ def test_bad_options_are_named(option, value, match):
         csdf.fit_depth(SHAPE, depth, CAM, init=np.full((4, 4), np.nan))
     with pytest.raises(CsdfError, match="one camera per mask"):
         csdf.fit_silhouette(SHAPE, [mask, mask], [CAM])
+
+
+def _plate_scene(core: float = 0.6):
+    """A red 40 x 30 cm plate facing the camera 1 m away before a green wall: the depth
+    only in the plate's central ``core`` part (a sensor that loses the edges), the colour
+    image everywhere."""
+    w, h = 160, 120
+    cam = csdf.Camera(200.0, 200.0, (w - 1) / 2, (h - 1) / 2, w, h)
+    d = cam.pixel_directions().reshape(h, w, 3)
+    zf = 1.0 - 0.01
+    x, y = d[..., 0] / d[..., 2] * zf, d[..., 1] / d[..., 2] * zf
+    inside = (np.abs(x) < 0.2) & (np.abs(y) < 0.15)
+    seen = (np.abs(x) < 0.2 * core) & (np.abs(y) < 0.15 * core)
+    rng = np.random.default_rng(0)
+    rgb = np.where(inside[..., None], [0.8, 0.2, 0.1], [0.2, 0.7, 0.3])
+    rgb = np.clip(rgb + 0.02 * rng.standard_normal((h, w, 3)), 0, 1)
+    return csdf.box((0.4, 0.3, 0.02)), cam, np.where(seen, zf, 0.0), rgb
+
+
+def test_the_colour_term_finds_what_the_depth_cannot():
+    plate, cam, depth, rgb = _plate_scene()
+    truth = np.array([0.0, 0.0, 1.0])
+    start = csdf.Pose(translation=truth + [0.025, -0.02, 0.0])
+    alone = csdf.fit_depth(plate, depth, cam, init=start)
+    # the depth points all lie on the plate's face: sliding it sideways costs nothing
+    assert np.linalg.norm(alone.translation[:2] - truth[:2]) > 0.02
+    both = csdf.fit_depth(plate, depth, cam, init=start, color=rgb)
+    # with the colours the plate's outline lands on the red patch: within a pixel
+    # (5 mm at 1 m)
+    assert np.linalg.norm(both.translation - truth) < 0.004
+    assert both.quality["color_rays"] == 300 and both.quality["color_rays_used"] > 250
+    eight = csdf.fit_depth(plate, depth, cam, init=start,
+                           color=np.rint(rgb * 255).astype(np.uint8))
+    assert np.linalg.norm(eight.translation - truth) < 0.004
+    for bad, match in [(rgb[:, :, :2], "RGB image of the camera's shape"),
+                       (rgb * 2, r"RGB values in \[0, 1\]")]:
+        with pytest.raises(CsdfError, match=match):
+            csdf.fit_depth(plate, depth, cam, init=start, color=bad)
+    with pytest.raises(CsdfError, match="color_weight must be a finite number"):
+        csdf.fit_depth(plate, depth, cam, init=start, color=rgb, color_weight=-1)
+
+
+def test_track_with_colour_images():
+    shape = SHAPE.color((0.85, 0.3, 0.1))
+    seq = csdf.synth.sequence(shape, n_frames=8, width=160, height=120, seed=3,
+                              colors=True)
+    res = csdf.track(shape, seq.depth, seq.camera, seq.poses[0], colors=seq.colors)
+    assert res.success.all()
+    assert all(f.result.quality["color_rays_used"] > 50 for f in res.frames)
+    err = [np.linalg.norm(f.pose.translation - p.translation)
+           for f, p in zip(res.frames, seq.poses)]
+    assert max(err) < 0.005
+    with pytest.raises(CsdfError, match="colors has 2 images but frames has more"):
+        csdf.track(shape, seq.depth[:3], seq.camera, seq.poses[0], colors=seq.colors[:2])

@@ -226,3 +226,30 @@ def test_clear_errors():
     bad("does not fit", SHAPE, n_frames=2, width=W, height=H, distance=0.2)
     bad("camera must be", SHAPE, n_frames=2, camera="kinect")
     bad("3D shape", csdf.circle(1.0), n_frames=2, width=W, height=H)
+
+
+def test_colour_images_show_the_object_in_its_colours_and_leave_the_depth_alone():
+    red = (0.9, 0.1, 0.1)
+    shape = SHAPE.color(red)
+    seq = sequence(shape, n_frames=3, width=W, height=H, seed=7, occlusion=0.3,
+                   colors=True, color_noise=0.0)
+    plain = sequence(shape, n_frames=3, width=W, height=H, seed=7, occlusion=0.3)
+    np.testing.assert_array_equal(seq.depth, plain.depth)  # the same sensor draws
+    assert plain.colors is None
+    assert seq.colors.shape == (3, H, W, 3) and seq.colors.dtype == np.float32
+    assert seq.colors.min() >= 0 and seq.colors.max() <= 1
+    obj = seq.colors[seq.masks]
+    # Lambert shading of red: every object pixel is red times a factor in [0.35, 1]
+    factor = obj[:, 0] / red[0]
+    assert factor.min() >= 0.35 - 1e-6 and factor.max() <= 1 + 1e-6
+    np.testing.assert_allclose(obj[:, 1] / red[1], factor, rtol=1e-5)
+    occ = seq.colors[seq.occluder_masks]
+    assert len(occ) and not np.allclose(occ[:, 1] / np.maximum(occ[:, 0], 1e-9), 1 / 9)
+    back = seq.colors[~(seq.masks | seq.occluder_masks)]
+    assert back.std(axis=0).max() < 0.3 and len(back) > 0.5 * back.size / 3
+    again = sequence(shape, n_frames=3, width=W, height=H, seed=7, occlusion=0.3,
+                     colors=True)
+    noisy = again.colors - seq.colors
+    assert 0.01 < float(noisy[~(seq.masks | seq.occluder_masks)].std()) < 0.03
+    with pytest.raises(csdf.CsdfError, match="color_noise"):
+        sequence(shape, n_frames=3, width=W, height=H, colors=True, color_noise=-1)

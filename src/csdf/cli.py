@@ -925,6 +925,8 @@ def track(
     estimate: str = typer.Option("pose", "--estimate", help="pose or pose,params"),
     mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", help="Millimetres per "
                                       "model unit (1000: a model in metres)."),
+    colors: bool = typer.Option(True, "--colors/--no-colors", help="Use rgb/ (the "
+                                "region-based colour term) when the folder has it."),
 ):
     """Track a model through depth frames (csdf.track) and write each frame's
     model-to-camera pose (BOP conventions: cam_R_m2c row-major, cam_t_m2c in mm)."""
@@ -936,7 +938,7 @@ def track(
 
         from .fit import track as track_fn
         from .io import atomic_path
-        from .io.bop import read_frames
+        from .io.bop import read_frames, read_rgb
 
         if output.suffix.lower() != ".json":
             raise CsdfError(f"{output}: the output must end in .json")
@@ -970,7 +972,9 @@ def track(
             start = _bop_pose(entry, where, mm_per_unit)
         run = track_fn(m, list(depth), cam, start,
                        masks=None if mk is None or not masks else list(mk),
-                       estimate=estimate)
+                       estimate=estimate,
+                       colors=read_rgb(frames, ids, (cam.width, cam.height)) if colors
+                       else None)
         doc = {"model": str(model), "frames": []}
         for k, fr in zip(ids, run.frames):
             doc["frames"].append({

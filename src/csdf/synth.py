@@ -102,6 +102,8 @@ class Sequence:
             object's whole silhouette (1 when nothing covers it; NaN when unknown).
         silhouettes: ``(N, H, W)`` bool, the object's whole silhouette ignoring the
             occluder (BOP's ``mask``), or None when unknown.
+        colors: ``(N, H, W, 3)`` float32 RGB in [0, 1], the colour camera's images
+            (``sequence(colors=True)``: the same camera as the depth), or None.
     """
 
     depth: np.ndarray
@@ -111,6 +113,7 @@ class Sequence:
     occluder_masks: np.ndarray
     visib_fract: np.ndarray
     silhouettes: np.ndarray | None = None
+    colors: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -125,6 +128,10 @@ class Sequence:
     def shape(self) -> tuple[int, int, int]:
         """``(N, H, W)``: frames, rows, columns."""
         return tuple(int(v) for v in self.depth.shape)  # type: ignore[return-value]
+
+
+#: the colour camera's Gaussian pixel noise (RGB in [0, 1])
+COLOR_NOISE = 0.02
 
 
 def noise_sigma(z, noise_base: float = 0.0, noise_quad: float = NOISE_QUAD) -> np.ndarray:
@@ -346,6 +353,39 @@ def _trace(fld: Field, pose: Pose, dirs: np.ndarray) -> tuple[np.ndarray, np.nda
     return t, cos
 
 
+def _background(rng: np.random.Generator, W: int, H: int) -> np.ndarray:
+    """``(H*W, 3)`` a background: two random colours mixed by a smooth pattern (a sum
+    of four random plane waves of 1-4 periods across the image)."""
+    a, b = rng.uniform(0.05, 0.95, (2, 3))
+    v, u = np.mgrid[0:H, 0:W]
+    pattern = np.zeros((H, W))
+    for _ in range(4):
+        k = rng.uniform(1.0, 4.0) * 2.0 * math.pi / max(W, H)
+        ang, phase = rng.uniform(0.0, 2.0 * math.pi, 2)
+        pattern += np.sin(k * (u * math.cos(ang) + v * math.sin(ang)) + phase)
+    w = (0.5 + 0.125 * pattern).clip(0.0, 1.0).reshape(-1, 1)
+    return (1.0 - w) * a + w * b
+
+
+def _colour_frame(fld: Field, pose: Pose, dirs: np.ndarray, t: np.ndarray,
+                  cos: np.ndarray, mask: np.ndarray, occ: np.ndarray,
+                  background: np.ndarray, occ_colour: np.ndarray, noise: float,
+                  rng: np.random.Generator) -> np.ndarray:
+    """``(H*W, 3)`` one colour image: the object's colours where it is seen (``mask``),
+    the occluder's where it is (``occ``), each Lambert-shaded by ``cos`` (a light at
+    the camera), the background elsewhere, plus noise."""
+    from .colors import colors_of
+
+    out = background.copy()
+    shade = (0.35 + 0.65 * np.nan_to_num(cos)).reshape(-1, 1)
+    if mask.any():
+        q = pose.apply_inverse(dirs[mask] * t[mask, None])
+        out[mask] = colors_of(fld, q)[:, :3] * shade[mask]
+    out[occ] = occ_colour * shade[occ]
+    out += noise * rng.standard_normal(out.shape)
+    return np.clip(out, 0.0, 1.0)
+
+
 def sequence(shape, n_frames: int = 30, camera: Camera | None = None, seed=0, *,
              width: int | None = None, height: int | None = None,
              distance: float | None = None, max_rotation: float = 3.0,
@@ -353,7 +393,8 @@ def sequence(shape, n_frames: int = 30, camera: Camera | None = None, seed=0, *,
              noise_quad: float = NOISE_QUAD, outliers: float = OUTLIERS,
              min_cos: float = MIN_COS, occlusion: float = 0.0,
              params: dict | None = None, backend: str = "auto", bounds=None,
-             check_ranges: bool = True) -> Sequence:
+             check_ranges: bool = True, colors: bool = False,
+             color_noise: float = COLOR_NOISE) -> Sequence:
     """A synthetic depth sequence of a shape moving before a camera (see the module
     docs for the motion and the sensor model).
 
@@ -395,6 +436,12 @@ def sequence(shape, n_frames: int = 30, camera: Camera | None = None, seed=0, *,
         backend: evaluation backend (``'auto'``: the fast Numba kernels).
         bounds: ``(2, 3)`` box containing the surface (for unbounded shapes).
         check_ranges: refuse a parameter value outside its declared range.
+        colors: also render colour images (:attr:`Sequence.colors`, an RGB-D sensor):
+            the object in its colours (:mod:`csdf.colors`) and the occluder in one
+            random colour, both Lambert-shaded by a light at the camera, before a
+            background of two random colours mixed by a smooth random pattern; every
+            pixel (dropouts too: the colour camera sees them) with Gaussian noise of
+            ``color_noise``.
 
     Returns:
         :class:`Sequence` with ``N`` frames of ``(H, W)`` images.
@@ -432,7 +479,9 @@ def sequence(shape, n_frames: int = 30, camera: Camera | None = None, seed=0, *,
         max_translation = 0.02 * 2.0 * radius
     max_translation = _real(max_translation, "max_translation")
 
-    path_rng, occ_rng, sensor_rng = np.random.default_rng(seed).spawn(3)
+    # (a fourth stream for the colours leaves the first three, and so the depth, as
+    # they are without colours)
+    path_rng, occ_rng, sensor_rng, color_rng = np.random.default_rng(seed).spawn(4)
     R, centres, _ = _path(path_rng, n, cam, radius, distance, rot, max_translation)
     poses = [Pose(R[k], centres[k] - R[k] @ centre_obj) for k in range(n)]
 
@@ -453,6 +502,10 @@ def sequence(shape, n_frames: int = 30, camera: Camera | None = None, seed=0, *,
         ofld = trace_field(sphere(r_occ), what="synth.sequence")
 
     # pass 2: the occluder, the first surface per pixel, the sensor
+    color_noise = _real(color_noise, "color_noise", 0.0, 1.0)
+    rgb = np.empty((n, H * W, 3), dtype=np.float32) if colors else None
+    background = _background(color_rng, W, H) if colors else None
+    occ_colour = color_rng.uniform(0.1, 0.9, 3) if colors else None
     masks = np.empty((n, H * W), dtype=bool)
     occ_masks = np.zeros((n, H * W), dtype=bool)
     for k in range(n):
@@ -478,9 +531,13 @@ def sequence(shape, n_frames: int = 30, camera: Camera | None = None, seed=0, *,
         z[cos[ok] < min_cos] = 0.0
         depth[k] = 0.0
         depth[k, ok] = np.maximum(z, 0.0)
+        if colors:
+            rgb[k] = _colour_frame(fld, poses[k], dirs, t, cos, masks[k], occ_masks[k],
+                                   background, occ_colour, color_noise, color_rng)
     n_all = hit.sum(1)
     visib = np.where(n_all > 0, masks.sum(1) / np.maximum(n_all, 1), 0.0)
     return Sequence(depth=depth.reshape(n, H, W), masks=masks.reshape(n, H, W),
                     poses=poses, camera=cam, occluder_masks=occ_masks.reshape(n, H, W),
                     visib_fract=visib.astype(np.float64),
-                    silhouettes=hit.reshape(n, H, W))
+                    silhouettes=hit.reshape(n, H, W),
+                    colors=rgb.reshape(n, H, W, 3) if colors else None)

@@ -28,6 +28,23 @@ Residuals (all in scene units, metres for csdf's models):
   minimising point (by more than ``occlusion_margin``) sees an occluder, not the
   background, and is left out.
 
+* **Colour** (``color=``, an RGB image of the same camera; SDF-RGBD's region-based
+  statistics, as PWP3D and RBOT use them). With the model posed at the start, the
+  pixels inside its silhouette give a foreground colour histogram and a ring of pixels
+  outside it a background one (``COLOR_BINS`` per channel, Laplace-smoothed; pixels
+  whose measured depth lies well in front of the model, an occluder, are left out);
+  each pixel's colour then has a foreground posterior ``P_f = h_f / (h_f + h_b)``.
+  For pixels within ``COLOR_BAND`` pixels of the silhouette's edge the residual is
+  ``w (H(phi) - P_f)``: ``phi`` the pixel's signed distance to the posed model's
+  silhouette in pixels (the ray minimum over the depth times the focal length, as for
+  the silhouette term), ``H`` a smoothed Heaviside (1 inside, width
+  ``COLOR_SOFTNESS`` pixels) and ``w = color_weight * f_scale``. So the silhouette is
+  pulled to where the colours change from the object's to the background's, without a
+  mask; pixels whose measured depth is in front of the model are left out. It is the
+  least-squares form of the region term (the posterior fitted by the soft silhouette)
+  rather than its log-likelihood, so that it joins the Levenberg-Marquardt solve of the
+  other residuals.
+
 The ray minimum is found by sampling the ray across the posed model's bounding sphere
 (``RAY_SAMPLES`` points), then ``REFINE_ROUNDS`` rounds of ``REFINE_POINTS`` samples
 in the bracket around the smallest so far (one evaluation call a round).
@@ -49,6 +66,7 @@ from .problem import jacobian, loss_weights, make_result, prepare, residuals
 from .result import FitResult
 
 __all__ = ["backproject", "fit_depth", "fit_silhouette", "contour_rays", "ray_minima",
+           "color_term", "ColorTerm", "COLOR_BAND", "COLOR_SOFTNESS", "COLOR_BINS",
            "RAY_SAMPLES", "REFINE_ROUNDS", "REFINE_POINTS", "SILHOUETTE_LIMIT"]
 
 #: samples along a silhouette ray across the model's bounding sphere
@@ -56,6 +74,11 @@ RAY_SAMPLES = 16
 #: refinement rounds around the smallest sample, and the points each samples
 REFINE_ROUNDS = 3
 REFINE_POINTS = 4
+#: the colour term: pixels within this many pixels of the model's silhouette, the
+#: smoothed Heaviside's width (pixels), histogram bins per channel
+COLOR_BAND = 8.0
+COLOR_SOFTNESS = 1.5
+COLOR_BINS = 8
 #: the silhouette residual's RMS passes up to the larger of these times f_scale and
 #: times a pixel's footprint at the object's depth
 SILHOUETTE_LIMIT = (2.0, 1.25)
@@ -287,6 +310,158 @@ def _value_function(prog, pv: dict, backend: str):
     return lambda q: prog(q, pv, backend=backend, check_ranges=False)
 
 
+# ------------------------------------------------------------------ the colour term
+@dataclass
+class ColorTerm:
+    """The region-based colour term's pixels (camera frame).
+
+    Attributes:
+        rays: their rays (:class:`Rays`: origins at the camera centre, ``depth`` the
+            measured depth or inf).
+        posterior: ``(M,)`` each pixel's probability of showing the object, from its
+            colour: ``h_f / (h_f + h_b)`` of the foreground and background colour
+            histograms.
+        fpx: the focal length (pixels).
+        softness: the smoothed Heaviside's width (pixels).
+    """
+
+    rays: Rays
+    posterior: np.ndarray
+    fpx: float
+    softness: float = COLOR_SOFTNESS
+
+
+def _color_image(color, cam) -> np.ndarray:
+    """``(H*W, 3)`` float RGB in [0, 1] of a colour image of the camera's size."""
+    try:
+        img = np.asarray(color)
+    except (TypeError, ValueError):
+        raise CsdfError("color must be an (H, W, 3) image") from None
+    if img.shape != (cam.height, cam.width, 3) or img.dtype.kind not in "uif":
+        raise CsdfError(f"color must be an RGB image of the camera's shape ({cam.height}, "
+                        f"{cam.width}, 3), got {img.shape} of {img.dtype}")
+    out = img.astype(np.float64).reshape(-1, 3)
+    if img.dtype == np.uint8:
+        out /= 255.0
+    if not np.isfinite(out).all() or out.min() < 0.0 or out.max() > 1.0:
+        raise CsdfError("color must hold RGB values in [0, 1] (or 8-bit)")
+    return out
+
+
+def _model_pixels(prob, cam, margin: float, max_pixels: int = 1500
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels (flat indices) of a grid over the posed model's projected bounding
+    sphere grown by ``margin`` pixels (every ``k``-th pixel, so at most about
+    ``max_pixels``), their signed distance to the model's silhouette in pixels
+    (positive outside: the ray minima of the field over the depth along the ray), and
+    for every pixel of the grid's box the index of its nearest grid pixel (``(B,)``
+    pairs ``(pixel, grid pixel)`` as a ``(2, B)`` array)."""
+    s = prob.s
+    C = s * (prob.R @ prob.centre) + prob.t
+    rw = s * 0.5 * prob.size
+    if C[2] <= rw:  # the camera is inside the bounding sphere: the whole image
+        u0, u1, v0, v1 = 0, cam.width - 1, 0, cam.height - 1
+    else:
+        uc, vc = cam.fx * C[0] / C[2] + cam.cx, cam.fy * C[1] / C[2] + cam.cy
+        rp = max(cam.fx, cam.fy) * rw / math.sqrt(C[2] ** 2 - rw ** 2) + margin
+        u0, u1 = max(int(uc - rp), 0), min(int(uc + rp) + 1, cam.width - 1)
+        v0, v1 = max(int(vc - rp), 0), min(int(vc + rp) + 1, cam.height - 1)
+    if u1 < u0 or v1 < v0:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros((2, 0), np.int64)
+    step = max(1, int(math.ceil(math.sqrt((u1 - u0 + 1) * (v1 - v0 + 1) / max_pixels))))
+    vv, uu = np.mgrid[v0:v1 + 1:step, u0:u1 + 1:step]
+    idx = (vv * cam.width + uu).ravel()
+    fv, fu = np.mgrid[v0:v1 + 1, u0:u1 + 1]
+    gv = np.minimum(np.rint((fv - v0) / step).astype(np.int64), vv.shape[0] - 1)
+    gu = np.minimum(np.rint((fu - u0) / step).astype(np.int64), vv.shape[1] - 1)
+    near = np.stack([(fv * cam.width + fu).ravel(), (gv * vv.shape[1] + gu).ravel()])
+    d = _directions(cam)[idx]
+    n = len(idx)
+    rays = Rays(np.zeros((n, 3)), d, np.broadcast_to([0.0, 0.0, 1.0], (n, 3)).copy(),
+                np.zeros(n), np.ones(n, bool), np.full(n, np.inf))
+    pv = dict(zip(prob.pnames, prob.values))
+    X, m = ray_minima(prob.prog, pv, prob.backend, prob.R, prob.t, s, prob.centre,
+                      0.5 * prob.size, rays)
+    fpx = 0.5 * (cam.fx + cam.fy)
+    return idx, m * fpx / np.maximum(X[:, 2], 1e-300), near
+
+
+def color_term(prob, rgb: np.ndarray, depth, cam, occlusion: float, *,
+               band: float = 8.0, max_rays: int | None = 300, bins: int = COLOR_BINS,
+               seed: int = 0) -> ColorTerm | None:
+    """The colour term's pixels and their foreground posteriors, from the model posed
+    at ``prob``'s start: colour histograms (``bins`` per channel) of the pixels inside
+    its silhouette (foreground) and of a ring of pixels outside it (background), each
+    left out where the measured depth says something stands in front of the model;
+    the pixels within ``band`` pixels of the silhouette's edge (a seeded subset of
+    ``max_rays``) are the term's. None when the model at the start covers fewer than
+    four grid pixels, or fewer than four background pixels are seen around it.
+    """
+    idx, phi, nearest = _model_pixels(prob, cam, margin=4.0 * band)
+    z_meas = _image(depth, cam, "depth").ravel()[idx]
+    z_meas = np.where(np.isfinite(z_meas) & (z_meas > 0), z_meas, np.inf)
+    fg = phi < -1.0
+    bg = (phi > 2.0) & (phi < 4.0 * band)
+    if fg.sum() < 4 or bg.sum() < 4:
+        return None  # nothing to learn the colours from: no colour term
+    # an occluder in front of the model is neither the object's colour nor the
+    # background's: its pixels teach nothing (the model's depth there is unknown, so
+    # the nearest measured depth in the model's box stands for it)
+    near = float(np.median(z_meas[fg][np.isfinite(z_meas[fg])])) \
+        if np.isfinite(z_meas[fg]).any() else np.inf
+    front = z_meas < near - max(occlusion, 0.5 * prob.size * prob.s)
+    q = np.minimum((rgb[idx] * bins).astype(np.int64), bins - 1)
+    code = (q[:, 0] * bins + q[:, 1]) * bins + q[:, 2]
+    hf = np.bincount(code[fg & ~front], minlength=bins ** 3) + 1.0
+    hb = np.bincount(code[bg & ~front], minlength=bins ** 3) + 1.0
+    hf, hb = hf / hf.sum(), hb / hb.sum()
+    posterior = hf / (hf + hb)
+    # the term's pixels: every pixel (not only the grid's, whose regular spacing would
+    # let the silhouette's edge sit anywhere between two columns of it) whose nearest
+    # grid pixel lies within the band
+    cand = nearest[0][np.abs(phi[nearest[1]]) <= band]
+    pix = cand[_subsample(len(cand), max_rays, np.random.default_rng(seed))]
+    n = len(pix)
+    z_pix = _image(depth, cam, "depth").ravel()[pix]
+    z_pix = np.where(np.isfinite(z_pix) & (z_pix > 0), z_pix, np.inf)
+    q = np.minimum((rgb[pix] * bins).astype(np.int64), bins - 1)
+    rays = Rays(np.zeros((n, 3)), _directions(cam)[pix],
+                np.broadcast_to([0.0, 0.0, 1.0], (n, 3)).copy(), np.zeros(n),
+                np.zeros(n, bool), z_pix)
+    return ColorTerm(rays, posterior[(q[:, 0] * bins + q[:, 1]) * bins + q[:, 2]],
+                     0.5 * (cam.fx + cam.fy))
+
+
+def _color_residuals(prob, st: State, idx: list[int], terms) -> tuple[np.ndarray,
+                                                                      np.ndarray]:
+    """The colour term's residuals ``w (H(phi) - P_f)`` (M,) and Jacobian rows: ``H``
+    the smoothed Heaviside (the model's silhouette, 1 inside) of the pixel's signed
+    distance ``phi`` to it (pixels: the ray minimum over the depth times the focal
+    length), ``P_f`` the pixel's colour posterior; pixels whose measured depth lies in
+    front of the model's are left out (an occluder)."""
+    ct = terms.color
+    rays = ct.rays
+    s = math.exp(st.sigma)
+    values = prob.values.copy()
+    values[idx] = st.cvals
+    pv = dict(zip(prob.pnames, values))
+    X, _ = ray_minima(prob.prog, pv, prob.backend, st.R, st.t, s, prob.centre,
+                      0.5 * prob.size, rays)
+    z = np.maximum(X[:, 2], 1e-300)
+    keep = np.flatnonzero(~(rays.depth < z - terms.occlusion))
+    if not len(keep):
+        n = 6 * prob.pose + prob.scale + len(idx)
+        return np.zeros(0), np.zeros((0, n))
+    m, J = _linearise(prob, st, idx, X[keep])
+    k = ct.fpx / z[keep]
+    phi = m * k
+    w = ct.softness
+    heav = 0.5 - np.arctan(phi / w) / math.pi
+    dheav = -(w / math.pi) / (w * w + phi * phi)
+    wt = terms.color_weight
+    return wt * (heav - ct.posterior[keep]), (wt * dheav * k)[:, None] * J
+
+
 # ------------------------------------------------------------------ the solve
 def _linearise(prob, st: State, idx: list[int], P: np.ndarray):
     """Residuals ``s f`` (N,) and Jacobian rows (N, n) of points ``P`` (N, 3) at ``st``."""
@@ -303,6 +478,8 @@ class _Terms:
     weight: float
     occlusion: float
     depth: bool = True
+    color: ColorTerm | None = None
+    color_weight: float = 0.0
 
 
 def _evaluate(prob, st: State, idx: list[int], terms: _Terms):
@@ -331,9 +508,15 @@ def _evaluate(prob, st: State, idx: list[int], terms: _Terms):
             r, J = _linearise(prob, st, idx, X[used])
             rs.append(terms.weight * (r - rays.target[used] * z[used]))
             Js.append(terms.weight * J)
+    n_color = 0
+    if terms.color is not None:
+        r, J = _color_residuals(prob, st, idx, terms)
+        n_color = len(r)
+        rs.append(r)
+        Js.append(J)
     r = np.concatenate(rs) if rs else np.zeros(0)
     J = np.concatenate(Js) if Js else np.zeros((0, 0))
-    return r, J, used
+    return r, J, (used, n_color)
 
 
 def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-4, step_tol: float = 1e-5,
@@ -383,7 +566,8 @@ def _solve(prob, terms: _Terms, max_iter: int, tol: float = 1e-4, step_tol: floa
     prob.R, prob.t, prob.s = st.R, st.t, math.exp(st.sigma)
     prob.values[idx] = st.cvals
     return {"nfev": nev, "converged": converged, "cost": cost, "notes": [],
-            "loss": prob.loss, "residuals": r, "rays_used": len(used)}
+            "loss": prob.loss, "residuals": r, "rays_used": len(used[0]),
+            "color_used": used[1]}
 
 
 def _silhouette_quality(r_sil: np.ndarray, rays: Rays | None, used: int, f_scale: float,
@@ -414,7 +598,8 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
               loss: str = "huber", f_scale: float | None = None, max_iter: int = 50,
               multistart: bool = False, seed: int = 0, backend: str = "auto",
               check_ranges: bool = True, check_visibility: bool = True,
-              gate: float | None = None) -> FitResult:
+              gate: float | None = None, color=None, color_weight: float = 1.0,
+              max_color_rays: int | None = 300) -> FitResult:
     """Fit a model to a depth image (SDF-RGBD, paper §4.5; see the module docs).
 
     Args:
@@ -447,6 +632,12 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
         check_visibility: include the success test's check that the model's surface
             visible from the camera is explained by the measurements (a ray cast of
             the fitted model: about 10 ms; the silhouette term checks much the same).
+        color: ``(H, W, 3)`` the colour image of the same camera (floats in [0, 1] or
+            8-bit): adds the region-based colour term (module docs), which needs no
+            mask.
+        color_weight: the colour term's weight (a full disagreement of a pixel counts
+            as ``color_weight * f_scale``).
+        max_color_rays: a seeded subset of the colour term's pixels.
 
     Returns:
         :class:`csdf.FitResult` of the model-to-camera pose; ``success`` is the point
@@ -462,7 +653,8 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
     t0 = time.perf_counter()
     _check_options(band=band, max_iter=max_iter, max_points=max_points, max_rays=max_rays,
                    seed=seed, silhouette_weight=silhouette_weight, gate=gate,
-                   occlusion_margin=occlusion_margin)
+                   occlusion_margin=occlusion_margin, color_weight=color_weight,
+                   max_color_rays=max_color_rays)
     cam = _camera(camera)
     m = None if mask is None else _mask(mask, cam)
     pts, _ = backproject(depth, cam, m)
@@ -507,14 +699,22 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
     pixel = float(np.median(prob.points[:, 2])) / (0.5 * (cam.fx + cam.fy))
     weight = float(silhouette_weight) * min(1.0, prob.f_scale / max(0.5 * pixel, 1e-300))
     terms = _Terms(rays, weight, occ)
+    if color is not None:
+        terms.color = color_term(prob, _color_image(color, cam), depth, cam, occ,
+                                 band=COLOR_BAND, max_rays=max_color_rays, seed=seed)
+        terms.color_weight = float(color_weight) * prob.f_scale
     stats = _solve(prob, terms, max_iter)
     n_sil = stats["rays_used"]
-    r_sil = stats["residuals"][len(prob.points):] / max(weight, 1e-300)
+    r_sil = stats["residuals"][len(prob.points):len(prob.points) + n_sil] / \
+        max(weight, 1e-300)
     res = make_result(prob, stats, time.perf_counter() - t0, "csdf-depth", None,
                       viewpoint=np.zeros(3) if check_visibility and not gating else None)
     sq = _silhouette_quality(r_sil, rays, n_sil, prob.f_scale, pixel)
     res.quality.update(sq)
     res.quality["gated"] = kept
+    if color is not None:
+        res.quality["color_rays"] = 0 if terms.color is None else len(terms.color.rays)
+        res.quality["color_rays_used"] = int(stats["color_used"])
     if sq and not sq["silhouette_ok"]:
         res.success = False
         res.quality.setdefault("reasons", []).append(_silhouette_reason(sq))

@@ -196,7 +196,7 @@ class Tracker:
         import inspect
 
         known = set(inspect.signature(fit_depth).parameters) - {
-            "shape", "depth", "camera", "init", "mask", "multistart"}
+            "shape", "depth", "camera", "init", "mask", "multistart", "color"}
         bad = sorted(set(fit_kwargs) - known)
         if bad:
             raise CsdfError(f"track: unknown option(s) {', '.join(bad)} (fit_depth's options "
@@ -224,8 +224,9 @@ class Tracker:
         return Pose.nearest(self.pose.matrix @ np.linalg.inv(self.prev.matrix)
                             @ self.pose.matrix, "the prediction")
 
-    def update(self, depth, mask=None) -> TrackFrame:
-        """Fit the next frame (depth ``(H, W)``, optional mask) and return it."""
+    def update(self, depth, mask=None, color=None) -> TrackFrame:
+        """Fit the next frame (depth ``(H, W)``, optional mask, optional colour image
+        ``(H, W, 3)`` for the colour term of :func:`csdf.fit_depth`) and return it."""
         t0 = time.perf_counter()
         guess = self.predict()
         start = {"rotation": guess.rotation, "translation": guess.translation,
@@ -242,7 +243,7 @@ class Tracker:
                                seconds=time.perf_counter() - t0, result=None)
             self.frames += 1
             return frame
-        res = fit_depth(shape, depth, camera, init=start, mask=mask, **opts)
+        res = fit_depth(shape, depth, camera, init=start, mask=mask, color=color, **opts)
         lost = not res.success
         again = False
         self.prev = self.pose
@@ -273,9 +274,9 @@ class Tracker:
 
 
 def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=None, *,
-          reinit: bool = True, max_points: int | None = None, max_rays: int | None = 120,
-          max_iter: int = 20, f_scale: float | None = None, seed: int = 0,
-          backend: str = "auto", **fit_kwargs) -> TrackResult:
+          colors=None, reinit: bool = True, max_points: int | None = None,
+          max_rays: int | None = 120, max_iter: int = 20, f_scale: float | None = None,
+          seed: int = 0, backend: str = "auto", **fit_kwargs) -> TrackResult:
     """Track a model through depth frames (see the module docs; :class:`Tracker` does it
     frame by frame).
 
@@ -292,6 +293,11 @@ def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=No
             from the predicted model are left out as clutter).
         estimate, params: as :func:`csdf.fit_depth`; with ``'params'`` the parameters
             are tracked as a running mean.
+        colors: the colour image ``(H, W, 3)`` of each frame (same camera), adding
+            :func:`csdf.fit_depth`'s region-based colour term: the object's and the
+            background's colour statistics, learnt each frame around the predicted
+            silhouette, pull the silhouette to where the colours change; no masks
+            needed.
         reinit: re-initialise a lost frame with a multistart fit.
         max_points, max_rays, max_iter, f_scale, seed, backend, fit_kwargs: passed to
             :func:`csdf.fit_depth` (fewer points and evaluations than a single fit's
@@ -306,4 +312,13 @@ def track(shape, frames, camera, init, masks=None, estimate=("pose",), params=No
                       reinit=reinit, max_points=max_points, max_rays=max_rays,
                       max_iter=max_iter, f_scale=f_scale, seed=seed, backend=backend,
                       **fit_kwargs)
-    return TrackResult([tracker.update(depth, mask) for depth, mask in _frames(frames, masks)])
+    cs = None if colors is None else iter(colors)
+    out = []
+    for k, (depth, mask) in enumerate(_frames(frames, masks)):
+        color = None
+        if cs is not None:
+            color = next(cs, None)
+            if color is None:
+                raise CsdfError(f"colors has {k} images but frames has more")
+        out.append(tracker.update(depth, mask, color))
+    return TrackResult(out)

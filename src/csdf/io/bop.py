@@ -18,7 +18,9 @@ A scene folder holds:
   inside) of the visible part and of the whole silhouette of object ``GGGGGG`` (its
   index in the image's ``scene_gt`` list);
 * ``mask_occluder/IIIIII.png`` (csdf's own addition, ignored by BOP tools): the pixels
-  of a :func:`csdf.synth.sequence` occluder, written when there is one.
+  of a :func:`csdf.synth.sequence` occluder, written when there is one;
+* ``rgb/IIIIII.png``: 8-bit RGB colour images of the same camera, written when the
+  sequence has colours (``sequence(colors=True)``); read as RGB floats in [0, 1].
 
 Model units are converted with ``mm_per_unit`` (1000: the model is in metres). Every
 file is written atomically (:func:`csdf.io.atomic_path`); the JSON files are written
@@ -42,8 +44,8 @@ from ..pose import Pose
 from ..synth import MAX_SEQUENCE_PIXELS, Sequence
 from .atomic import atomic_path
 
-__all__ = ["write_bop", "read_bop", "read_frames", "DepthClipWarning", "DEPTH_SCALE",
-           "MAX_DEPTH_VALUE"]
+__all__ = ["write_bop", "read_bop", "read_frames", "read_rgb", "DepthClipWarning",
+           "DEPTH_SCALE", "MAX_DEPTH_VALUE"]
 
 #: default ``depth_scale``: stored depth in tenths of a millimetre
 DEPTH_SCALE = 0.1
@@ -171,8 +173,9 @@ def write_bop(sequence: Sequence, folder: str | os.PathLike, obj_id: int = 1, *,
     root = Path(folder)
     sil = sequence.silhouettes
     occ = np.asarray(sequence.occluder_masks, dtype=bool)
+    rgb = getattr(sequence, "colors", None)
     subfolders = ["depth", "mask_visib"] + (["mask"] if sil is not None else []) \
-        + (["mask_occluder"] if occ.any() else [])
+        + (["mask_occluder"] if occ.any() else []) + (["rgb"] if rgb is not None else [])
     for sub in subfolders:
         try:
             (root / sub).mkdir(parents=True, exist_ok=True)
@@ -207,6 +210,9 @@ def write_bop(sequence: Sequence, folder: str | os.PathLike, obj_id: int = 1, *,
                        np.asarray(sil[k], dtype=np.uint8) * 255)
         if occ.any():
             _write_png(root / "mask_occluder" / f"{k:06d}.png", occ[k].astype(np.uint8) * 255)
+        if rgb is not None:
+            _write_png(root / "rgb" / f"{k:06d}.png",
+                       np.rint(np.clip(rgb[k], 0.0, 1.0) * 255).astype(np.uint8))
         pose = sequence.poses[k]
         cameras[str(k)] = {"cam_K": K, "depth_scale": depth_scale}
         gts[str(k)] = [{"cam_R_m2c": pose.rotation.ravel().tolist(),
@@ -297,7 +303,13 @@ def _read_png(path: Path, kind: str, size: tuple[int, int] | None) -> np.ndarray
                                 f"got mode {mode!r}")
             if kind == "mask" and mode not in ("1", "L", "P", "I;16", "I"):
                 raise CsdfError(f"{path}: a mask must be a grayscale PNG, got mode {mode!r}")
-            a = np.array(im)
+            if kind == "rgb":
+                if mode not in ("RGB", "RGBA", "L", "P"):
+                    raise CsdfError(f"{path}: a colour image must be an 8-bit RGB PNG, "
+                                    f"got mode {mode!r}")
+                a = np.array(im.convert("RGB"))
+            else:
+                a = np.array(im)
     except CsdfError:
         raise
     except Exception as exc:  # noqa: BLE001 - Pillow raises many kinds for bad files
@@ -305,6 +317,8 @@ def _read_png(path: Path, kind: str, size: tuple[int, int] | None) -> np.ndarray
     if size is not None and wh != size:
         raise CsdfError(f"{path}: {wh[0]}x{wh[1]} pixels, but the scene's depth images "
                         f"are {size[0]}x{size[1]}")
+    if kind == "rgb":
+        return a.astype(np.float32) / 255.0
     if kind == "depth":
         if a.min(initial=0) < 0 or a.max(initial=0) > MAX_DEPTH_VALUE:
             raise CsdfError(f"{path}: depth values outside 0..{MAX_DEPTH_VALUE}")
@@ -500,7 +514,27 @@ def read_bop(folder: str | os.PathLike, obj_id: int | None = None, *,
                                masks[todo].sum((1, 2)) / np.maximum(total[todo], 1), 0.0)
     camera = Camera(K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2], w, h)
     return Sequence(depth=depth, masks=masks, poses=poses, camera=camera,
-                    occluder_masks=occ, visib_fract=visib, silhouettes=sil)
+                    occluder_masks=occ, visib_fract=visib, silhouettes=sil,
+                    colors=read_rgb(root, [int(i) for i in ids], (w, h)))
+
+
+def read_rgb(folder: str | os.PathLike, ids: list[int], size: tuple[int, int]
+             ) -> np.ndarray | None:
+    """The colour images ``rgb/IIIIII.png`` of images ``ids`` of a BOP scene folder,
+    ``(N, H, W, 3)`` float32 RGB in [0, 1] (``size`` ``(W, H)``, checked), or None when
+    the folder has no ``rgb/``.
+
+    Raises:
+        CsdfError: a missing or unreadable image, or one of another size (naming it).
+    """
+    root = Path(folder) / "rgb"
+    if not root.is_dir():
+        return None
+    w, h = size
+    out = np.empty((len(ids), h, w, 3), dtype=np.float32)
+    for k, im in enumerate(ids):
+        out[k] = _read_png(root / f"{int(im):06d}.png", "rgb", size)
+    return out
 
 
 def read_frames(folder: str | os.PathLike, *, mm_per_unit: float = 1000.0

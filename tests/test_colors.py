@@ -302,3 +302,29 @@ def test_channel_colours_in_the_preview_shader():
     main = "out vec4 c;\nvoid main() { c = vec4(sdf_albedo(vec3(0.5)), sdf(vec3(0.0))); }\n"
     ok, log = validate(ES_PRELUDE + geometry + src + main)
     assert ok, log
+
+
+@pytest.mark.parametrize("kind", ["palette", "channels"])
+def test_shadertoy_export_draws_the_colours(kind):
+    import os
+
+    from csdf.field import shadertoy
+    from glsl_runner import ES_PRELUDE, glslang, validate
+
+    r = csdf.param("r", 0.4, 0.1, 0.6)
+    a = csdf.box(1).color(RED)
+    b = csdf.sphere(r).translate((0.5, 0, 0)).color(BLUE)
+    shape = a - b if kind == "palette" else csdf.union(a, b, k=0.2)
+    src = shadertoy(shape)
+    assert "vec3 sdf_albedo(vec3 p)" in src and "pow(sdf_albedo(p), vec3(2.2))" in src
+    assert ("sdf_albedo_index" in src) == (kind == "palette")
+    assert "uniform" not in src and src.count("const float u_r = 0.4;") == 1
+    assert "0.55 + 0.35 * n" in shadertoy(csdf.sphere(1))  # uncoloured: as before
+    if glslang() is None:
+        if os.environ.get("CSDF_REQUIRE_TOOLS") == "1":
+            pytest.fail("CSDF_REQUIRE_TOOLS=1 but glslangValidator is not installed")
+        pytest.skip("needs glslangValidator (apt-get install glslang-tools)")
+    prelude = ES_PRELUDE + "uniform vec3 iResolution;\nuniform float iTime;\n"
+    main = "out vec4 c;\nvoid main() { mainImage(c, gl_FragCoord.xy); }\n"
+    ok, log = validate(prelude + src + main)
+    assert ok, log

@@ -44,8 +44,7 @@ DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 def _section(model) -> tuple[Any, np.ndarray] | None:
     """The colour section ``(program, palette with NaN rows)`` of a shape's compiled
     program (compiled once, cached on the shape) or of a program; None without."""
-    prog = model.compile() if hasattr(model, "children") else model
-    return getattr(prog, "colors", None)
+    return getattr(model_program(model), "colors", None)
 
 
 def has_colors(shape) -> bool:
@@ -143,37 +142,17 @@ def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",
     Raises:
         CsdfError: a shape the GLSL export refuses (a mesh call).
     """
-    from .field import glsl_float, to_glsl
-
-    def vec3(c) -> str:
-        return "vec3(" + ", ".join(glsl_float(float(v)) for v in c[:3]) + ")"
+    from .field import albedo_functions
 
     base = DEFAULT_COLOR if default is None else tuple(default)
-    section = _section(shape)
-    if section is None:
-        return f"vec3 {name}(vec3 p) {{\n    return {vec3(base)};\n}}\n"
+    prog = model_program(shape)
+    params, lines = albedo_functions(prog, name, base)
     have = {ln.strip() for ln in declared.splitlines() if ln.startswith("uniform ")}
+    decl = [f"uniform float {ident}; // {comment}" for ident, comment in params]
+    decl = [d for d in decl if d.strip() not in have]
+    return "\n".join(decl + lines) + "\n"
 
-    def snippet(prog, fname: str) -> list[str]:
-        lines = [ln for ln in to_glsl(prog, fname, gradient=False).splitlines()
-                 if not (ln.startswith("uniform ") and ln.strip() in have)]
-        have.update(ln.strip() for ln in lines if ln.startswith("uniform "))
-        return lines
 
-    progs, raw = section
-    if raw is None:  # channel programs
-        src: list[str] = []
-        for c, prog in zip("rgbu", (progs[0], progs[1], progs[2], progs[4])):
-            src += snippet(prog, f"{name}_{c}")
-        body = [f"vec3 {name}(vec3 p) {{",
-                f"    vec3 c = vec3({name}_r(p), {name}_g(p), {name}_b(p)) + "
-                f"{name}_u(p) * {vec3(base)};",
-                "    return clamp(c, 0.0, 1.0);", "}"]
-        return "\n".join(src + body) + "\n"
-    palette = np.where(np.isnan(raw), np.array((tuple(base) + (1.0,))[:4]), raw)
-    src = snippet(progs, f"{name}_index")
-    body = [f"vec3 {name}(vec3 p) {{", f"    float k = {name}_index(p);"]
-    for k in range(len(palette) - 1):
-        body.append(f"    if (k < {k}.5) return {vec3(palette[k])};")
-    body += [f"    return {vec3(palette[-1])};", "}"]
-    return "\n".join(src + body) + "\n"
+def model_program(model) -> Any:
+    """The compiled program of a shape (cached on it), or the program itself."""
+    return model.compile() if hasattr(model, "children") else model

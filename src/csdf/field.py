@@ -49,7 +49,7 @@ import numpy as np
 from .backends import BACKENDS, check_mesh_calls
 from .backends import fast as _fast_backend
 from .backends.cexport import to_c, to_numpy
-from .backends.glsl import glsl_float, glsl_params, shadertoy, to_glsl
+from .backends.glsl import albedo_functions, glsl_float, glsl_params, shadertoy, to_glsl
 from .backends.interval_eval import evaluate_intervals
 from .cache import memo
 from .compiler.program import Program, as_program
@@ -61,7 +61,8 @@ __all__ = [
     "Field", "as_field", "field_bounds", "planar_bounds", "auto_bounds", "choose_backend",
     "check_bounds", "params_in_ranges", "AUTO_FAST_POINTS", "to_glsl", "shadertoy", "glsl_params",
     "to_c", "to_numpy",
-    "glsl_float", "numba_available", "kernel_cache_dir", "evaluate_intervals",
+    "glsl_float", "albedo_functions", "numba_available", "kernel_cache_dir",
+    "evaluate_intervals",
 ]
 
 #: point sets at least this large get the compiled backend under ``'auto'``

@@ -277,7 +277,7 @@ def glsl_params(shape_or_program) -> list[dict]:
 class _Emitter:
     """Straight-line GLSL for one program: operand atoms per slot, then statements."""
 
-    def __init__(self, prog):
+    def __init__(self, prog, names: dict[str, str] | None = None):
         self.prog = prog
         self.layout = lay = prog.layout
         self.n_fixed = lay.n_fixed
@@ -285,7 +285,9 @@ class _Emitter:
         z = "p.z" if prog.dim == 3 else "0.0"
         atoms: dict[int, str] = {0: "p.x", 1: "p.y", 2: z}
         for i, prm in enumerate(prog.params):
-            atoms[lay.param(i)] = uniform_name(prm.name, i)
+            # (names: another program's identifiers, for a colour program that reads
+            # the parameters of the program it belongs to)
+            atoms[lay.param(i)] = (names or {}).get(prm.name) or uniform_name(prm.name, i)
         for i, c in enumerate(prog.consts.tolist()):
             atoms[lay.const(i)] = glsl_float(c)
         self.fixed = atoms
@@ -437,6 +439,47 @@ def to_glsl(shape_or_program, name: str = "sdf", *, gradient: bool = True) -> st
     return "\n".join(lines) + "\n"
 
 
+# ---------------------------------------------------------------------------- colours
+def albedo_functions(prog, name: str = "sdf_albedo",
+                     default: tuple[float, ...] = (0.8, 0.8, 0.8)
+                     ) -> tuple[list[str], list[str]]:
+    """GLSL of a program's colour section (:attr:`csdf.Program.colors`, the rule of
+    :mod:`csdf.colors`): ``(params, lines)``, the main program's parameters that the
+    colour programs read (``(identifier, comment)``; the caller declares them, as
+    uniforms or constants) and the functions, ending in ``vec3 <name>(vec3 p)``, the RGB
+    colour at ``p``; ``default`` (RGB) for uncoloured surfaces, and everywhere for a
+    program without colours."""
+    _check_name(name)
+
+    def vec3(c) -> str:
+        return "vec3(" + ", ".join(glsl_float(float(v)) for v in tuple(c)[:3]) + ")"
+
+    section = getattr(prog, "colors", None)
+    if section is None:
+        return [], [f"vec3 {name}(vec3 p) {{", f"    return {vec3(default)};", "}"]
+    ids = {p.name: uniform_name(p.name, i) for i, p in enumerate(prog.params)}
+    progs, palette = section
+    chans = progs if palette is None else (progs,)
+    used = {p.name for c in chans for p in c.params}
+    params = [(ids[p.name], _param_comment(p)) for p in prog.params if p.name in used]
+    lines: list[str] = []
+    if palette is None:  # channel programs r, g, b, a, u
+        for c, cp in zip("rgbu", (progs[0], progs[1], progs[2], progs[4])):
+            lines += _function("float", f"{name}_{c}", _Emitter(cp, ids).value_body())
+        lines += [f"vec3 {name}(vec3 p) {{",
+                  f"    vec3 c = vec3({name}_r(p), {name}_g(p), {name}_b(p)) + "
+                  f"{name}_u(p) * {vec3(default)};",
+                  "    return clamp(c, 0.0, 1.0);", "}"]
+        return params, lines
+    rows = np.where(np.isnan(palette), np.array(tuple(default)[:3] + (1.0,)), palette)
+    lines += _function("float", f"{name}_index", _Emitter(progs, ids).value_body())
+    lines += [f"vec3 {name}(vec3 p) {{", f"    float k = {name}_index(p);"]
+    for k in range(len(rows) - 1):
+        lines.append(f"    if (k < {k}.5) return {vec3(rows[k])};")
+    lines += [f"    return {vec3(rows[-1])};", "}"]
+    return params, lines
+
+
 # ---------------------------------------------------------------------------- Shadertoy
 _DEFAULT_RADIUS = 1.5
 
@@ -487,7 +530,7 @@ void mainImage(out vec4 fragColor, in vec2 fragCoord) {{
         float dif = clamp(dot(n, l), 0.0, 1.0);
         float amb = 0.5 + 0.5 * n.z;
         float spe = pow(clamp(dot(reflect(rd, n), l), 0.0, 1.0), 24.0);
-        vec3 base = 0.55 + 0.35 * n;
+        vec3 base = {base};
         col = base * (0.25 * amb + 0.85 * dif) + 0.25 * spe;
         col = mix(col, csdfBackground(rd), smoothstep(0.4 * far, far, t));
     }}
@@ -518,7 +561,8 @@ def shadertoy(shape_or_program) -> str:
     above 1 (0.5 step scale when the bound is infinite), shading by normals from central
     differences. Parameters become ``const float u_<name> = <default>;`` (Shadertoy has
     no custom uniforms): edit them there. A Shape is framed by its bounds; a Program (or
-    an unbounded shape) by a radius-1.5 sphere about the origin.
+    an unbounded shape) by a radius-1.5 sphere about the origin. A coloured model is
+    drawn in its colours (:func:`albedo_functions`), others in a normal-tinted grey.
     """
     prog = _program(shape_or_program)
     em = _Emitter(prog)
@@ -537,10 +581,16 @@ def shadertoy(shape_or_program) -> str:
         )
     lines.append("")
     lines += _function("float", "sdf", em.value_body())
+    base = "0.55 + 0.35 * n"
+    if prog.colors is not None:  # the model's colours (sRGB) as linear albedo
+        lines.append("")
+        lines += albedo_functions(prog, "sdf_albedo")[1]
+        base = "pow(sdf_albedo(p), vec3(2.2))"
     main = _SHADERTOY_MAIN.format(
         center="vec3({})".format(", ".join(glsl_float(c) for c in center)),
         radius=glsl_float(radius),
         step=glsl_float(step),
         steps=int(min(1024, math.ceil(160 / step))),
+        base=base,
     )
     return "\n".join(lines) + "\n" + main

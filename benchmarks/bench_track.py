@@ -48,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import machine_info, md_table  # noqa: E402
 
-from csdf.synth import NOISE_QUAD  # noqa: E402
+from csdf.synth import MIN_COS, NOISE_QUAD  # noqa: E402
 
 MODELS = ["chair", "cross_shaft", "flange", "gear", "electrical_box"]
 ROT_DEG, TRANS_FRAC = 5.0, 0.05
@@ -267,6 +267,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-open3d", action="store_true")
     p.add_argument("--noise-scale", type=float, default=1.0,
                    help="depth noise as a multiple of Kinect v1's (csdf.synth.NOISE_QUAD)")
+    p.add_argument("--min-cos", type=float, default=MIN_COS,
+                   help="depth returns drop out where |n . ray| is below this (0.2: "
+                   "grazing angles only; larger: a sensor that loses dark or shiny "
+                   "surfaces and every silhouette edge)")
     p.add_argument("--no-colors", action="store_true",
                    help="no colour images, no depth + colour row")
     p.add_argument("--seed", type=int, default=0)
@@ -286,7 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     print("\n".join(f"* {k}: {v}" for k, v in machine_info().items()))
     print(f"* sequences: {args.sequences} per model x {len(models)} models, {args.frames} "
           f"frames at {args.width}x{args.height}, occluder covering up to "
-          f"{args.occlusion:.0%}, depth noise {args.noise_scale:g} x Kinect v1's")
+          f"{args.occlusion:.0%}, depth noise {args.noise_scale:g} x Kinect v1's, "
+          f"dropouts below |n . ray| = {args.min_cos:g}")
     stats: dict[str, list[dict]] = {}
     per_model: dict[tuple[str, str], list[dict]] = {}
     diam_of = {}
@@ -301,7 +306,8 @@ def main(argv: list[str] | None = None) -> int:
                                       seed=args.seed + 1000 * mi + s,
                                       occlusion=args.occlusion, width=args.width,
                                       height=args.height, colors=not args.no_colors,
-                                      noise_quad=NOISE_QUAD * args.noise_scale)
+                                      noise_quad=NOISE_QUAD * args.noise_scale,
+                                      min_cos=args.min_cos)
             methods = [TrackMethod(shape, seq.camera, seq.poses[0], True),
                        TrackMethod(shape, seq.camera, seq.poses[0], False)]
             if not args.no_colors:

@@ -66,7 +66,7 @@ from .problem import jacobian, loss_weights, make_result, prepare, residuals
 from .result import FitResult
 
 __all__ = ["backproject", "fit_depth", "fit_silhouette", "contour_rays", "ray_minima",
-           "color_term", "ColorTerm", "COLOR_BAND", "COLOR_SOFTNESS", "COLOR_BINS",
+           "color_term", "ColorTerm", "GateError", "COLOR_BAND", "COLOR_SOFTNESS", "COLOR_BINS",
            "RAY_SAMPLES", "REFINE_ROUNDS", "REFINE_POINTS", "SILHOUETTE_LIMIT"]
 
 #: samples along a silhouette ray across the model's bounding sphere
@@ -82,6 +82,11 @@ COLOR_BINS = 8
 #: the silhouette residual's RMS passes up to the larger of these times f_scale and
 #: times a pixel's footprint at the object's depth
 SILHOUETTE_LIMIT = (2.0, 1.25)
+
+
+class GateError(CsdfError):
+    """:func:`fit_depth` from a start without a mask found too few depth points near
+    the model to fit (a tracker's prediction that lost the object)."""
 
 
 # ------------------------------------------------------------------ image inputs
@@ -683,7 +688,7 @@ def fit_depth(shape, depth, camera, init=None, mask=None, estimate=("pose",), pa
         near = np.flatnonzero(np.abs(r0) <= g)
         kept = len(near) / len(r0)
         if len(near) < 10:
-            raise CsdfError(f"no depth points within {g:.4g} of the model at the start "
+            raise GateError(f"no depth points within {g:.4g} of the model at the start "
                             "(pass a better init, multistart=True or a mask)")
         near = near[_subsample(len(near), max_points, rng)]
         prob.points = prob.points[near]

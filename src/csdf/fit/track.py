@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..pose import Pose
-from .images import fit_depth
+from .images import GateError, fit_depth
 from .result import FitResult
 
 __all__ = ["track", "Tracker", "TrackFrame", "TrackResult", "MIN_PIXELS"]
@@ -224,6 +224,17 @@ class Tracker:
         return Pose.nearest(self.pose.matrix @ np.linalg.inv(self.prev.matrix)
                             @ self.pose.matrix, "the prediction")
 
+    def _carry(self, guess: Pose, t0: float) -> TrackFrame:
+        """A lost frame without a fit: the prediction stands in for it and the motion
+        goes on."""
+        self.prev, self.pose = self.pose, guess
+        frame = TrackFrame(index=self.frames, pose=guess, params=dict(self.mean),
+                           success=False, lost=True, reinitialised=False,
+                           rmse=math.nan, inlier_fraction=0.0, silhouette_rmse=math.nan,
+                           seconds=time.perf_counter() - t0, result=None)
+        self.frames += 1
+        return frame
+
     def update(self, depth, mask=None, color=None) -> TrackFrame:
         """Fit the next frame (depth ``(H, W)``, optional mask, optional colour image
         ``(H, W, 3)`` for the colour term of :func:`csdf.fit_depth`) and return it."""
@@ -233,26 +244,24 @@ class Tracker:
                  "scale": guess.scale, "params": dict(self.mean)}
         shape, camera, opts = self.shape, self.camera, self.opts
         if _valid_pixels(depth, mask, camera, self.frames) < MIN_PIXELS:
-            # nothing to fit (the object fully hidden, a dropped frame): lost, and the
-            # prediction stands in for it; the motion goes on
-            self.prev, self.pose = self.pose, guess
-            frame = TrackFrame(index=self.frames, pose=guess, params=dict(self.mean),
-                               success=False, lost=True, reinitialised=False,
-                               rmse=math.nan, inlier_fraction=0.0,
-                               silhouette_rmse=math.nan,
-                               seconds=time.perf_counter() - t0, result=None)
-            self.frames += 1
-            return frame
-        res = fit_depth(shape, depth, camera, init=start, mask=mask, color=color, **opts)
-        lost = not res.success
+            # nothing to fit (the object fully hidden, a dropped frame)
+            return self._carry(guess, t0)
+        try:
+            res: FitResult | None = fit_depth(shape, depth, camera, init=start, mask=mask,
+                                              color=color, **opts)
+        except GateError:  # no depth points near the prediction: the object is lost
+            res = None
+        lost = res is None or not res.success
         again = False
         self.prev = self.pose
         if lost and self.reinit:
             alt = _reinitialise(shape, depth, camera, mask, self.centre, opts)
             again = True
-            if alt.success or alt.cost < res.cost:
+            if res is None or alt.success or alt.cost < res.cost:
                 res = alt
                 self.prev = None  # the motion history restarts
+        if res is None:  # lost, not re-initialised: the prediction stands in for it
+            return self._carry(guess, t0)
         self.pose = Pose.nearest(res.transform, "the fitted pose")  # (re-orthonormalised)
         if self.track_params and res.success:
             self.n_mean += 1

@@ -249,3 +249,21 @@ def test_track_with_colour_images():
     assert max(err) < 0.005
     with pytest.raises(CsdfError, match="colors has 2 images but frames has more"):
         csdf.track(shape, seq.depth[:3], seq.camera, seq.poses[0], colors=seq.colors[:2])
+
+
+def test_a_track_whose_prediction_sees_no_points_is_lost_not_ended():
+    rng = np.random.default_rng(7)
+    seq = _sequence(SHAPE, 6, rng)
+    frames = [d for d, _, _, _ in seq]
+    # frame 3: the object half a metre behind the prediction (no depth point within
+    # the gate of 10 % of its size), then back
+    R, t = seq[3][2], seq[3][3] + [0.0, 0.0, 0.5]
+    depth, mask = _view(SHAPE, R, t)
+    frames[3] = depth
+    start = csdf.Pose(seq[0][2], seq[0][3])
+    res = csdf.track(SHAPE, frames, CAM, start)
+    assert res[3].lost and res[3].reinitialised
+    assert np.linalg.norm(res[3].pose.translation - t) < 0.01  # found where it went
+    plain = csdf.track(SHAPE, frames, CAM, start, reinit=False)
+    assert plain[3].lost and plain[3].result is None and not plain[3].reinitialised
+    assert plain.success[:3].all()

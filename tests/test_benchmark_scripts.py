@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
@@ -17,3 +19,40 @@ def test_benchmark_help(script):
                        text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "usage:" in r.stdout
+
+
+def _box(lo, hi, flip: bool = False):
+    """A closed box mesh ``(vertices (8, 3), faces (12, 3))`` facing outwards, each
+    square split along one diagonal (the other one with ``flip``)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    v = np.array([[(hi if i >> k & 1 else lo)[k] for k in range(3)] for i in range(8)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2),
+             (1, 3, 7, 5)]  # -z, +z, -y, +y, -x, +x, counter-clockwise from outside
+    faces = []
+    for a, b, c, d in quads:
+        faces += [(b, c, d), (b, d, a)] if flip else [(a, b, c), (a, c, d)]
+    return v, np.array(faces)
+
+
+def test_openscad_examples_drops_only_zero_thickness_sheets():
+    """Two boxes touching along a face, both faces kept (OpenSCAD's export of touching
+    parts): the doubly covered square is removed, leaving the closed union with the
+    same volume; where the faces overlap only in part, nothing is removed."""
+    trimesh = pytest.importorskip("trimesh")
+    pytest.importorskip("shapely")
+    spec = importlib.util.spec_from_file_location("openscad_examples",
+                                                  BENCH / "openscad_examples.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for shift, removed in ((0.0, 4), (0.5, 0)):
+        va, fa = _box([0, 0, 0], [1, 1, 1])
+        vb, fb = _box([1, shift, 0], [2, 1 + shift, 1], flip=True)
+        both = trimesh.Trimesh(np.vstack([va, vb]), np.vstack([fa, fb + 8]))
+        out, n = mod.drop_double_sheets(both)
+        assert n == removed
+        if removed:  # (four triangles met at each side of the shared square)
+            assert not both.is_watertight and out.is_volume and len(out.faces) == 20
+            assert out.volume == pytest.approx(2.0, abs=1e-12)
+            assert out.area == pytest.approx(10.0, abs=1e-12)
+        else:
+            assert out is both

@@ -456,6 +456,21 @@ def test_uneven_scale_in_the_ideal_mode_is_a_taper_of_x_and_y_apart(tmp_path):
         assert abs(_f(csdf.io.load_scad(src), ref.vertices)).max() < 1e-4
 
 
+def test_twisted_uneven_scale_in_the_ideal_mode_turns_then_scales(tmp_path):
+    """As OpenSCAD places its slices: each section turned by the twist, then scaled
+    along x and y (an uneven scale does not commute with the turn), so every vertex of
+    OpenSCAD's STL lies on the smooth surface of the ideal mode."""
+    _need_openscad()
+    scad = ("linear_extrude(height = 30, twist = 150, scale = [1.5, 0.5]) polygon([[0, 0], "
+            "[10, 0], [10, 5], [5, 2], [0, 5]]);")
+    ref = _stl(tmp_path, scad)
+    src = tmp_path / "m.scad"
+    src.write_text(scad)
+    shape = csdf.io.load_scad(src)
+    assert shape.name != "polyhedron"
+    assert abs(_f(shape, ref.vertices)).max() < 1e-4
+
+
 def test_colours_are_kept_on_the_shape():
     from csdf.shapes.appearance import colors
 
@@ -486,6 +501,47 @@ def test_openscad_slice_counts():
     assert diagonal_slices(106.25, 40.0) == 21
     assert diagonal_slices(400.0, 1.0) == 11
     assert diagonal_slices(400.0, 1.0, fn=5) == 5
+
+
+_TWISTED = [
+    "linear_extrude(height = 20, twist = 90) square(size = [20, 10], center = true);",
+    "linear_extrude(height = 30, twist = 150, scale = [1.5, 0.5]) difference() { "
+    "circle(r = 10); multmatrix([[1, 0, 0, 3], [0, 1, 0, 0], [0, 0, 1, 0], "
+    "[0, 0, 0, 1]]) square(size = [4, 3], center = true); }",
+    "linear_extrude(height = 12, scale = [0.3, 1.7], center = true) polygon(points = "
+    "[[0, 0], [10, 0], [10, 10], [0, 10]]);",
+]
+
+
+@pytest.mark.parametrize("scad", _TWISTED)
+def test_hull_of_a_twisted_extrusion_has_the_surfaces_slices(scad):
+    """facets='openscad': a hull around a twisted or unevenly scaled extrusion takes
+    the points of OpenSCAD's slices, as the ruled surface has them (one slice count,
+    the same turn-then-scale placement): each hull vertex is a vertex of the surface,
+    and every vertex of the surface lies in the hull."""
+    pytest.importorskip("shapely")
+    surface = loads_csg(scad, facets="openscad")
+    verts = surface.compile().data[0].vertices
+    hull = loads_csg(f"hull() {{ {scad} }}", facets="openscad")
+    corners = np.asarray(hull.args[0])
+    gap = np.linalg.norm(corners[:, None, :] - verts[None, :, :], axis=2).min(axis=1)
+    assert gap.max() < 1e-12
+    assert _f(hull, verts).max() < 1e-9
+
+
+def test_resize_of_a_twisted_extrusion_matches_openscad(tmp_path):
+    """resize scales by the box of OpenSCAD's slices (not of the first and last
+    slices alone): every vertex of OpenSCAD's STL on csdf's zero set."""
+    _need_openscad()
+    pytest.importorskip("shapely")
+    scad = f"resize([30, 0, 10], auto = [false, true, false]) {_TWISTED[0]}"
+    ref = _stl(tmp_path, scad)
+    src = tmp_path / "m.scad"
+    src.write_text(scad)
+    shape = csdf.io.load_scad(src, facets="openscad")
+    diag = float(np.linalg.norm(ref.bounds[1] - ref.bounds[0]))
+    assert abs(_f(shape, ref.vertices)).max() < 1e-5 * diag
+    np.testing.assert_allclose(shape.bounds, ref.bounds, atol=1e-4)
 
 
 def test_partial_revolve_and_cross_section_fields():

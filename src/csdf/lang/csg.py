@@ -575,82 +575,46 @@ class _Converter:
             if ruled is not None:
                 return ruled
         s = extrude(child, h).translate((0.0, 0.0, h / 2))
+        if twist != 0.0:
+            # OpenSCAD turns clockwise (seen from +z) by `twist` degrees over the height
+            s = s.twist(-math.radians(twist) / h)
+        # then scales the turned section (an uneven scale does not commute with the turn)
         if sc_a[0] != sc_a[1]:  # x and y scaled apart from 1 at the bottom to sc at the top
             s = s.taper(((float(sc_a[0]) - 1.0) / h, (float(sc_a[1]) - 1.0) / h))
         elif sc_a[0] != 1.0:  # the section scaled from 1 at the bottom to sc at the top
             s = s.taper((float(sc_a[0]) - 1.0) / h)
-        if twist != 0.0:
-            # OpenSCAD turns clockwise (seen from +z) by `twist` degrees over the height
-            s = s.twist(-math.radians(twist) / h)
         return s.translate((0.0, 0.0, -h / 2)) if self.flag(n, "center") else s
 
     # -- OpenSCAD's ruled extrusions (facets='openscad') ---------------------------------
     def ruled_extrusion(self, n: _Node, h: float, scale: np.ndarray, twist: float):
         """A twisted or non-uniformly scaled ``linear_extrude`` as OpenSCAD builds it:
-        the outline copied to each slice (turned by ``-twist t`` degrees and scaled by
-        ``1 + (scale - 1) t``) and neighbouring slices joined by flat triangles, each
-        quad split along its shorter diagonal as OpenSCAD's export shows; the slice
-        count by OpenSCAD's rules (:func:`helix_slices`, :func:`diagonal_slices`);
-        a ``polyhedron`` of that surface (exact). None
-        when the child's outline cannot be had (a node other than square, circle,
-        polygon, transforms and booleans of them; or no shapely), or the top is
-        squashed flat in one axis only."""
-        try:
-            import shapely
-        except ImportError:
+        the outline copied to each slice (:func:`extrusion_levels`: turned by ``-twist
+        t`` degrees, then scaled by ``1 + (scale - 1) t``) and neighbouring slices
+        joined by flat triangles, each quad split along its shorter diagonal as
+        OpenSCAD's export shows; the slice count by :meth:`extrude_slices`; a
+        ``polyhedron`` of that surface (exact). None when the child's outline cannot be
+        had (:meth:`extrusion_outline`), or the top is squashed flat in one axis only."""
+        got = self.extrusion_outline(n)
+        if got is None or (scale[0] == 0.0) != (scale[1] == 0.0):
             return None
-        geom = self.outline_group(n.children)
-        if geom is None or geom.is_empty:
-            return None
-        if (scale[0] == 0.0) != (scale[1] == 0.0):
-            return None
-        polys = [shapely.geometry.polygon.orient(p, 1.0)
-                 for p in getattr(geom, "geoms", [geom]) if not p.is_empty]
-        rings: list[np.ndarray] = []  # outer rings counter-clockwise, holes clockwise
-        for p in polys:
-            for ring in [p.exterior, *p.interiors]:
-                xy = np.asarray(ring.coords)[:-1, :2]
-                if len(xy) >= 3:
-                    rings.append(xy)
-        if not rings:
-            return None
-        r2 = max(float((xy ** 2).sum(axis=1).max()) for xy in rings)
-        if "slices" in n.args:
-            slices = max(int(self.num(n, "slices", 1.0)), 1)
-        elif twist != 0.0:
-            slices = helix_slices(r2, h, twist, self.num(n, "$fn", 0.0),
-                                  self.num(n, "$fs", 2.0), self.num(n, "$fa", 12.0))
-        else:  # a non-uniform scale alone: OpenSCAD's "diagonal" slices
-            delta2 = max(float((((1.0 - scale) * xy) ** 2).sum(axis=1).max())
-                         for xy in rings)
-            slices = diagonal_slices(delta2, h, self.num(n, "$fn", 0.0),
-                                     self.num(n, "$fs", 2.0))
-        if slices > 100_000:
-            raise self.err(n, f"{slices} slices; at most 100000 are read")
+        polys, rings = got
+        import shapely
+
+        slices = self.extrude_slices(n, h, scale, twist, np.concatenate(rings))
         z0 = -h / 2 if self.flag(n, "center") else 0.0
         apex = scale[0] == 0.0
         rots = twist * np.arange(slices + 1) / slices
-        sn, cs = _sin_cos_deg(-rots)
-        levels = slices if apex else slices + 1  # a squashed top is one point
-        verts: list[np.ndarray] = []
-        base: list[list[int]] = []  # per level, the first index of each ring
-        start = 0
-        for i in range(levels):
-            t = i / slices
-            f = 1.0 + (scale - 1.0) * t
-            firsts = []
-            for xy in rings:
-                x = xy[:, 0] * cs[i] - xy[:, 1] * sn[i]
-                y = xy[:, 0] * sn[i] + xy[:, 1] * cs[i]
-                verts.append(np.column_stack([x * f[0], y * f[1],
-                                              np.full(len(xy), z0 + h * t)]))
-                firsts.append(start)
-                start += len(xy)
-            base.append(firsts)
+        levels = extrusion_levels(np.concatenate(rings), h, scale, twist, slices, z0)
+        if apex:  # a squashed top is one point
+            levels = levels[:-1]
+        size = sum(len(xy) for xy in rings)
+        offsets = np.cumsum([0] + [len(xy) for xy in rings[:-1]])
+        # per level, the first index of each ring
+        base = [[i * size + int(o) for o in offsets] for i in range(len(levels))]
+        V = levels.reshape(-1, 3)
+        top = len(V)  # the apex's index
         if apex:
-            verts.append(np.array([[0.0, 0.0, z0 + h]]))
-        V = np.concatenate(verts)
-        top = start  # the apex's index
+            V = np.concatenate([V, [[0.0, 0.0, z0 + h]]])
         faces: list[tuple[int, int, int]] = []
         for i in range(slices):
             split_first = math.sin(math.radians(rots[i] - rots[i + 1])) > 0.0
@@ -697,6 +661,51 @@ class _Converter:
             return polyhedron(V, np.array(faces, dtype=np.int64))
         except ShapeError as exc:
             raise self.err(n, f"OpenSCAD's extrusion surface: {exc}") from None
+
+    def extrusion_outline(self, n: _Node) -> tuple[list, list[np.ndarray]] | None:
+        """``(polygons, rings)`` of a ``linear_extrude``'s children: their outline as
+        shapely polygons (outer rings counter-clockwise, holes clockwise) and each
+        ring's vertices ``(k, 2)`` without the closing repeat; None when it cannot be
+        had (a child other than squares, circles, polygons, their transforms and
+        booleans; no shapely) or is empty."""
+        try:
+            import shapely
+        except ImportError:
+            return None
+        geom = self.outline_group(n.children)
+        if geom is None or geom.is_empty:
+            return None
+        polys = [shapely.geometry.polygon.orient(p, 1.0)
+                 for p in getattr(geom, "geoms", [geom]) if not p.is_empty]
+        rings: list[np.ndarray] = []
+        for p in polys:
+            for ring in [p.exterior, *p.interiors]:
+                xy = np.asarray(ring.coords)[:-1, :2]
+                if len(xy) >= 3:
+                    rings.append(xy)
+        return (polys, rings) if rings else None
+
+    def extrude_slices(self, n: _Node, h: float, scale: np.ndarray, twist: float,
+                       xy: np.ndarray) -> int:
+        """The number of slices of a twisted or unevenly scaled ``linear_extrude`` in
+        ``facets='openscad'`` mode, for its surface and for the points of a ``hull``
+        or ``resize`` around it alike: the node's ``slices`` when given, else OpenSCAD
+        2021.01's rule (:func:`helix_slices` for a twist, :func:`diagonal_slices` for
+        an uneven scale alone), from the outline's vertices ``xy`` ``(N, 2)``.
+        Raises a located error above 100000."""
+        if "slices" in n.args:
+            slices = max(int(self.num(n, "slices", 1.0)), 1)
+        elif twist != 0.0:
+            slices = helix_slices(float((xy ** 2).sum(axis=1).max()), h, twist,
+                                  self.num(n, "$fn", 0.0), self.num(n, "$fs", 2.0),
+                                  self.num(n, "$fa", 12.0))
+        else:  # a non-uniform scale alone: OpenSCAD's "diagonal" slices
+            delta2 = float((((1.0 - scale) * xy) ** 2).sum(axis=1).max())
+            slices = diagonal_slices(delta2, h, self.num(n, "$fn", 0.0),
+                                     self.num(n, "$fs", 2.0))
+        if slices > 100_000:
+            raise self.err(n, f"{slices} slices; at most 100000 are read")
+        return slices
 
     def outline_group(self, children: list[_Node]):
         """The union of the children's outlines (a shapely geometry), or None."""
@@ -949,22 +958,20 @@ class _Converter:
         if v is not _UNDEF and not np.allclose(_array(v), [0, 0, 1]):
             raise self.err(n, f"an extrusion direction v = {_show(v)} is not read yet")
         twist = self.num(n, "twist", 0.0)
-        if twist == 0.0:
+        z0 = -h / 2 if self.flag(n, "center") else 0.0
+        if self.faceted and (twist != 0.0 or sc[0] != sc[1]):
+            # OpenSCAD's slices, as its surface has them (ruled_extrusion): the exact
+            # outline's vertices where it can be had
+            got = self.extrusion_outline(n)
+            if got is not None:
+                pts = np.concatenate(got[1])
+            layers = self.extrude_slices(n, h, sc, twist, pts)
+        elif twist == 0.0:
             layers = 1
-        elif self.faceted:
-            layers = max(int(self.num(n, "slices", 1.0)), 1)
         else:  # a point turning by `step` degrees stays within the tolerance of its arc
             step = math.degrees(2.0 * math.acos(1.0 - HULL_TOLERANCE))
             layers = max(int(math.ceil(abs(twist) / step)), 1)
-        z0 = -h / 2 if self.flag(n, "center") else 0.0
-        out = []
-        for k in range(layers + 1):
-            t = k / layers
-            a = -math.radians(twist) * t  # clockwise seen from +z
-            R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-            xy = (pts * (1.0 + (sc - 1.0) * t)) @ R.T
-            out.append(np.column_stack([xy, np.full(len(xy), z0 + h * t)]))
-        return np.concatenate(out)
+        return extrusion_levels(pts, h, sc, twist, layers, z0).reshape(-1, 3)
 
     def p_rotate_extrude(self, n):
         pts = self.group_points(n)
@@ -1180,6 +1187,21 @@ def diagonal_slices(delta2: float, h: float, fn: float = 0.0, fs: float = 2.0) -
     if fn > 0.0:
         return max(int(fn), 1)
     return max(math.ceil(math.sqrt(delta2 + h * h) / max(fs, 0.01)), 1)
+
+
+def extrusion_levels(xy: np.ndarray, h: float, scale: np.ndarray, twist: float,
+                     slices: int, z0: float = 0.0) -> np.ndarray:
+    """The outline's vertices ``xy`` ``(N, 2)`` at each level of a ``linear_extrude``
+    as OpenSCAD places them: ``(slices + 1, N, 3)``, level ``i`` (``t = i / slices``)
+    at height ``z0 + h t``, turned by ``-twist t`` degrees (clockwise seen from +z),
+    then scaled by ``1 + (scale - 1) t`` along x and y."""
+    t = np.arange(slices + 1) / slices
+    sn, cs = _sin_cos_deg(-(twist * np.arange(slices + 1) / slices))
+    f = 1.0 + (np.asarray(scale, dtype=float)[None, :] - 1.0) * t[:, None]
+    x = (xy[None, :, 0] * cs[:, None] - xy[None, :, 1] * sn[:, None]) * f[:, :1]
+    y = (xy[None, :, 0] * sn[:, None] + xy[None, :, 1] * cs[:, None]) * f[:, 1:]
+    z = np.broadcast_to((z0 + h * t)[:, None], x.shape)
+    return np.stack([x, y, z], axis=-1)
 
 
 def circle_points(r: float, k: int) -> np.ndarray:

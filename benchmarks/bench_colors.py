@@ -24,11 +24,27 @@ from csdf.colors import colors_at
 
 MODELS = ("chair", "car", "lamp", "gear")
 
+#: a model whose colours mix: the chair's parts blended (its colours then need the five
+#: channel programs, not a palette index)
+BLENDED = """
+let legs = union(cylinder(0.03, 0.45).translate((0.18, 0.18, 0.225)),
+                 cylinder(0.03, 0.45).translate((-0.18, 0.18, 0.225)),
+                 cylinder(0.03, 0.45).translate((0.18, -0.18, 0.225)),
+                 cylinder(0.03, 0.45).translate((-0.18, -0.18, 0.225)))
+let seat = box((0.46, 0.46, 0.04)).translate((0, 0, 0.47))
+let back = box((0.46, 0.04, 0.45)).translate((0, 0.21, 0.715))
+export union(legs.color((0.2, 0.2, 0.22)), seat.color((0.62, 0.42, 0.24)),
+             back.color((0.8, 0.3, 0.2)), k = 0.03)
+"""
+
 
 def uncoloured(name: str) -> csdf.Shape:
     """The zoo model with every ``.color((r, g, b))`` call removed from its source."""
-    text = re.sub(r"\.color\(\([^()]*\)\)", "", zoo.source(name))
-    return csdf.loads(text)
+    return csdf.loads(_strip(zoo.source(name)))
+
+
+def _strip(text: str) -> str:
+    return re.sub(r"\.color\(\([^()]*\)\)", "", text)
 
 
 def main() -> None:
@@ -40,9 +56,14 @@ def main() -> None:
           f"{csdf.parallel.N_THREADS} threads; {a.points} points; median of {a.repeat}")
     print("| model | uncoloured s | coloured s | ratio | same values | colors_at s |")
     print("|---|---|---|---|---|---|")
-    for name in MODELS:
-        shape = zoo.load(name)
-        plain = uncoloured(name)
+    for name in MODELS + ("blended chair",):
+        if name == "blended chair":
+            shape = csdf.loads(BLENDED)
+            plain = csdf.loads(_strip(BLENDED))
+            assert shape.compile().colors[1] is None  # channel programs
+        else:
+            shape = zoo.load(name)
+            plain = uncoloured(name)
         assert plain.compile().colors is None and shape.compile().colors is not None
         lo, hi = shape.bounds
         P = np.random.default_rng(0).uniform(lo, hi, (a.points, 3))

@@ -343,6 +343,11 @@ def main(argv: list[str] | None = None) -> int:
                     "ADD-S AUC", "median ms", "resets"],
                    [[name, f"{diam_of[name]:.3f}", *summary(per_model[(first, name)])]
                     for name in models]))
+    tracks = [m for m in stats if m.startswith("track:")]
+    print()
+    print(md_table(["model"] + [f"{m}: tracked / ADD-S AUC" for m in tracks],
+                   [[name] + [" / ".join(summary(per_model[(m, name)])[i] for i in (0, 2))
+                              for m in tracks] for name in models]))
     errs = silhouette_starts(models, 6, args.seed + 7, args.width, args.height)
     print(f"\nsilhouette only, one view, starts turned 20 degrees ({len(errs)} frames): "
           f"median rotation error {np.median(errs):.2f} degrees (90th percentile "

@@ -78,6 +78,11 @@ def test_geometry_is_untouched_by_colour_and_colours_survive_the_bytecode():
     bad[i:i + 8] = np.float64(2.0).tobytes()
     with pytest.raises(csdf.BytecodeError, match="palette colour 0"):
         csdf.Program.from_bytes(_with_crc(bytes(bad)))
+    # the text form checks the palette too (a fuzzer found it did not)
+    text = coloured.disassemble().replace("palette 1.0 0.0 0.0 1.0", "palette 2.0 0.0 0.0 1.0")
+    assert "palette 2.0" in text
+    with pytest.raises(csdf.BytecodeError, match="palette colour 0 is not RGBA"):
+        csdf.Program.from_text(text)
 
 
 def test_coloured_meshes_round_trip_through_ply_glb_and_obj(tmp_path):

@@ -259,10 +259,9 @@ def decode_fields(data: bytes) -> dict[str, Any]:
                                     f"{MAX_PALETTE})")
             palette = np.frombuffer(r.take(32 * k, "palette"), dtype="<f8").astype(
                 np.float64).reshape(k, 4)
-            ok = np.isnan(palette).all(axis=1) | ((palette >= 0) & (palette <= 1)).all(axis=1)
-            if not ok.all():
-                raise BytecodeError(f"byte {at}: palette colour {int(np.argmin(ok))} is not "
-                                    "RGBA in [0, 1]")
+            bad = _bad_palette_row(palette)
+            if bad is not None:
+                raise BytecodeError(f"byte {at}: palette colour {bad} is not RGBA in [0, 1]")
             colors = (_colour_program(r, "colour program"), palette)
     if r.pos != len(r.data):
         raise BytecodeError(f"byte {r.pos}: {len(r.data) - r.pos} unexpected trailing bytes")
@@ -272,6 +271,12 @@ def decode_fields(data: bytes) -> dict[str, Any]:
         lipschitz=lipschitz, calls=tuple(calls), bounds=bounds, data=tuple(data),
         colors=colors,
     )
+
+
+def _bad_palette_row(palette: np.ndarray) -> int | None:
+    """The first palette row that is neither all NaN (uncoloured) nor RGBA in [0, 1]."""
+    ok = np.isnan(palette).all(axis=1) | ((palette >= 0) & (palette <= 1)).all(axis=1)
+    return None if ok.all() else int(np.argmin(ok))
 
 
 def _colour_program(r: Any, what: str) -> dict:
@@ -379,6 +384,9 @@ def validate(prog: Any) -> None:
         else:
             if np.shape(palette) != (np.shape(palette)[0], 4) or not len(palette):
                 raise BytecodeError("the palette must be (K, 4) RGBA rows")
+            bad = _bad_palette_row(palette)
+            if bad is not None:
+                raise BytecodeError(f"palette colour {bad} is not RGBA in [0, 1]")
             programs = (cprog,)
         for p in programs:
             validate(p)

@@ -333,3 +333,26 @@ def test_shadertoy_export_draws_the_colours(kind):
     main = "out vec4 c;\nvoid main() { mainImage(c, gl_FragCoord.xy); }\n"
     ok, log = validate(prelude + src + main)
     assert ok, log
+
+
+def test_scenes_render_and_scan_in_their_instances_colours():
+    from csdf.render import auto_camera
+
+    scene = csdf.Scene()
+    scene.add(csdf.box(0.5).color(RED), pose=csdf.Pose(translation=(0, 0, 0)), name="a")
+    scene.add(csdf.sphere(0.3).color(BLUE), pose=csdf.Pose(translation=(1, 0, 0)),
+              name="b")
+    scene.add(csdf.sphere(0.2), pose=csdf.Pose(translation=(0, 1, 0)), name="c")
+    cam = auto_camera(scene, 80, 60)
+    pts, normals, ids, rgba = csdf.scan(scene, cam, colors=True, outliers=0.0)
+    assert set(np.unique(ids)) == {0, 1, 2}
+    np.testing.assert_array_equal(np.unique(rgba[ids == 0], axis=0), [RED + (1.0,)])
+    np.testing.assert_array_equal(np.unique(rgba[ids == 1], axis=0), [BLUE + (1.0,)])
+    np.testing.assert_array_equal(np.unique(rgba[ids == 2], axis=0), [DEFAULT_COLOR])
+    img = csdf.render(scene, cam)
+    rgb = np.asarray(img.color).astype(int)
+    red = img.instance == 0
+    blue = img.instance == 1
+    assert (rgb[red][:, 0] > rgb[red][:, 2]).all() and (rgb[blue][:, 2] > rgb[blue][:, 0]).all()
+    with pytest.raises(csdf.CsdfError, match="instance id of each point"):
+        csdf.colors.colors_of(scene, pts)

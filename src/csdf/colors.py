@@ -35,7 +35,7 @@ import numpy as np
 from .errors import CsdfError
 
 __all__ = ["DEFAULT_COLOR", "color_program", "colors_at", "colors_of", "has_colors",
-           "albedo_glsl"]
+           "scene_has_colors", "albedo_glsl"]
 
 #: the colour of surfaces outside every ``color`` node (a light grey, opaque)
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
@@ -115,11 +115,16 @@ def _run(prog, pts: np.ndarray, params: dict | None, check_ranges: bool) -> np.n
 
 
 def colors_of(model: Any, points: Any, params: dict | None = None, *,
-              check_ranges: bool = True, default: Any = None) -> np.ndarray:
+              check_ranges: bool = True, default: Any = None,
+              instances: Any = None) -> np.ndarray:
     """:func:`colors_at` for a model a consumer was given: a :class:`csdf.Shape` or
     :class:`csdf.Program` as is, a :class:`csdf.Field` by its shape (else its
     program) with its parameter values (updated by ``params``), ``points`` ``(N, 3)``
-    in the field's frame (mapped back by its pose)."""
+    in the field's frame (mapped back by its pose); a :class:`csdf.Scene` with
+    ``instances`` ``(N,)``, the instance id each point lies on (-1: none, NaN colour),
+    each point in the colours of its instance's model (world points)."""
+    if getattr(model, "__csdf_scene__", False):
+        return _scene_colors(model, points, instances, check_ranges, default)
     if hasattr(model, "children") or hasattr(model, "colors"):
         return colors_at(model, points, params, check_ranges=check_ranges, default=default)
     src = getattr(model, "shape", None) or getattr(model, "program", None)
@@ -128,6 +133,28 @@ def colors_of(model: Any, points: Any, params: dict | None = None, *,
     pose = getattr(model, "pose", None)
     local = points if pose is None or pose.is_identity() else pose.apply_inverse(points)
     return colors_at(src, local, merged, check_ranges=check_ranges, default=default)
+
+
+def scene_has_colors(scene: Any) -> bool:
+    """True when some instance of a :class:`csdf.Scene` places a coloured model."""
+    return any(has_colors(inst.model) for inst in scene)
+
+
+def _scene_colors(scene: Any, points: Any, instances: Any, check_ranges: bool,
+                  default: Any) -> np.ndarray:
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if instances is None:
+        raise CsdfError("a scene's colours need the instance id of each point")
+    ids = np.asarray(instances).reshape(-1)
+    if ids.shape != (len(pts),):
+        raise CsdfError(f"instances must give one id per point ({len(pts)}), got "
+                        f"{ids.shape}")
+    out = np.full((len(pts), 4), np.nan)
+    for i in np.unique(ids[ids >= 0]):
+        sel = ids == i
+        out[sel] = colors_of(scene.field(int(i)), pts[sel], check_ranges=check_ranges,
+                             default=default)
+    return out
 
 
 def albedo_glsl(shape, name: str = "sdf_albedo", declared: str = "",

@@ -68,8 +68,9 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
             shapes).
         check_ranges: refuse a parameter value outside its declared range
             (:class:`csdf.ParamError` naming the range); False scans it anyway.
-        colors: an RGB-D sensor: also each point's colour, the shape's at the surface
-            point the ray hit (:func:`csdf.colors.colors_at`; outliers get a random
+        colors: an RGB-D sensor: also each point's colour, the shape's (or the hit
+            instance's) at the surface point the ray hit (:func:`csdf.colors.colors_of`;
+            outliers get a random
             colour drawn after everything else, so the points are those of
             ``colors=False``).
 
@@ -80,7 +81,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         :class:`csdf.Scene` (traced by :meth:`csdf.Scene.raycast`, ``object_pose``
         placing the whole scene): ``(points, normals, instance (M,))``, the id of the
         instance each point lies on (-1 for outliers). With ``colors``, ``(points,
-        normals, colors (M, 4))`` RGBA in ``[0, 1]``.
+        normals, colors (M, 4))`` RGBA in ``[0, 1]`` (a scene's: ``(points, normals,
+        instance, colors)``, each point in its instance's colours).
 
     Raises:
         CsdfError: bad resolution, non-finite or negative noise, an outlier fraction
@@ -99,8 +101,6 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     scene = getattr(shape, "__csdf_scene__", False)
     if scene and (params or bounds is not None):
         raise CsdfError("a scene's instances carry their own parameters and bounds")
-    if scene and colors:
-        raise CsdfError("colors=True scans a shape; a scene's colours are not drawn yet")
 
     dcam = cam.pixel_directions()  # (N, 3) unit, camera frame
     M = pose.rotation.T @ cam.R  # camera frame -> object frame (rotation)
@@ -123,7 +123,8 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         from .colors import colors_of
 
         hit_obj = o_obj + t[:, None] * d_obj[keep]
-        rgba = colors_of(fld, hit_obj, check_ranges=check_ranges)
+        rgba = colors_of(shape if scene else fld, hit_obj, check_ranges=check_ranges,
+                         instances=ids)
     normals = n_obj[keep] @ M  # object frame -> camera frame: M^T n
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     m = len(t)
@@ -149,5 +150,5 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
         if rgba is not None:
             rgba[sel] = np.column_stack([rng.random((k, 3)), np.ones(k)])
     if rgba is not None:
-        return points, normals, rgba
+        return (points, normals, ids, rgba) if scene else (points, normals, rgba)
     return (points, normals, ids) if scene else (points, normals)

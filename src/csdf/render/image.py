@@ -159,15 +159,20 @@ def _linear(srgb: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def _albedo(fld, p: np.ndarray, params, check_ranges: bool) -> np.ndarray | None:
-    """Linear RGB ``(M, 3)`` of a coloured shape at world hits ``p`` (its ``color``
-    nodes, :mod:`csdf.colors`; uncoloured parts keep :data:`ALBEDO`), or None."""
-    from ..colors import colors_of
+def _albedo(fld, p: np.ndarray, params, check_ranges: bool,
+            ids: np.ndarray | None = None) -> np.ndarray | None:
+    """Linear RGB ``(M, 3)`` of a coloured shape (or scene, with the instance ``ids``
+    of the hits) at world hits ``p`` (its ``color`` nodes, :mod:`csdf.colors`;
+    uncoloured parts keep :data:`ALBEDO`), or None without colours."""
+    from ..colors import colors_of, scene_has_colors
 
-    if fld.program.colors is None:
+    if ids is not None:
+        if not scene_has_colors(fld):
+            return None
+    elif fld.program.colors is None:
         return None
     rgba = colors_of(fld, p, params, check_ranges=check_ranges,
-                     default=tuple(_srgb(ALBEDO)) + (1.0,))
+                     default=tuple(_srgb(ALBEDO)) + (1.0,), instances=ids)
     return _linear(np.nan_to_num(rgba[:, :3], nan=0.5))
 
 
@@ -290,7 +295,7 @@ def render(shape, camera: Camera, width: int | None = None, height: int | None =
     hi = np.flatnonzero(hit)
     if hi.size:
         p = cam.t + t[hi, None] * dirs[hi]
-        albedo = None if ids is not None else _albedo(fld, p, params, check_ranges)
+        albedo = _albedo(fld, p, params, check_ranges, None if ids is None else ids[hi])
         color[hi] = _srgb(_shade(fld, cam, p, normals[hi], dirs[hi], shadows, ao, albedo))
     rgb = np.round(np.clip(color, 0.0, 1.0) * 255.0).astype(np.uint8)
     stats.update(seconds=time.perf_counter() - t_start,

@@ -46,6 +46,10 @@ def _programs() -> list[Program]:
         csdf.union(csdf.sphere(0.5), csdf.box(0.4).translate((1, 0, 0)), k=0.1).compile(),
         csdf.extrude(csdf.circle(0.5), 1).twist(0.5).compile(),
         csdf.circle(1).compile(),
+        # colours that mix (a blend of two colours, a colour field): channel programs
+        csdf.union(csdf.sphere(0.5).color((1, 0, 0)),
+                   csdf.box(0.4).translate((1, 0, 0)).color_field((csdf.x, 0.5, 0.2)),
+                   k=0.1).compile(),
     ]
     return progs
 

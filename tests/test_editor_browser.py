@@ -173,12 +173,24 @@ def test_preview_matches_cpu_render(page):
     assert str(prog.exactness) in info
 
 
-def test_preview_draws_the_models_colours_as_the_cpu_render_does(page):
+_COLOURED = {
+    # a palette: each surface one colour
+    "palette": ("export box(1).color((0.9, 0.15, 0.1)) - sphere(0.45).translate((0.5, 0, "
+                "0.3)).color((0.1, 0.3, 0.95)) | cylinder(0.2, 1.4).translate((-0.8, 0, "
+                "0)).color((0.1, 0.8, 0.2))\n"),
+    # channel programs: the colours mix in the blends
+    "channels": ("export union(box(1).color((0.9, 0.15, 0.1)), sphere(0.45).translate((0.6,"
+                 " 0, 0.3)).color((0.1, 0.3, 0.95)), cylinder(0.2, 1.4).translate((-0.8, 0,"
+                 " 0)).color((0.1, 0.8, 0.2)), k = 0.15)\n"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(_COLOURED))
+def test_preview_draws_the_models_colours_as_the_cpu_render_does(page, kind):
     from csdf.render import Camera, render
 
-    text = ("export box(1).color((0.9, 0.15, 0.1)) - sphere(0.45).translate((0.5, 0, "
-            "0.3)).color((0.1, 0.3, 0.95)) | cylinder(0.2, 1.4).translate((-0.8, 0, 0))"
-            ".color((0.1, 0.8, 0.2))\n")
+    text = _COLOURED[kind]
+    assert (csdf.loads(text).compile().colors[1] is None) == (kind == "channels")
     n = _state(page, "compileCount")
     page.evaluate("(t) => { const v = window.csdfEditor.view; v.dispatch({changes: "
                   "{from: 0, to: v.state.doc.length, insert: t}}); }", text)

@@ -39,7 +39,7 @@ import numpy as np
 
 import csdf
 
-__all__ = ["primitive_scene", "clutter_scene", "CLUTTER_MODELS"]
+__all__ = ["primitive_scene", "clutter_scene", "CLUTTER_MODELS", "param_solid"]
 
 #: the zoo models :func:`clutter_scene` draws from by default
 CLUTTER_MODELS: tuple[str, ...] = ("chair", "table", "stool", "lamp", "bookshelf")
@@ -124,7 +124,7 @@ def _point_to_rectangle(p: np.ndarray, centre: np.ndarray, u: np.ndarray, v: np.
 
 
 @cache
-def _param_solid(kind: str) -> csdf.Shape:
+def param_solid(kind: str) -> csdf.Shape:
     """The primitive of ``kind`` in its own frame with its sizes as parameters (metres):
     one compiled program per kind, whatever the sizes.
 
@@ -162,7 +162,7 @@ def _draw_solid(kind: str, rng: np.random.Generator) -> dict[str, Any]:
     """Random sizes of one solid, in its own frame.
 
     Returns:
-        ``{'kind', 'values': parameter values of :func:`_param_solid` (m), 'area': surface
+        ``{'kind', 'values': parameter values of :func:`param_solid` (m), 'area': surface
         area (m^2), 'bcentre': (3,) centre of a bounding sphere in the solid's frame (m),
         'bradius': its radius (m)}``.
     """
@@ -223,7 +223,9 @@ def _solid_truth(d: dict[str, Any], R: np.ndarray, t: np.ndarray) -> dict[str, A
         shape = csdf.box(tuple(size))
     params = {k: (float(x) if isinstance(x, (float, np.floating)) else x)
               for k, x in params.items()}
-    return {"kind": kind, "params": params, "shape": shape.rotate(R).translate(tuple(t))}
+    return {"kind": kind, "params": params, "shape": shape.rotate(R).translate(tuple(t)),
+            "frame": {"rotation": R.tolist(), "translation": [float(x) for x in t],
+                      "values": {k: float(x) for k, x in v.items()}}}
 
 
 def primitive_scene(seed: int, n_points: int = 40_000, noise: float = 0.001) -> dict:
@@ -259,7 +261,10 @@ def primitive_scene(seed: int, n_points: int = 40_000, noise: float = 0.001) -> 
         * ``'labels'``: ``(N,)`` int64, the index in ``truth`` of each point's primitive.
         * ``'truth'``: list of dicts ``{'kind', 'params', 'shape'}``, the plane first;
           ``shape`` is the posed csdf shape (the plane: ``csdf.plane(normal, offset)``,
-          the half-space ``n . p <= offset``). ``params`` (floats and lists of floats):
+          the half-space ``n . p <= offset``); a solid's ``'frame'`` holds its pose
+          (``rotation`` 3x3, ``translation`` (3)) and the values of the parameters
+          of :func:`param_solid` that make ``shape``. ``params`` (floats and lists of
+          floats):
 
           - plane: ``normal`` (3, unit), ``offset`` (``n . p = offset`` on it); the plane
             record also has ``'patch': {'center' (3), 'u' (3), 'v' (3), 'size' [su, sv]}``,
@@ -334,7 +339,7 @@ def primitive_scene(seed: int, n_points: int = 40_000, noise: float = 0.001) -> 
     pts = [p_centre + ab[:, :1] * u + ab[:, 1:] * v]
     nrm = [np.tile(normal, (k0, 1))]
     for (d, R, t, _), k in zip(placed, counts[1:]):
-        q, m = csdf.sample_surface(_param_solid(d["kind"]), int(k), seed=rng,
+        q, m = csdf.sample_surface(param_solid(d["kind"]), int(k), seed=rng,
                                    params=d["values"])
         pts.append(q @ R.T + t)
         nrm.append(m @ R.T)
@@ -353,7 +358,7 @@ def primitive_scene(seed: int, n_points: int = 40_000, noise: float = 0.001) -> 
 # ----------------------------------------------------------------------------- clutter
 def _distractor(kind: str, rng: np.random.Generator) -> dict[str, Any]:
     """Random sizes (largest dimension 0.1-0.3 m) of a non-zoo distractor resting on the
-    floor: ``{'kind', 'values': parameter values of :func:`_param_solid`, 'z': height
+    floor: ``{'kind', 'values': parameter values of :func:`param_solid`, 'z': height
     of its origin above the floor (m), 'radius': its footprint radius about its origin
     (m), 'corner': (3,) half extents of its local box (m)}``. Spheres, upright
     cylinders, boxes standing on a face, tori lying flat."""
@@ -551,7 +556,7 @@ def clutter_scene(seed: int, models: tuple[str, ...] = CLUTTER_MODELS,
             o["instance"] = scene.add(o["model"], o["world_pose"], params=o["params"],
                                       name=f"{o['model']}_{i}")
         for i, d in enumerate(distractors):
-            d["instance"] = scene.add(_param_solid(d["kind"]), d["world_pose"],
+            d["instance"] = scene.add(param_solid(d["kind"]), d["world_pose"],
                                       params=d["values"], name=f"distractor_{d['kind']}_{i}")
 
         # ---- the view: the field of view frames every object's and distractor's box

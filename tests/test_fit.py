@@ -80,6 +80,31 @@ def test_pose_scale_and_params_are_recovered():
     np.testing.assert_allclose(res.translation, T_TRUE, atol=1e-5)
 
 
+def test_a_close_start_needs_no_coarse_stage():
+    # coarse=False refines from the start at once: the same solution in fewer
+    # evaluations, with parameters, with the pose alone, and with an ambiguous scale
+    shape = _part()
+    M = _init(1.0, 0.002)
+    for est, r in (("pose", 0.1), ("pose,params", 0.13)):
+        P = _scene(shape, r=r)
+        init = {"rotation": M[:3, :3], "translation": M[:3, 3], "params": {"r": 0.12}}
+        if est == "pose":
+            init["params"] = {"r": 0.1}
+        a = csdf.fit(shape, P, init=init, estimate=est)
+        b = csdf.fit(shape, P, init=init, estimate=est, coarse=False)
+        assert rotation_angle(b.rotation, R_TRUE) < 1e-6 and b.rmse < 1e-7
+        assert rotation_angle(a.rotation, b.rotation) < 1e-6
+        np.testing.assert_allclose(a.translation, b.translation, atol=1e-7)
+        assert b.params["r"] == pytest.approx(r, abs=1e-7)
+        assert b.iterations < a.iterations and b.converged
+    sphere = csdf.sphere(csdf.param("r", 0.5, 0.1, 2.0))
+    Ps = _scene(sphere, n=800, r=0.7)
+    res = csdf.fit(sphere, Ps, init={"translation": T_TRUE + 0.01, "params": {"r": 0.69}},
+                   estimate="pose,scale,params", coarse=False)
+    assert any("ambiguous" in n for n in res.notes) and res.scale == 1.0
+    assert res.params["r"] == pytest.approx(0.7, rel=1e-6)
+
+
 def test_scale_size_ambiguity_is_noted_and_resolved():
     r = csdf.param("r", 0.5, 0.1, 2.0)
     shape = csdf.sphere(r) | csdf.box(0.6).translate((0.4, 0, 0))  # r does not resize all

@@ -1,12 +1,18 @@
 """Compiled (Numba) core of detection: connected components of a masked neighbour graph
-by union-find, visiting only the masked points' own edges."""
+by union-find, visiting only the masked points' own edges; the distances of points to
+surface hypotheses (:mod:`.surfaces`' table) with their inlier tests and counts; the
+k nearest neighbours of every point on a grid of cells."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
 
-__all__ = ["component_roots"]
+__all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
+           "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
+           "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
 @njit(cache=True, nogil=True)
@@ -51,3 +57,323 @@ def component_roots(sel: np.ndarray, nbr: np.ndarray, linked: np.ndarray,
     for a in range(sel.shape[0]):
         out[a] = _find(parent, sel[a])
     return out
+
+
+# ------------------------------------------------------------------ surface distances
+#: the surface kinds' numbers in the kernels (the order of ``surfaces.KINDS``)
+PLANE, SPHERE, CYLINDER, CONE, TORUS = 0, 1, 2, 3, 4
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _surface_point(kind: int, h: np.ndarray, ct: float, st: float, px: float, py: float,
+                   pz: float) -> tuple[float, float, float, float]:
+    """Signed distance of point ``(px, py, pz)`` to surface hypothesis ``h`` (a row of
+    the table in :mod:`.surfaces`) and the unit surface normal ``(ux, uy, uz)`` at its
+    nearest point; ``ct``, ``st``: cosine and sine of a cone's half angle."""
+    if kind == PLANE:
+        return px * h[0] + py * h[1] + pz * h[2] - h[3], h[0], h[1], h[2]
+    vx, vy, vz = px - h[0], py - h[1], pz - h[2]
+    if kind == SPHERE:
+        r = math.sqrt(vx * vx + vy * vy + vz * vz)
+        m = max(r, 1e-300)
+        return r - h[3], vx / m, vy / m, vz / m
+    ax, ay, az = h[3], h[4], h[5]
+    hh = vx * ax + vy * ay + vz * az
+    wx, wy, wz = vx - hh * ax, vy - hh * ay, vz - hh * az
+    rho = math.sqrt(wx * wx + wy * wy + wz * wz)
+    m = max(rho, 1e-300)
+    wx, wy, wz = wx / m, wy / m, wz / m
+    if kind == CYLINDER:
+        return rho - h[6], wx, wy, wz
+    if kind == CONE:
+        d = rho * ct - hh * st
+        if rho * st + hh * ct < 0.0:  # the nearest point of the nappe is the apex
+            d = math.sqrt(rho * rho + hh * hh)
+        return d, ct * wx - st * ax, ct * wy - st * ay, ct * wz - st * az
+    e = rho - h[6]  # torus
+    tx, ty, tz = e * wx + hh * ax, e * wy + hh * ay, e * wz + hh * az
+    tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+    m = max(tl, 1e-300)
+    return tl - h[7], tx / m, ty / m, tz / m
+
+
+@njit(cache=True, nogil=True)
+def _angles(kind: int, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cosines and sines ``(M,)`` of the cones' half angles (zeros for other kinds)."""
+    ct = np.zeros(H.shape[0])
+    st = np.zeros(H.shape[0])
+    if kind == CONE:
+        for i in range(H.shape[0]):
+            ct[i] = math.cos(H[i, 6])
+            st[i] = math.sin(H[i, 6])
+    return ct, st
+
+
+@njit(cache=True, nogil=True)
+def surface_values(kind: int, H: np.ndarray, P: np.ndarray, N: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distances ``(M, S)`` of points to hypotheses ``H`` ``(M, W)`` and the
+    ``|cos|`` of the angle between each point's normal and the surface normal at its
+    nearest point ``(M, S)``. ``P``, ``N``: ``(1, S, 3)`` points shared by every
+    hypothesis or ``(M, S, 3)`` each one's own; ``N`` may have no rows (then the
+    cosines are zeros)."""
+    M, S = H.shape[0], P.shape[1]
+    ct, st = _angles(kind, H)
+    d = np.empty((M, S))
+    c = np.zeros((M, S))
+    own = P.shape[0] > 1
+    normals = N.shape[0] > 0
+    for i in range(M):
+        pi = i if own else 0
+        for j in range(S):
+            dd, ux, uy, uz = _surface_point(kind, H[i], ct[i], st[i], P[pi, j, 0],
+                                            P[pi, j, 1], P[pi, j, 2])
+            d[i, j] = dd
+            if normals:
+                c[i, j] = abs(ux * N[pi, j, 0] + uy * N[pi, j, 1] + uz * N[pi, j, 2])
+    return d, c
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _is_inlier(kind: int, h: np.ndarray, ct: float, st: float, P: np.ndarray, N: np.ndarray,
+               j: int, eps: float, cos_tol: float) -> bool:
+    """Whether point ``j`` of ``P`` (unit normal ``N[j]``) lies within ``eps`` of
+    hypothesis ``h`` with its normal agreeing to ``|cos| >= cos_tol``."""
+    dd, ux, uy, uz = _surface_point(kind, h, ct, st, P[j, 0], P[j, 1], P[j, 2])
+    return abs(dd) <= eps and abs(ux * N[j, 0] + uy * N[j, 1] + uz * N[j, 2]) >= cos_tol
+
+
+@njit(cache=True, nogil=True)
+def inlier_counts(kind: int, H: np.ndarray, P: np.ndarray, N: np.ndarray, eps: float,
+                  cos_tol: float) -> np.ndarray:
+    """``(M,)`` how many points ``P`` ``(S, 3)`` (unit normals ``N`` ``(S, 3)``) lie
+    within ``eps`` of each hypothesis ``H`` ``(M, W)`` with normals agreeing to
+    ``|cos| >= cos_tol``."""
+    M = H.shape[0]
+    ct, st = _angles(kind, H)
+    out = np.zeros(M, dtype=np.int64)
+    for i in range(M):
+        n = 0
+        for j in range(P.shape[0]):
+            if _is_inlier(kind, H[i], ct[i], st[i], P, N, j, eps, cos_tol):
+                n += 1
+        out[i] = n
+    return out
+
+
+@njit(cache=True, nogil=True)
+def largest_component(sel: np.ndarray, nbr: np.ndarray, linked: np.ndarray,
+                      mask: np.ndarray) -> np.ndarray:
+    """The points of the largest connected component (sorted indices) of the masked
+    points ``sel`` (as :func:`component_roots`; a tie goes to the component holding the
+    lowest point)."""
+    roots = component_roots(sel, nbr, linked, mask)
+    size = np.zeros(mask.shape[0], dtype=np.int64)
+    best, best_n = -1, 0
+    for a in range(roots.shape[0]):
+        r = roots[a]
+        size[r] += 1
+    for a in range(roots.shape[0]):
+        r = roots[a]
+        if size[r] > best_n or (size[r] == best_n and r < best):
+            best, best_n = r, size[r]
+    out = np.empty(best_n, dtype=np.int64)
+    k = 0
+    for a in range(roots.shape[0]):
+        if roots[a] == best:
+            out[k] = sel[a]
+            k += 1
+    return out
+
+
+# ------------------------------------------------------------------ nearest neighbours
+@njit(cache=True, nogil=True)
+def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.ndarray,
+              ckey: np.ndarray, dims: np.ndarray, h: float, k: int, c0: int, c1: int,
+              out_d: np.ndarray, out_i: np.ndarray, exact: np.ndarray) -> None:
+    """The ``k`` nearest neighbours (self excluded) of the points of occupied grid
+    cells ``c0 .. c1 - 1``, searched in the 3 x 3 x 3 block of cells around each.
+
+    ``S`` ``(N, 3)`` the points sorted by the key ``ix + nx (iy + ny iz)`` of their
+    cell (cells of side ``h``; ``dims`` ``(3,)`` = ``(nx, ny, nz)``), ``order``
+    ``(N,)`` their indices in the cloud; ``first`` ``(nx ny nz + 1,)`` where each cell's
+    run of ``S`` begins (every cell, empty ones too); ``cstart`` ``(C + 1,)`` and
+    ``ckey`` ``(C,)`` where each occupied cell's run begins and its key. Writes, at each
+    point's own row (its index in the cloud), the distances ``out_d`` and indices
+    ``out_i`` ``(N, k)`` of its neighbours (nearest first) and ``exact`` ``(N,)``:
+    whether its ``k``-th neighbour lies within ``h`` (only then is the block sure to
+    hold the true neighbours; the others need another search). The block's nine rows
+    of three cells are each one run of ``S``."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    bd = np.empty(k)
+    bi = np.empty(k, dtype=np.int64)
+    lo = np.empty(9, dtype=np.int64)
+    hi = np.empty(9, dtype=np.int64)
+    h2 = h * h
+    for c in range(c0, c1):
+        key = ckey[c]
+        ix = key % nx
+        iy = (key // nx) % ny
+        iz = key // (nx * ny)
+        x0, x1 = max(ix - 1, 0), min(ix + 1, nx - 1)
+        rows = 0
+        for dz in range(-1, 2):
+            z = iz + dz
+            if z < 0 or z >= nz:
+                continue
+            for dy in range(-1, 2):
+                y = iy + dy
+                if y < 0 or y >= ny:
+                    continue
+                base = nx * (y + ny * z)
+                a0, a1 = first[base + x0], first[base + x1 + 1]
+                if a1 > a0:
+                    lo[rows] = a0
+                    hi[rows] = a1
+                    rows += 1
+        for a in range(cstart[c], cstart[c + 1]):
+            px, py, pz = S[a, 0], S[a, 1], S[a, 2]
+            m = 0
+            worst = np.inf  # the k-th distance so far (squared)
+            for r in range(rows):
+                for b in range(lo[r], hi[r]):
+                    dx = S[b, 0] - px
+                    dy = S[b, 1] - py
+                    dz = S[b, 2] - pz
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 >= worst or b == a:
+                        continue
+                    s = m if m < k else k - 1
+                    while s > 0 and bd[s - 1] > d2:
+                        bd[s] = bd[s - 1]
+                        bi[s] = bi[s - 1]
+                        s -= 1
+                    bd[s] = d2
+                    bi[s] = b
+                    if m < k:
+                        m += 1
+                    if m == k:
+                        worst = bd[k - 1]
+            i = order[a]
+            for q in range(m):
+                out_d[i, q] = math.sqrt(bd[q])
+                out_i[i, q] = order[bi[q]]
+            exact[i] = m == k and bd[k - 1] <= h2
+
+
+@njit(cache=True, nogil=True)
+def within_ball(P: np.ndarray, idx: np.ndarray, c: np.ndarray, r: float) -> np.ndarray:
+    """``(K,)`` which of the points ``idx`` ``(K,)`` of ``P`` ``(N, 3)`` lie within
+    distance ``r`` of ``c`` ``(3,)``."""
+    out = np.zeros(idx.shape[0], dtype=np.bool_)
+    r2 = r * r
+    for a in range(idx.shape[0]):
+        j = idx[a]
+        dx, dy, dz = P[j, 0] - c[0], P[j, 1] - c[1], P[j, 2] - c[2]
+        out[a] = dx * dx + dy * dy + dz * dz <= r2
+    return out
+
+
+#: the states of points while a set grows (:func:`_spread`)
+UNTESTED, IN, OUT, REACHED, PASS = 0, 1, 2, 3, 4
+
+
+@njit(cache=True, nogil=True)
+def _spread(state: np.ndarray, seeds: np.ndarray, start: np.ndarray, adj: np.ndarray,
+            kind: int, h: np.ndarray, P: np.ndarray, N: np.ndarray, eps: float,
+            cos_tol: float) -> np.ndarray:
+    """The points a set grows to from ``seeds`` over the graph of :func:`linked_graph`
+    (``start``, ``adj``), sorted. ``state`` ``(N,)`` holds each point's state: ``IN``
+    and ``OUT`` are known, an ``UNTESTED`` point is tested against hypothesis ``h`` when
+    first met (within ``eps``, normals agreeing to ``cos_tol``), and a ``PASS`` seed is
+    grown from without being in the set. The seeds are met first, then the neighbours
+    of each point that joined, in turn."""
+    ct = math.cos(h[6]) if kind == CONE else 0.0
+    st = math.sin(h[6]) if kind == CONE else 0.0
+    queue = np.empty(state.shape[0], dtype=np.int64)
+    m, q = 0, 0
+    src, e, stop = seeds, 0, seeds.shape[0]  # the points met next: src[e:stop]
+    while True:
+        if e == stop:
+            if q == m:
+                break
+            i = queue[q]
+            q += 1
+            src, e, stop = adj, start[i], start[i + 1]
+            continue
+        j = src[e]
+        e += 1
+        s = state[j]
+        if s == UNTESTED:
+            s = IN if _is_inlier(kind, h, ct, st, P, N, j, eps, cos_tol) else OUT
+        if s == IN or s == PASS:
+            state[j] = REACHED if s == IN else OUT
+            queue[m] = j
+            m += 1
+        elif s == OUT:
+            state[j] = OUT
+    out = np.empty(m, dtype=np.int64)
+    k = 0
+    for a in range(m):
+        if state[queue[a]] == REACHED:
+            out[k] = queue[a]
+            k += 1
+    return np.sort(out[:k])
+
+
+@njit(cache=True, nogil=True)
+def seeded_components(good: np.ndarray, seeds: np.ndarray, start: np.ndarray,
+                      adj: np.ndarray) -> np.ndarray:
+    """The points ``good`` ``(G,)`` in the connected components of ``good`` and
+    ``seeds`` ``(S,)`` together that hold a seed (sorted indices), in the graph of
+    :func:`linked_graph` (``start``, ``adj``), found by growing from the seeds."""
+    state = np.full(start.shape[0] - 1, OUT, dtype=np.int8)
+    for a in range(seeds.shape[0]):
+        state[seeds[a]] = PASS
+    for a in range(good.shape[0]):
+        state[good[a]] = IN
+    return _spread(state, seeds, start, adj, PLANE, np.zeros(4), np.zeros((1, 3)),
+                   np.zeros((1, 3)), 0.0, 0.0)
+
+
+@njit(cache=True, nogil=True)
+def linked_graph(nbr: np.ndarray, linked: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The undirected graph of the linked neighbour edges (``nbr``, ``linked``
+    ``(N, k)``, as in :func:`component_roots`) in compressed rows: ``start`` ``(N + 1,)``
+    and ``adj`` ``(E,)``, the neighbours of point ``i`` being
+    ``adj[start[i]:start[i + 1]]`` (an edge found from both ends is listed twice)."""
+    n, k = nbr.shape
+    deg = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        for c in range(k):
+            if linked[i, c]:
+                deg[i + 1] += 1
+                deg[nbr[i, c] + 1] += 1
+    start = np.cumsum(deg)
+    fill = start[:-1].copy()
+    adj = np.empty(start[n], dtype=np.int64)
+    for i in range(n):
+        for c in range(k):
+            if linked[i, c]:
+                j = nbr[i, c]
+                adj[fill[i]] = j
+                fill[i] += 1
+                adj[fill[j]] = i
+                fill[j] += 1
+    return start, adj
+
+
+@njit(cache=True, nogil=True)
+def grow_inliers(kind: int, h: np.ndarray, P: np.ndarray, N: np.ndarray, free: np.ndarray,
+                 seeds: np.ndarray, eps: float, cos_tol: float, start: np.ndarray,
+                 adj: np.ndarray) -> np.ndarray:
+    """The free inliers of hypothesis ``h`` (within ``eps``, normals agreeing to
+    ``cos_tol``) connected to the free inlier points among ``seeds`` in the graph of
+    :func:`linked_graph` (sorted indices): the connected components of the inliers that
+    hold a seed, found by growing from the seeds, so that only those components' points
+    and their neighbours are evaluated."""
+    state = np.full(P.shape[0], OUT, dtype=np.int8)
+    for i in range(P.shape[0]):
+        if free[i]:
+            state[i] = UNTESTED
+    return _spread(state, seeds, start, adj, kind, h, P, N, eps, cos_tol)

@@ -15,7 +15,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import CsdfError
 
-__all__ = ["Neighbourhood", "neighbourhood", "estimate_normals", "points_arg", "viewpoint_arg",
+__all__ = ["Neighbourhood", "neighbourhood", "knn", "estimate_normals", "points_arg",
+           "viewpoint_arg",
            "normals_arg", "components",
            "linked_edges", "sparse_points", "K_NORMALS", "MAX_DETECT_POINTS", "LINK",
            "SPARSE"]
@@ -30,6 +31,14 @@ LINK = 2.0
 SPARSE = 4.0
 #: points whose neighbourhoods estimate the noise level when normals are given
 NOISE_SAMPLE = 4000
+#: clouds of at least this many points find their neighbours on a grid (:func:`knn`)
+GRID_MIN_POINTS = 5000
+#: points of the sample that sizes the grid's cells
+GRID_SAMPLE = 500
+#: the grid's cell side: this quantile of the sample's k-th neighbour distances
+GRID_QUANTILE = 0.98
+#: the most cells the grid may have (else the tree answers)
+GRID_MAX_CELLS = 4_000_000
 #: the most points detection accepts in one cloud
 MAX_DETECT_POINTS = 5_000_000
 
@@ -111,28 +120,103 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
     the sensor. Without ``want_normals`` the normals are None and the noise level is
     estimated on a subsample of about ``NOISE_SAMPLE`` points."""
     n = len(points)
-    tree = cKDTree(points)
+    tree = cKDTree(points, balanced_tree=False)  # (a third quicker to build, as quick to ask)
     k = int(min(k, n - 1))
     if k < 2:
         raise CsdfError(f"a cloud of {n} points is too small to estimate normals")
-    dist, idx = tree.query(points, k=k + 1, workers=-1)
-    dist, idx = dist[:, 1:], idx[:, 1:]
+    dist, idx = knn(points, tree, k)
     # the noise level from a fixed subsample (every point when normals are wanted)
     sub = np.arange(n) if want_normals else np.arange(0, n, max(1, n // NOISE_SAMPLE))
     nb = points[idx[sub]]  # (S, k, 3)
     centred = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centred, centred) / k
-    w, v = np.linalg.eigh(cov)
+    cov = np.matmul(centred.transpose(0, 2, 1), centred) / k
     normals = None
-    if want_normals:
+    if not want_normals:
+        least = _least_eigenvalues(cov)
+    else:
+        w, v = np.linalg.eigh(cov)
+        least = w[:, 0]
         normals = v[:, :, 0]
         if viewpoint is not None:
             flip = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, float) - points) < 0
             normals[flip] *= -1
     return Neighbourhood(tree=tree, nbr=np.ascontiguousarray(idx), lengths=dist,
                          spacing=float(np.median(dist[:, 0])), local=dist[:, k // 2 - 1],
-                         noise=float(np.median(np.sqrt(np.maximum(w[:, 0], 0.0)))),
+                         noise=float(np.median(np.sqrt(np.maximum(least, 0.0)))),
                          normals=normals)
+
+
+def _least_eigenvalues(A: np.ndarray) -> np.ndarray:
+    """The least eigenvalue of each symmetric ``(3, 3)`` matrix of ``A`` ``(S, 3, 3)``,
+    in closed form (the trigonometric solution of the characteristic cubic)."""
+    q = np.trace(A, axis1=1, axis2=2) / 3.0
+    p1 = A[:, 0, 1] ** 2 + A[:, 0, 2] ** 2 + A[:, 1, 2] ** 2
+    d = np.diagonal(A, axis1=1, axis2=2) - q[:, None]
+    p = np.sqrt(np.maximum((np.sum(d * d, axis=1) + 2.0 * p1) / 6.0, 0.0))
+    B = A - q[:, None, None] * np.eye(3)
+    safe = np.where(p > 0, p, 1.0)
+    det = (B[:, 0, 0] * (B[:, 1, 1] * B[:, 2, 2] - B[:, 1, 2] * B[:, 2, 1])
+           - B[:, 0, 1] * (B[:, 1, 0] * B[:, 2, 2] - B[:, 1, 2] * B[:, 2, 0])
+           + B[:, 0, 2] * (B[:, 1, 0] * B[:, 2, 1] - B[:, 1, 1] * B[:, 2, 0])) / safe ** 3
+    phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
+    return np.where(p > 0, q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0), q)
+
+
+def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` nearest neighbours of every point of ``points`` ``(N, 3)`` but itself:
+    distances ``(N, k)`` (scene units, nearest first) and indices ``(N, k)``.
+
+    Exact, as ``tree.query`` (``tree`` the points' own k-d tree), and faster on large
+    clouds: the points are binned in cubic cells whose side ``h`` is the
+    ``GRID_QUANTILE`` quantile of the ``k``-th neighbour distance of a sample, and
+    each point searches the 3 x 3 x 3 cells around its own (compiled, on every core).
+    That block holds every point within ``h``; points whose ``k``-th neighbour found
+    there is farther (outliers, sparse parts) are searched again with the tree."""
+    from ..parallel import N_THREADS, executor
+    from .kernels import knn_cells
+
+    n = len(points)
+    if n < GRID_MIN_POINTS:
+        d, i = tree.query(points, k=k + 1, workers=-1)
+        return d[:, 1:], i[:, 1:]
+    ds, _ = tree.query(points[::max(1, n // GRID_SAMPLE)], k=k + 1)
+    h = float(np.quantile(ds[:, -1], GRID_QUANTILE))
+    lo = points.min(axis=0)
+    span = points.max(axis=0) - lo
+    if not (h > 0 and np.prod(span / h + 1.0) <= GRID_MAX_CELLS):
+        d, i = tree.query(points, k=k + 1, workers=-1)
+        return d[:, 1:], i[:, 1:]
+    dims = (span // h).astype(np.int64) + 1
+    ijk = np.minimum(((points - lo) // h).astype(np.int64), dims - 1)
+    key = ijk[:, 0] + dims[0] * (ijk[:, 1] + dims[1] * ijk[:, 2])
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    first = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(key, minlength=len(first) - 1), out=first[1:])
+    cstart = np.concatenate([[0], np.flatnonzero(np.diff(skey)) + 1, [n]])
+    ckey = skey[cstart[:-1]]
+    dist = np.empty((n, k))
+    idx = np.empty((n, k), dtype=np.int64)
+    exact = np.empty(n, dtype=bool)
+    S = np.ascontiguousarray(points[order])
+    # one run of cells per thread, of about equal numbers of points
+    parts = min(N_THREADS, max(1, n // GRID_MIN_POINTS))
+    cuts = np.searchsorted(cstart, np.linspace(0, n, parts + 1)).tolist()
+    cuts[0], cuts[-1] = 0, len(ckey)
+    jobs = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+
+    def job(r: tuple[int, int]) -> None:
+        knn_cells(S, order, first, cstart, ckey, dims, h, k, r[0], r[1], dist, idx, exact)
+
+    if len(jobs) == 1:
+        job(jobs[0])
+    else:
+        list(executor().map(job, jobs))
+    redo = np.flatnonzero(~exact)
+    if len(redo):
+        d, i = tree.query(points[redo], k=k + 1, workers=-1)
+        dist[redo], idx[redo] = d[:, 1:], i[:, 1:]
+    return dist, idx
 
 
 def estimate_normals(points, k: int = K_NORMALS, viewpoint=None) -> np.ndarray:

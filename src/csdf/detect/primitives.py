@@ -3,32 +3,42 @@
 The search follows Schnabel, Wahl and Klein's Efficient RANSAC (2007), with csdf's exact
 distances and :func:`csdf.fit` doing the refinement:
 
-1. **Neighbourhoods.** One k-nearest-neighbour query gives normals (when not given),
-   the point spacing, a noise estimate (the default ``epsilon`` is three times it) and
-   the graph that connected components are cut from (:mod:`.neighbours`).
+1. **Neighbourhoods.** One k-nearest-neighbour search (on a grid of cells, compiled)
+   gives normals (when not given), the point spacing, a noise estimate (the default
+   ``epsilon`` is three times it) and the graph that connected components are cut from
+   (:mod:`.neighbours`).
 2. **Hypotheses from local minimal sets.** Each round draws a batch of samples: a seed
    point among those not yet explained and three of its neighbours at a random level of
    a coarse-to-fine pyramid of random subsets (so that neighbourhoods span small and
    large primitives alike). Every sample proposes a plane, a sphere, a cylinder, a cone
    and a torus (:mod:`.surfaces`), kept when its own points agree with it.
 3. **Scoring.** Every hypothesis counts the points of a random subset within
-   ``epsilon`` whose normals agree within ``normal_tolerance`` degrees; the best few are
-   then scored on all unexplained points, keeping their largest connected component
-   (in the 12-nearest-neighbour graph, edges shorter than ``cluster_epsilon``). A
-   simpler kind wins over a more complex one that explains at most
-   ``1/SIMPLER_WINS`` more points (a flat face is a plane, not a
-   huge cylinder; a ring of small radius is a sphere, not a torus).
+   ``epsilon`` whose normals agree within ``normal_tolerance`` degrees, on growing
+   prefixes of it: one that cannot be among the best is dropped after each doubling
+   (:func:`_best_hypotheses`). The best are grown from their sample points into their
+   connected inliers among all unexplained points (the 12-nearest-neighbour graph,
+   edges shorter than ``cluster_epsilon``). A simpler kind wins over a more complex one
+   that explains at most ``1/SIMPLER_WINS`` more points (a flat face is a plane, not a
+   huge cylinder; a ring of small radius is a sphere, not a torus). Candidates not
+   taken stay in a pool for the next rounds; a pooled plane that nothing can beat is
+   taken without drawing again (:func:`_sure`).
 4. **Refinement.** The winner becomes a csdf solid (:mod:`.solids`: a sphere, capped
    cylinder, frustum or torus spanning its points), which :func:`csdf.fit` refines in
-   pose and size on the points near it (caps included); its inliers are then the
-   connected unexplained points within ``epsilon`` of the solid with agreeing normals.
-   Planes are refined by principal component analysis (the least-squares plane).
+   pose and size from that start: on a subsample while the points near it (caps
+   included) grow, then on every point within ``FIT_BAND`` times ``epsilon`` but those
+   near its edges, collected again after each fit (:func:`_settle`). Its inliers are
+   the connected unexplained points within ``epsilon`` of the solid with agreeing
+   normals. A candidate of another kind on the same points is refined too and wins
+   when it explains them better (:func:`_replaces`); a curved detection that one plane
+   explains more than half of is dropped (:func:`_flat_share`). Planes are refined by
+   principal component analysis (the least-squares plane).
 5. **Greedy acceptance.** The largest detection is accepted and its points removed,
-   until a round finds nothing with ``min_points`` points (or ``max_primitives`` are
-   found).
+   until rounds find nothing with ``min_points`` points (a cylinder's or cone's caps
+   count towards it) or ``max_primitives`` are found.
 6. **Composition.** Planes whose points lie on an accepted solid (a cylinder's or
-   cone's cap) join it; groups of mutually adjacent orthogonal planes are fitted with a
-   box, which replaces them when it explains their points.
+   cone's flat end, moved onto them) join it; groups of mutually adjacent orthogonal
+   planes are fitted with a box, which replaces them when it explains their points, and
+   takes the unexplained points on it (faces too small to be found alone).
 
 Everything random comes from ``numpy.random.default_rng(seed)``: the same input and seed
 give the same detections.
@@ -44,24 +54,39 @@ from scipy.spatial import cKDTree
 
 from ..errors import CsdfError
 from ..fit import fit
+from .kernels import (
+    grow_inliers,
+    largest_component,
+    linked_graph,
+    seeded_components,
+    within_ball,
+)
 from .neighbours import (
     Neighbourhood,
-    components,
     linked_edges,
     neighbourhood,
     normals_arg,
     points_arg,
     viewpoint_arg,
 )
-from .solids import SOLID_BACKEND, SOLID_PARAMS, posed, solid_values
+from .solids import (
+    SOLID_BACKEND,
+    SOLID_PARAMS,
+    away_from_edges,
+    bounding_sphere,
+    end_moved,
+    posed,
+    solid_values,
+)
 from .surfaces import (
+    KIND_ID,
     KINDS,
     cones_from,
     cylinders_from,
     frame_z,
+    inlier_counts,
     planes_from,
     spheres_from,
-    surface_distance,
     tori_from,
 )
 
@@ -77,17 +102,57 @@ SUBSET = 1500
 #: a simpler kind wins when it explains at least this fraction of the best's points
 SIMPLER_WINS = 0.97
 #: hypotheses scored on all unexplained points per round (the best estimates)
-FULL_SCORES = 3
+FULL_SCORES = 2
 #: rounds in a row that may find nothing before the search stops
 MAX_FAILURES = 3
 #: default limit on the number of detections
 MAX_PRIMITIVES = 64
-#: points a refinement fit uses at most (a seeded subsample of the inliers)
+#: points the refinement fits before the last use at most (a seeded subsample of the
+#: inliers); the last fit uses them all
 FIT_POINTS = 600
+#: points of the random subset every hypothesis is first counted on; those that cannot
+#: be among the best ``FULL_SCORES`` are dropped before the next, twice as many, points
+#: (Schnabel et al.'s scoring on growing subsets)
+SCORE_FIRST = 250
+#: the dropping test's width in standard deviations of a count (Poisson)
+SCORE_Z = 3.0
+#: the last fits of a solid use the points within this many ``epsilon`` of it
+FIT_BAND = 2.0
+#: fits of the last refinement at most (each on the points its predecessor collected)
+SETTLE_FITS = 3
+#: evaluations of each of those fits at most
+SETTLE_ITER = 5
+#: planes tried on a curved detection's inliers (:func:`_flat_share`)
+FLAT_TRIES = 32
+#: ... counted on at most this many of them
+FLAT_POINTS = 400
+#: a curved detection one plane explains more than this share of is a flat patch, not
+#: the solid (a cylinder's or cone's cap holds less than half of its surface)
+FLAT_SHARE = 0.5
+#: the kinds a pooled candidate of may be accepted without new samples (a plane's
+#: hypothesis is exact and cheap to refine; a solid's may be a poor one that a fresh
+#: round would beat)
+SURE_KINDS = ("plane",)
+#: candidates kept from round to round
+POOL = 9
+#: a candidate of another kind on the same points is refined too when it holds at
+#: least this share of the best's inliers (the refined ones then compete)
+RIVAL_SHARE = 0.5
+#: ... and replaces the best when its refined inliers hold this share of the best's
+RIVAL_COVER = 0.9
+#: ... with an rmse at most this times the best's
+RIVAL_RMSE = 1.1
+#: kinds whose solids have flat ends (caps), which count towards ``min_points``
+CAPPED = ("cylinder", "cone")
+#: the share of a plane's points that must lie on a solid for it to be the solid's
+#: face (a cap, a box side)
+CAP_SHARE = 0.9
 #: least-squares refits of a plane hypothesis before it is compared with the others
 PLANE_REFITS = 1
 #: fits of a solid at most, each on the inliers of the one before (while they grow)
 SOLID_REFITS = 3
+#: evaluations of each of those fits at most (the last fits converge)
+REFIT_ITER = 5
 #: neighbours searched around a seed point for its minimal set
 SAMPLE_NEIGHBOURS = 10
 
@@ -112,7 +177,8 @@ class PrimitiveDetection:
             ``rotation`` (3x3, columns the box axes), ``size`` (full side lengths).
             Solids also give ``rotation`` and ``translation`` of ``shape``'s canonical
             frame and the solid's size parameters (``radius``, ``height``, ``r1``,
-            ``r2``, ``major``, ``minor``, ``size_x``...).
+            ``r2``, ``major``, ``minor``, ``size_x``...; a cone's frustum, ``r1`` at its
+            base and ``r2`` at its top, has ``frustum_height``).
         inliers: ``(K,)`` indices of the points it explains.
         rmse: root mean square distance of the inliers to the surface (scene units).
     """
@@ -146,6 +212,7 @@ class _Ctx:
     kinds: tuple[str, ...]
     viewpoint: np.ndarray | None
     levels: list[tuple[np.ndarray, cKDTree]] = field(default_factory=list)
+    graph: tuple[np.ndarray, np.ndarray] | None = None  # linked_graph(nbr, linked)
 
 
 def _kinds_arg(kinds) -> tuple[str, ...]:
@@ -232,6 +299,7 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
                conn=conn, linked=linked_edges(nb, conn), min_points=max(mp, 4),
                max_radius=max(diag, eps),
                rng=np.random.default_rng(seed), kinds=ks, viewpoint=vp)
+    ctx.graph = linked_graph(nb.nbr, ctx.linked)
     _build_levels(ctx)
     found = _extract(ctx, int(max_primitives))
     found = _absorb_planes(ctx, found)
@@ -248,7 +316,8 @@ def _build_levels(ctx: _Ctx) -> None:
     m = n
     while True:
         idx = np.sort(perm[:m])
-        ctx.levels.append((idx, ctx.nb.tree if m == n else cKDTree(ctx.P[idx])))
+        ctx.levels.append((idx, ctx.nb.tree if m == n
+                           else cKDTree(ctx.P[idx], balanced_tree=False)))
         m //= 4
         if m < 64:
             break
@@ -278,80 +347,188 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros((0, 4), dtype=int)
 
 
-def _hypotheses(ctx: _Ctx, S: np.ndarray) -> dict[str, np.ndarray]:
-    """The hypotheses of every surface kind from samples ``S`` ``(M, 4)``."""
+def _hypotheses(ctx: _Ctx, S: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The hypotheses of every surface kind from samples ``S`` ``(M, 4)``: per kind, the
+    rows and the sample each came from (degenerate samples, whose solutions overflow or
+    are NaN, are not ``ok`` and are dropped)."""
     p, nrm = ctx.P[S], ctx.N[S]
     eps, rmax = ctx.eps, ctx.max_radius
     want = set(ctx.kinds)
+    rows = np.arange(len(S))
     out = {}
-    H, ok = planes_from(p[:, :3], nrm[:, :3], ctx.cos_tol)
-    out["plane"] = H[ok]
-    if "sphere" in want:
-        H, ok = spheres_from(p[:, :2], nrm[:, :2], eps, rmax)
-        out["sphere"] = H[ok]
-    if "cylinder" in want:
-        H, ok = cylinders_from(p[:, :2], nrm[:, :2], eps, rmax)
-        out["cylinder"] = H[ok]
-    if "cone" in want:
-        H, ok = cones_from(p[:, :3], nrm[:, :3], eps, rmax)
-        out["cone"] = H[ok]
-    if "torus" in want:
-        H, ok = tori_from(p, nrm, eps, rmax)
-        out["torus"] = H[ok]
+    with np.errstate(all="ignore"):
+        H, ok = planes_from(p[:, :3], nrm[:, :3], ctx.cos_tol)
+        out["plane"] = H[ok], rows[ok]
+        if "sphere" in want:
+            H, ok = spheres_from(p[:, :2], nrm[:, :2], eps, rmax)
+            out["sphere"] = H[ok], rows[ok]
+        if "cylinder" in want:
+            H, ok = cylinders_from(p[:, :2], nrm[:, :2], eps, rmax)
+            out["cylinder"] = H[ok], rows[ok]
+        if "cone" in want:
+            H, ok = cones_from(p[:, :3], nrm[:, :3], eps, rmax)
+            out["cone"] = H[ok], rows[ok]
+        if "torus" in want:
+            H, ok = tori_from(p, nrm, eps, rmax)  # up to three a sample
+            out["torus"] = H[ok], np.repeat(rows, 3)[ok]
     return out
 
 
-def _inlier_mask(ctx: _Ctx, d: np.ndarray, c: np.ndarray) -> np.ndarray:
-    return (np.abs(d) <= ctx.eps) & (c >= ctx.cos_tol)
+def _best_hypotheses(ctx: _Ctx, hyps: dict[str, np.ndarray], sub: np.ndarray, k: int
+                     ) -> list[tuple[int, str, int]]:
+    """The ``k`` hypotheses with the most inliers among the points ``sub`` ``(S,)`` (in
+    random order), as ``(count, kind, index in hyps[kind])``, most first (a tie to the
+    simpler kind, then the earlier row).
+
+    Every hypothesis is counted on the first ``SCORE_FIRST`` points of ``sub``, the
+    survivors on twice as many, and so on up to all of ``sub``; after each step a
+    hypothesis is dropped when its count plus ``SCORE_Z`` standard deviations (Poisson)
+    stays below the ``k``-th best count less as many of its own: it cannot be among the
+    best. The survivors' counts are over all of ``sub``."""
+    P = np.ascontiguousarray(ctx.P[sub])
+    N = np.ascontiguousarray(ctx.N[sub])
+    kinds = [kd for kd, H in hyps.items() if len(H)]
+    alive = {kd: np.arange(len(hyps[kd])) for kd in kinds}
+    counts = {kd: np.zeros(len(hyps[kd]), dtype=np.int64) for kd in kinds}
+    a, b = 0, min(SCORE_FIRST, len(sub))
+    while kinds and a < len(sub):
+        for kd in kinds:
+            live = alive[kd]
+            counts[kd][live] += inlier_counts(kd, hyps[kd][live], P[a:b], N[a:b], ctx.eps,
+                                              ctx.cos_tol)
+        if b >= len(sub):
+            break
+        every = np.concatenate([counts[kd][alive[kd]] for kd in kinds])
+        if len(every) > k:
+            ck = float(np.partition(every, len(every) - k)[len(every) - k])
+            floor = ck - SCORE_Z * math.sqrt(ck)
+            for kd in kinds:
+                c = counts[kd][alive[kd]].astype(float)
+                alive[kd] = alive[kd][c + SCORE_Z * np.sqrt(c) >= floor]
+        a, b = b, min(2 * b, len(sub))
+    rank = {kd: i for i, kd in enumerate(KINDS)}
+    out = [(int(counts[kd][i]), kd, int(i)) for kd in kinds for i in alive[kd]]
+    out.sort(key=lambda x: (-x[0], rank[x[1]], x[2]))
+    return out[:k]
+
+
+@dataclass(eq=False)
+class _Candidate:
+    """A scored surface hypothesis: its kind, row ``h`` and connected inliers ``inl``
+    (sorted indices); ``fresh`` when ``inl`` was cut on the current free points (else
+    it is what is left of an earlier round's: an upper bound)."""
+
+    kind: str
+    h: np.ndarray
+    inl: np.ndarray
+    fresh: bool = True
+
+
+def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
+    """One round's new candidates: minimal samples, their hypotheses, the best
+    ``FULL_SCORES`` by their counts on a random subset, each with its connected inliers
+    among the free points (planes refitted by least squares first)."""
+    S = _samples(ctx, free, SAMPLES_PER_ROUND)
+    fidx = np.flatnonzero(free)
+    # in random order: the growing prefixes that hypotheses are counted on must be
+    # random samples too (a scan's points come in scan order)
+    sub = (ctx.rng.permutation(fidx) if len(fidx) <= SUBSET
+           else ctx.rng.choice(fidx, SUBSET, replace=False))
+    scale = len(fidx) / len(sub)
+    hyps = _hypotheses(ctx, S)
+    out = []
+    for cnt, kind, i in _best_hypotheses(ctx, {k: H for k, (H, _) in hyps.items()}, sub,
+                                         FULL_SCORES):
+        if cnt * scale < 0.5 * ctx.min_points:
+            break
+        h = hyps[kind][0][i]
+        inl = _connected_inliers(ctx, kind, h, free, S[hyps[kind][1][i]])
+        if kind == "plane":  # refitted by least squares: three close points tilt it
+            for _ in range(PLANE_REFITS):
+                if len(inl) < 3:
+                    break
+                h = _lsq_plane(ctx.P[inl])
+                inl = _connected_inliers(ctx, kind, h, free, inl)
+        out.append(_Candidate(kind, h, inl))
+    return out
+
+
+def _pick(ctx: _Ctx, cands: list[_Candidate], free: np.ndarray) -> _Candidate | None:
+    """The candidate with the most inliers, a simpler kind winning when it explains at
+    least ``SIMPLER_WINS`` of the most; an earlier round's candidate is cut on the
+    current free points before it can win."""
+    rank = {k: i for i, k in enumerate(KINDS)}
+    while cands:
+        top = max(len(c.inl) for c in cands)
+        ok = [c for c in cands if len(c.inl) >= SIMPLER_WINS * top]
+        best = min(ok, key=lambda c: (rank[c.kind], -len(c.inl)))
+        if best.fresh:
+            return best
+        best.inl = _connected_inliers(ctx, best.kind, best.h, free, best.inl)
+        best.fresh = True
+    return None
+
+
+def _rival(best: _Candidate, cands: list[_Candidate]) -> _Candidate | None:
+    """The largest candidate of another kind on (mostly) the same points as ``best``,
+    with at least ``RIVAL_SHARE`` of its inliers: a poor torus hypothesis may explain
+    fewer points than a sphere that fits a piece of it, yet more once refined."""
+    n = len(best.inl)
+    out = None
+    for c in cands:
+        if (c.kind == best.kind or len(c.inl) < RIVAL_SHARE * n
+                or (out is not None and len(c.inl) <= len(out.inl))):
+            continue
+        if _shared(c.inl, best.inl) >= 0.5 * min(len(c.inl), n):
+            out = c
+    return out
 
 
 def _extract(ctx: _Ctx, max_primitives: int) -> list[PrimitiveDetection]:
-    """Steps 2-5 of the module docstring: the greedy extraction loop."""
+    """Steps 2-5 of the module docstring: the greedy extraction loop. Candidates that
+    were not accepted stay in a pool for the next rounds (at most ``POOL`` of them, their
+    inliers cut to the free points), so that a round whose samples missed a large
+    primitive does not accept a lesser one (Schnabel et al. keep their candidates
+    likewise); a pooled candidate that is sure to win (:func:`_sure`) is taken without
+    drawing new samples."""
     free = np.ones(len(ctx.P), dtype=bool)
     found: list[PrimitiveDetection] = []
+    pool: list[_Candidate] = []
     failures = 0
     rank = {k: i for i, k in enumerate(KINDS)}
     while free.sum() >= ctx.min_points and len(found) < max_primitives:
-        S = _samples(ctx, free, SAMPLES_PER_ROUND)
-        fidx = np.flatnonzero(free)
-        sub = fidx if len(fidx) <= SUBSET else np.sort(ctx.rng.choice(fidx, SUBSET,
-                                                                      replace=False))
-        scale = len(fidx) / len(sub)
-        cands = []  # (estimated count, kind, row)
-        for kind, H in _hypotheses(ctx, S).items():
-            if not len(H):
-                continue
-            d, c = surface_distance(kind, H, ctx.P[sub], ctx.N[sub])
-            cnt = _inlier_mask(ctx, d, c).sum(axis=1) * scale
-            top = np.argsort(-cnt, kind="stable")[:FULL_SCORES]
-            cands += [(float(cnt[i]), kind, H[i]) for i in top]
-        cands.sort(key=lambda x: (-x[0], rank[x[1]]))
-        best = None
-        scored = []
-        for est, kind, h in cands[:FULL_SCORES]:
-            if est < 0.5 * ctx.min_points:
-                break
-            inl = _connected_inliers(ctx, kind, h, fidx)
-            if kind == "plane":  # refitted by least squares: three close points tilt it
-                for _ in range(PLANE_REFITS):
-                    if len(inl) < 3:
-                        break
-                    h = _lsq_plane(ctx.P[inl])
-                    inl = _connected_inliers(ctx, kind, h, fidx)
-            scored.append((len(inl), kind, h, inl))
-        if scored:
-            top = max(s[0] for s in scored)
-            ok = [s for s in scored if s[0] >= SIMPLER_WINS * top]
-            best = min(ok, key=lambda s: (rank[s[1]], -s[0]))
-        if best is None or best[0] < ctx.min_points:
-            failures += 1
-            if failures >= MAX_FAILURES:
-                break
-            continue
-        det = _refine(ctx, best[1], best[2], best[3], free)
+        for c in pool:
+            left = c.inl[free[c.inl]]
+            c.fresh = c.fresh and len(left) == len(c.inl)
+            c.inl = left
+        pool = [c for c in pool if len(c.inl) >= 0.5 * ctx.min_points]
+        best = _sure(ctx, pool, rank)
+        if best is None:
+            cands = _round_candidates(ctx, free) + pool
+            best = _pick(ctx, cands, free)
+        else:
+            cands = pool
+        det = None
+        if best is not None and len(best.inl) < ctx.min_points:
+            # a cylinder's or cone's caps may make up what its side lacks
+            capped = [c for c in cands if c.kind in CAPPED and c.fresh
+                      and len(c.inl) >= 0.5 * ctx.min_points]
+            best = max(capped, key=lambda c: len(c.inl)) if capped else None
+        if best is not None:
+            det = _refine(ctx, best.kind, best.h, best.inl, free)
+            rival = _rival(best, cands)
+            if rival is not None:
+                other = _refine(ctx, rival.kind, rival.h, rival.inl, free)
+                if other is not None and (det is None or _replaces(other, det, rank)):
+                    best, det = rival, other
+            if det is not None and det.kind != "plane" and (
+                    _flat_share(ctx, det) > FLAT_SHARE or _repeats(ctx, det, found)):
+                det = None  # a patch of a plane (a box's face), or what an accepted solid
+                # left of its own surface
+        pool = sorted((c for c in cands if c is not best), key=lambda c: -len(c.inl))[:POOL]
         if det is None or len(det.inliers) < ctx.min_points:
             failures += 1
-            if failures >= MAX_FAILURES:
+            if failures >= MAX_FAILURES or _scattered(ctx, free):
                 break
             continue
         failures = 0
@@ -360,13 +537,107 @@ def _extract(ctx: _Ctx, max_primitives: int) -> list[PrimitiveDetection]:
     return found
 
 
-def _connected_inliers(ctx: _Ctx, kind: str, h: np.ndarray, fidx: np.ndarray) -> np.ndarray:
-    """The largest connected component of the points among ``fidx`` that are inliers
-    of surface hypothesis ``h``."""
-    d, c = surface_distance(kind, h[None], ctx.P[fidx], ctx.N[fidx])
-    mask = np.zeros(len(ctx.P), dtype=bool)
-    mask[fidx[_inlier_mask(ctx, d[0], c[0])]] = True
-    return np.flatnonzero(components(ctx.nb, mask, ctx.linked) == 0)
+def _flat_share(ctx: _Ctx, det: PrimitiveDetection) -> float:
+    """The largest share of a detection's inliers that one plane explains (within
+    ``epsilon``, normals agreeing), of the planes through ``FLAT_TRIES`` of its inliers
+    along their normals (drawn from the context's generator; shares counted on
+    ``FLAT_POINTS`` of the inliers at most)."""
+    inl = det.inliers
+    pick = inl[ctx.rng.integers(0, len(inl), FLAT_TRIES)]
+    if len(inl) > FLAT_POINTS:  # the shares on a random subset
+        inl = inl[ctx.rng.integers(0, len(inl), FLAT_POINTS)]
+    n, p = ctx.N[pick], ctx.P[pick]
+    d = ctx.P[inl] @ n.T - np.einsum("ij,ij->i", n, p)  # (K, T)
+    c = np.abs(ctx.N[inl] @ n.T)
+    return float(((np.abs(d) <= ctx.eps) & (c >= ctx.cos_tol)).sum(axis=0).max() / len(inl))
+
+
+def _repeats(ctx: _Ctx, det: PrimitiveDetection, found: list[PrimitiveDetection]) -> bool:
+    """Whether most of a solid detection's inliers lie within ``FIT_BAND`` times
+    ``epsilon`` of an accepted solid (normals not asked): what that solid left of its
+    own surface (noise tails, a rim) taken for another one."""
+    inl = det.inliers[::max(1, len(det.inliers) // FLAT_POINTS)]
+    for d in found:
+        if d.solid is not None:
+            kind, R, t, vals = d.solid
+            c, rad = bounding_sphere(kind, R, t, vals)
+            near = within_ball(ctx.P, inl, c, rad + FIT_BAND * ctx.eps)
+            if near.mean() > 0.5:
+                dist, _ = solid_values(kind, R, t, vals, ctx.P[inl[near]])
+                if np.count_nonzero(np.abs(dist) <= FIT_BAND * ctx.eps) > 0.5 * len(inl):
+                    return True
+    return False
+
+
+def _scattered(ctx: _Ctx, free: np.ndarray) -> bool:
+    """Whether the free points are too scattered to hold another detection: no
+    connected component of them has half ``min_points`` (a detection starts from the
+    connected inliers of one hypothesis)."""
+    fidx = np.flatnonzero(free)
+    return len(largest_component(fidx, ctx.nb.nbr, ctx.linked, free)) < 0.5 * ctx.min_points
+
+
+def _sure(ctx: _Ctx, pool: list[_Candidate], rank: dict) -> _Candidate | None:
+    """A candidate of the pool that can be accepted without another round of samples,
+    the largest such, or None: none of its inliers has been taken since it was scored
+    (so they are still its connected inliers), it has ``min_points`` of them, and
+    every candidate on any of the same points would lose to it in :func:`_pick` (fewer
+    inliers, and not a simpler kind with ``SIMPLER_WINS`` of them). What is left of a
+    region once its best explanation is taken is then taken in turn (a box's faces
+    one by one) without a round of samples each."""
+    best = None
+    for c in pool:
+        if (c.kind not in SURE_KINDS or not c.fresh or len(c.inl) < ctx.min_points
+                or (best is not None and len(c.inl) <= len(best.inl))):
+            continue
+        if all(not _shared(o.inl, c.inl) or (
+                len(o.inl) < len(c.inl) and not (rank[o.kind] < rank[c.kind] and len(o.inl)
+                                                 >= SIMPLER_WINS * len(c.inl)))
+               for o in pool if o is not c):
+            best = c
+    return best
+
+
+def _replaces(a: PrimitiveDetection, b: PrimitiveDetection, rank: dict) -> bool:
+    """Whether refined detection ``a`` (a rival) replaces ``b`` on the same points: it
+    explains them as well (holds at least ``RIVAL_COVER`` of ``b``'s inliers, with an
+    rmse at most ``RIVAL_RMSE`` times ``b``'s) and more of them (a simpler kind winning
+    within ``SIMPLER_WINS``). A solid that merely grew over a neighbour does neither."""
+    na, nb = len(a.inliers), len(b.inliers)
+    held = _shared(a.inliers, b.inliers)
+    if held < RIVAL_COVER * nb or a.rmse > RIVAL_RMSE * b.rmse:
+        return False
+    if rank[a.kind] < rank[b.kind]:
+        return na >= SIMPLER_WINS * nb
+    return na * SIMPLER_WINS > nb
+
+
+def _union(*sets: np.ndarray) -> np.ndarray:
+    """The sorted union of index arrays (of one cloud)."""
+    n = max((int(x.max()) + 1 for x in sets if len(x)), default=0)
+    mask = np.zeros(n, dtype=bool)
+    for x in sets:
+        mask[x] = True
+    return np.flatnonzero(mask)
+
+
+def _shared(a: np.ndarray, b: np.ndarray) -> int:
+    """How many indices the index arrays ``a`` and ``b`` (each without repeats) share."""
+    if not len(a) or not len(b):
+        return 0
+    mask = np.zeros(max(int(a.max()), int(b.max())) + 1, dtype=bool)
+    mask[a] = True
+    return int(np.count_nonzero(mask[b]))
+
+
+def _connected_inliers(ctx: _Ctx, kind: str, h: np.ndarray, free: np.ndarray,
+                       seeds: np.ndarray) -> np.ndarray:
+    """The free inliers of surface hypothesis ``h`` in the connected components that
+    hold one of ``seeds`` (the hypothesis's own sample points, or the inliers of the
+    candidate it refines): sorted indices."""
+    return grow_inliers(KIND_ID[kind], np.ascontiguousarray(h, dtype=np.float64), ctx.P,
+                        ctx.N, free, np.asarray(seeds, dtype=np.int64), ctx.eps,
+                        ctx.cos_tol, *ctx.graph)
 
 
 def _lsq_plane(Q: np.ndarray) -> np.ndarray:
@@ -416,42 +687,56 @@ def _initial_solid(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray
     return frame_z(a), h[:3].copy(), {"major": float(h[6]), "minor": float(h[7])}
 
 
-def _on_solid(ctx: _Ctx, kind: str, R, t, values, idx: np.ndarray) -> np.ndarray:
-    """``(K,)`` which points ``idx`` are inliers of the solid: within ``epsilon`` of it,
-    their normals within the tolerance of its gradient."""
-    d, g = solid_values(kind, R, t, values, ctx.P[idx])
-    return (np.abs(d) <= ctx.eps) & (np.abs(np.einsum("ij,ij->i", g, ctx.N[idx]))
-                                     >= ctx.cos_tol)
+def _on_solid(ctx: _Ctx, kind: str, R, t, values, idx: np.ndarray, band: float = 1.0
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Which points ``idx`` ``(K,)`` are inliers of the solid: within ``band`` times
+    ``epsilon`` of it, their normals within the tolerance of its gradient (``(K,)``
+    bool), and the distances of those inliers (scene units, unsigned). Points outside
+    the solid's bounding sphere grown by that band are not evaluated."""
+    c, rad = bounding_sphere(kind, R, t, values)
+    idx = np.asarray(idx, dtype=np.int64)
+    near = np.flatnonzero(within_ball(ctx.P, idx, c, rad + band * ctx.eps))
+    out = np.zeros(len(idx), dtype=bool)
+    if not len(near):
+        return out, np.zeros(0)
+    d, g = solid_values(kind, R, t, values, ctx.P[idx[near]])
+    d = np.abs(d)
+    ok = (d <= band * ctx.eps) & (np.abs(np.einsum("ij,ij->i", g, ctx.N[idx[near]]))
+                                  >= ctx.cos_tol)
+    out[near[ok]] = True
+    return out, d[ok]
 
 
-def _near_solid(ctx: _Ctx, kind: str, R, t, values, cand: np.ndarray, seedset: np.ndarray
-                ) -> np.ndarray:
-    """Indices among ``cand`` within ``epsilon`` of the solid with agreeing normals,
-    in the connected components that hold points of ``seedset``."""
-    ok = _on_solid(ctx, kind, R, t, values, cand)
-    good = np.zeros(len(ctx.P), dtype=bool)
-    good[cand[ok]] = True
-    mask = good.copy()
-    mask[seedset] = True
-    lab = components(ctx.nb, mask, ctx.linked)
-    keep = np.unique(lab[seedset])
-    return np.flatnonzero(np.isin(lab, keep[keep >= 0]) & good)
+def _near_solid(ctx: _Ctx, kind: str, R, t, values, cand: np.ndarray, seedset: np.ndarray,
+                band: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The points among ``cand`` (sorted indices) within ``band`` times ``epsilon`` of
+    the solid with agreeing normals, in the connected components that hold points of
+    ``seedset``: their indices (sorted) and distances (scene units, unsigned)."""
+    ok, dist = _on_solid(ctx, kind, R, t, values, cand, band)
+    good = cand[ok]
+    out = seeded_components(good, np.asarray(seedset, dtype=np.int64), *ctx.graph)
+    return out, dist[np.searchsorted(good, out)]
 
 
-def _fit_solid(ctx: _Ctx, kind: str, R, t, values: dict, pts_idx: np.ndarray):
-    """Refine a solid's pose and sizes with :func:`csdf.fit` on the points
-    ``pts_idx`` (a seeded subsample of at most ``FIT_POINTS``)."""
+def _fit_solid(ctx: _Ctx, kind: str, R, t, values: dict, pts_idx: np.ndarray,
+               limit: int | None = FIT_POINTS, max_iter: int = 60):
+    """Refine a solid's pose and sizes with :func:`csdf.fit` (from this start, Huber
+    loss at the noise level, at most ``max_iter`` evaluations) on the points
+    ``pts_idx`` (a seeded subsample of at most ``limit``; all of them when None)."""
     from .solids import canonical
 
     shape, _ = canonical(kind)
     idx = pts_idx
-    if len(idx) > FIT_POINTS:
-        idx = np.sort(ctx.rng.choice(idx, FIT_POINTS, replace=False))
+    if limit is not None and len(idx) > limit:
+        idx = np.sort(ctx.rng.choice(idx, limit, replace=False))
     res = fit(shape, ctx.P[idx], init={"rotation": R, "translation": t, "scale": 1.0,
                                        "params": dict(values)},
               estimate=("pose", "params"), loss="huber", f_scale=ctx.eps / 3.0,
-              escape=False, debias=False, backend=SOLID_BACKEND, max_iter=60)
+              escape=False, debias=False, backend=SOLID_BACKEND, max_iter=max_iter,
+              coarse=False)
     vals = {k: float(res.params[k]) for k in SOLID_PARAMS[kind]}
+    if not all(math.isfinite(v) for v in vals.values()):
+        raise CsdfError(f"the {kind} fit diverged")
     return res.rotation, np.asarray(res.translation, float), vals
 
 
@@ -478,43 +763,105 @@ def _solid_detection(ctx: _Ctx, kind: str, R, t, vals, inl: np.ndarray) -> Primi
         geo = {"center": t.tolist(), "rotation": R.tolist(),
                "size": [vals["size_x"], vals["size_y"], vals["size_z"]]}
     geo.update({"rotation": R.tolist(), "translation": t.tolist()} if kind != "box" else {})
-    geo.update(vals)
+    # the solid's sizes; a frustum's height is not the cone's (apex to base)
+    geo.update({("frustum_height" if kind == "cone" and k == "height" else k): v
+                for k, v in vals.items()})
     return PrimitiveDetection(kind=kind, shape=posed(kind, R, t, vals), params=geo,
                               inliers=np.sort(inl), rmse=float(np.sqrt(np.mean(d * d))),
                               solid=(kind, R, t, vals))
 
 
+def _settle(ctx: _Ctx, kind: str, R, t, vals, pts: np.ndarray, cand: np.ndarray,
+            wide: bool = False):
+    """The last refinement of a solid from its points ``pts``: fitted on every point
+    among ``cand`` within ``FIT_BAND`` times ``epsilon`` of it (with agreeing normals,
+    connected to ``pts``; those near its edges left out, see
+    :func:`.solids.away_from_edges`), collected again after each fit until they change
+    by at most 1 % (``SETTLE_FITS`` fits at most). The wide band keeps the fit
+    unbiased: points cut at ``epsilon`` from a surface that is still off lean towards
+    it, and a flat end held by few points would then creep to the truth one fit at a
+    time. ``wide``: ``pts`` are that band's points already. Returns ``(R, t, vals,
+    inliers)``, the inliers within ``epsilon``."""
+    if not wide:
+        pts = _union(pts, _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)[0])
+    for _ in range(SETTLE_FITS):
+        use = pts[away_from_edges(kind, R, t, vals, ctx.P[pts])]
+        R, t, vals = _fit_solid(ctx, kind, R, t, vals, use if len(use) >= 4 else pts,
+                                limit=None, max_iter=SETTLE_ITER)
+        near, _ = _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)
+        same = len(near) + len(pts) - 2 * _shared(near, pts) <= 0.01 * len(pts)
+        pts = near
+        if same or len(pts) < 4:
+            break
+    return R, t, vals, _near_solid(ctx, kind, R, t, vals, cand, pts)[0]
+
+
 def _refine(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray, free: np.ndarray
             ) -> PrimitiveDetection | None:
     """Step 4: the refined detection of hypothesis ``h`` with connected inliers
-    ``inl``, or None when the refined solid is degenerate."""
+    ``inl``, or None when the refined solid is degenerate: fits on a subsample of its
+    points (within ``epsilon``), each on the points the one before collected, while
+    they grow, then :func:`_settle`."""
+    fidx = np.flatnonzero(free)
     if kind == "plane":
         # the least-squares plane, then its own inliers
         return _plane_detection(ctx, _connected_inliers(ctx, "plane", _lsq_plane(ctx.P[inl]),
-                                                        np.flatnonzero(free)))
+                                                        free, inl))
     R, t, vals = _initial_solid(ctx, kind, h, inl)
-    fidx = np.flatnonzero(free)
-    pts = np.union1d(inl, _near_solid(ctx, kind, R, t, vals, fidx, inl))
-    for _ in range(SOLID_REFITS):
-        try:
-            R, t, vals = _fit_solid(ctx, kind, R, t, vals, pts)
-        except CsdfError:
+    pts = _union(inl, _near_solid(ctx, kind, R, t, vals, fidx, inl)[0])
+    band = None
+    try:
+        for _ in range(SOLID_REFITS):
+            R, t, vals = _fit_solid(ctx, kind, R, t, vals, pts, max_iter=REFIT_ITER)
+            band, dist = _near_solid(ctx, kind, R, t, vals, fidx, pts, FIT_BAND)
+            near = band[dist <= ctx.eps]
+            grown = len(near) > 1.01 * len(pts)
+            pts = near
+            if not grown or len(pts) < 4:
+                break
+        if len(pts) < ctx.min_points:
             return None
-        if not all(np.isfinite(v) for v in vals.values()):
-            return None
-        near = _near_solid(ctx, kind, R, t, vals, fidx, pts)
-        grown = len(near) > 1.01 * len(pts)
-        pts = near
-        if not grown:
-            break
+        R, t, vals, pts = _settle(ctx, kind, R, t, vals, pts if band is None else band, fidx,
+                                  wide=band is not None)
+    except CsdfError:
+        return None
     if len(pts) < ctx.min_points:
         return None
     return _solid_detection(ctx, kind, R, t, vals, pts)
 
 
+def _free_of(ctx: _Ctx, found: list[PrimitiveDetection]) -> np.ndarray:
+    """``(K,)`` the points no detection in ``found`` holds (sorted indices)."""
+    free = np.ones(len(ctx.P), dtype=bool)
+    for d in found:
+        free[d.inliers] = False
+    return np.flatnonzero(free)
+
+
+def _as_cap(ctx: _Ctx, solid: tuple, plane: PrimitiveDetection) -> tuple | None:
+    """The solid ``(kind, R, t, values)`` with its nearer flat end moved onto the plane
+    detection, when the plane's points (nearly all) lie on that end; else None. A
+    sphere or torus (no flat ends) takes the plane as it stands."""
+    kind, R, t, vals = solid
+    Q = plane.inliers
+    if kind in CAPPED:
+        if abs(np.asarray(plane.params["normal"]) @ R[:, 2]) < ctx.cos_tol:
+            return None
+        z = float(np.median((ctx.P[Q] - t) @ R[:, 2]))
+        moved = end_moved(kind, R, t, vals, z)
+        if moved is None:
+            return None
+        t, vals = moved
+    if _on_solid(ctx, kind, R, t, vals, Q)[0].mean() < CAP_SHARE:
+        return None
+    return kind, R, t, vals
+
+
 def _absorb_planes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDetection]:
-    """Step 6a: a plane whose points (nearly all) lie on an accepted solid, with agreeing
-    normals, is that solid's cap: its points join the solid, which is refitted."""
+    """Step 6a: a plane whose points (nearly all) lie on an accepted solid with agreeing
+    normals, once the solid's nearer flat end is moved onto it, is that solid's cap:
+    its points join the solid, which is fitted again on all its points (and the
+    unexplained points on it join too)."""
     solids = [i for i, d in enumerate(found) if d.solid is not None]
     if not solids:
         return found
@@ -524,16 +871,19 @@ def _absorb_planes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[Primitive
         if d.kind != "plane":
             continue
         for j in solids:
-            kind, R, t, vals = out[j].solid
-            if _on_solid(ctx, kind, R, t, vals, d.inliers).mean() >= 0.9:
-                pts = np.union1d(out[j].inliers, d.inliers)
-                try:
-                    R2, t2, v2 = _fit_solid(ctx, kind, R, t, vals, pts)
-                except CsdfError:
-                    R2, t2, v2 = R, t, vals
-                out[j] = _solid_detection(ctx, kind, R2, t2, v2, pts)
-                drop.add(i)
-                break
+            moved = _as_cap(ctx, out[j].solid, d)
+            if moved is None:
+                continue
+            kind, R, t, vals = moved
+            pts = _union(out[j].inliers, d.inliers)
+            cand = _union(pts, _free_of(ctx, out))
+            try:
+                R, t, vals, pts = _settle(ctx, kind, R, t, vals, pts, cand)
+            except CsdfError:
+                continue
+            out[j] = _solid_detection(ctx, kind, R, t, vals, pts)
+            drop.add(i)
+            break
     return [d for i, d in enumerate(out) if i not in drop]
 
 
@@ -542,9 +892,27 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
     planes = [i for i, d in enumerate(found) if d.kind == "plane"]
     if len(planes) < 2:
         return found
-    trees = {i: cKDTree(ctx.P[found[i].inliers]) for i in planes}
     link = (2.0 * ctx.conn if ctx.conn is not None
             else 4.0 * float(np.median(ctx.nb.local)))
+    box = {i: (ctx.P[found[i].inliers].min(axis=0) - link,
+               ctx.P[found[i].inliers].max(axis=0) + link) for i in planes}
+
+    def near_box(i: int, j: int) -> np.ndarray:
+        """The points of plane ``i`` in plane ``j``'s box grown by ``link``."""
+        Q = ctx.P[found[i].inliers]
+        return Q[np.all((Q >= box[j][0]) & (Q <= box[j][1]), axis=1)]
+
+    def touch(i: int, j: int) -> bool:
+        """Whether a point of plane ``j`` lies within ``link`` of one of plane ``i``
+        (only the points in each other's grown boxes are compared)."""
+        a, b = near_box(i, j), near_box(j, i)
+        if not len(a) or not len(b):
+            return False
+        if len(a) < len(b):
+            a, b = b, a
+        dd, _ = cKDTree(b).query(a, k=1, distance_upper_bound=link)
+        return bool(np.isfinite(dd).any())
+
     parent = {i: i for i in planes}
 
     def root(i: int) -> int:
@@ -556,11 +924,7 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         ni = np.asarray(found[i].params["normal"])
         for j in planes[a_i + 1:]:
             nj = np.asarray(found[j].params["normal"])
-            if abs(ni @ nj) > 0.15:
-                continue
-            dd, _ = trees[i].query(ctx.P[found[j].inliers], k=1,
-                                   distance_upper_bound=link)
-            if np.isfinite(dd).any():
+            if abs(ni @ nj) <= 0.15 and touch(i, j):
                 parent[root(j)] = root(i)
     groups: dict[int, list[int]] = {}
     for i in planes:
@@ -572,7 +936,8 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         for trial in (members, members[1:]):
             if len(trial) < 2:
                 continue
-            box = _box_of(ctx, [found[i] for i in trial])
+            box = _box_of(ctx, [found[i] for i in trial],
+                          _free_of(ctx, list(out.values())))
             if box is not None:
                 first = min(trial)
                 for i in trial:
@@ -582,9 +947,12 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
     return [out[i] for i in sorted(out)]
 
 
-def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection]) -> PrimitiveDetection | None:
+def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection], free: np.ndarray
+            ) -> PrimitiveDetection | None:
     """A box fitted to the points of ``faces`` (planes), or None when it does not
-    explain at least 90% of them."""
+    explain at least 90% of them. Unexplained points ``free`` on the fitted box
+    (connected to its faces: faces too small to be detected on their own) join it
+    before the last fit."""
     n0 = np.asarray(faces[0].params["normal"])
     n1 = next((np.asarray(f.params["normal"]) for f in faces[1:]
                if abs(np.asarray(f.params["normal"]) @ n0) < 0.15), None)
@@ -594,16 +962,20 @@ def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection]) -> PrimitiveDetection | 
     e2 = n1 - (n1 @ e1) * e1
     e2 /= np.linalg.norm(e2)
     R = np.stack([e1, e2, np.cross(e1, e2)], axis=1)
-    idx = np.unique(np.concatenate([f.inliers for f in faces]))
+    idx = _union(*[f.inliers for f in faces])
     q = ctx.P[idx] @ R
     lo, hi = q.min(axis=0), q.max(axis=0)
     size = np.maximum(hi - lo, ctx.eps)
     t = R @ (0.5 * (lo + hi))
     vals = {"size_x": float(size[0]), "size_y": float(size[1]), "size_z": float(size[2])}
     try:
-        R, t, vals = _fit_solid(ctx, "box", R, t, vals, idx)
+        R, t, vals = _fit_solid(ctx, "box", R, t, vals, idx, max_iter=REFIT_ITER)
+        if (_on_solid(ctx, "box", R, t, vals, idx)[0].mean() < CAP_SHARE
+                or min(vals.values()) <= 2 * ctx.eps):
+            return None
+        R, t, vals, pts = _settle(ctx, "box", R, t, vals, idx, _union(idx, free))
     except CsdfError:
         return None
-    if _on_solid(ctx, "box", R, t, vals, idx).mean() < 0.9 or min(vals.values()) <= 2 * ctx.eps:
+    if min(vals.values()) <= 2 * ctx.eps:
         return None
-    return _solid_detection(ctx, "box", R, t, vals, idx)
+    return _solid_detection(ctx, "box", R, t, vals, pts)

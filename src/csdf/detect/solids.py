@@ -25,15 +25,16 @@ from functools import cache
 import numpy as np
 
 from ..expr import param
-from ..field import as_field
-from ..pose import Pose
+from ..field import as_field, choose_backend
 from ..shapes import box, capped_cone, cylinder, sphere, torus
 
-__all__ = ["canonical", "SOLID_PARAMS", "posed", "solid_values", "SOLID_BACKEND"]
+__all__ = ["canonical", "SOLID_PARAMS", "posed", "solid_values", "SOLID_BACKEND",
+           "bounding_sphere", "end_moved", "away_from_edges"]
 
-#: the evaluator of the solids: the bytecode interpreter (compiled once for every
-#: program, so no kernel is compiled per solid)
-SOLID_BACKEND = "interp"
+#: the evaluator of the solids: the compiled one (a kernel per canonical solid and
+#: evaluation mode, compiled once and cached on disk; ten times the interpreter's speed
+#: on a few thousand points), NumPy without Numba (the field layer's choice for sweeps)
+SOLID_BACKEND = choose_backend("auto")
 
 #: the size parameters of each solid kind, in order
 SOLID_PARAMS = {
@@ -72,10 +73,71 @@ def solid_values(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.nd
     the solid of ``kind`` with sizes ``values``, placed by rotation ``R`` and
     translation ``t`` (``p = R q + t``), at points ``P`` ``(S, 3)``."""
     _, fld = canonical(kind)
-    f, g = fld.replace(params=values, pose=Pose(R, t), check_ranges=False).value_and_grad(P)
-    g = np.asarray(g, dtype=float)
+    f, g = fld.program.value_and_grad((P - t) @ R, values, backend=SOLID_BACKEND,
+                                      check_ranges=False)
+    g = np.asarray(g, dtype=float) @ R.T
     g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     return np.asarray(f, dtype=float), g
+
+
+def away_from_edges(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.ndarray
+                    ) -> np.ndarray:
+    """``(S,)`` which points ``P`` ``(S, 3)`` keep their distance when reflected
+    through the solid's surface along its gradient (the reflection's signed distance is
+    the point's negated, within 5 %).
+
+    Near an edge the distance of a point inside is that to the nearer face, shorter
+    than its offset from its own face, while a point the same offset outside keeps its
+    own: a fit on both pulls the surface outwards (a cone's base radius came out
+    0.09 mm too large at 1 mm noise). The test drops the points on both sides alike,
+    so the rest are unbiased."""
+    d, g = solid_values(kind, R, t, values, P)
+    d2, _ = solid_values(kind, R, t, values, P - 2.0 * d[:, None] * g)
+    return np.abs(d2 + d) <= 0.05 * np.abs(d)
+
+
+def bounding_sphere(kind: str, R: np.ndarray, t: np.ndarray, values: dict
+                    ) -> tuple[np.ndarray, float]:
+    """A sphere around the posed solid: centre ``(3,)`` and radius (scene units)."""
+    v = values
+    if kind == "sphere":
+        return np.asarray(t, float), v["radius"]
+    if kind == "cylinder":
+        return np.asarray(t, float), math.hypot(v["radius"], 0.5 * v["height"])
+    if kind == "cone":
+        c = np.asarray(t, float) + 0.5 * v["height"] * R[:, 2]
+        return c, math.hypot(max(v["r1"], v["r2"]), 0.5 * v["height"])
+    if kind == "torus":
+        return np.asarray(t, float), v["major"] + v["minor"]
+    return np.asarray(t, float), 0.5 * math.sqrt(v["size_x"] ** 2 + v["size_y"] ** 2
+                                                 + v["size_z"] ** 2)
+
+
+def end_moved(kind: str, R: np.ndarray, t: np.ndarray, values: dict, z: float
+              ) -> tuple[np.ndarray, dict] | None:
+    """The cylinder or frustum with the end nearer to canonical height ``z`` (scene
+    units along its axis ``R[:, 2]``) moved to ``z``, the rest kept (a frustum's radius
+    follows its slope): its translation ``(3,)`` and sizes, or None when that leaves no
+    solid (a non-positive height or radius) or ``kind`` has no flat ends."""
+    a = R[:, 2]
+    if kind == "cylinder":
+        lo, hi = -0.5 * values["height"], 0.5 * values["height"]
+        lo, hi = (lo, z) if z > 0.5 * (lo + hi) else (z, hi)
+        if hi - lo <= 0:
+            return None
+        return t + 0.5 * (lo + hi) * a, {"radius": values["radius"], "height": hi - lo}
+    if kind == "cone":
+        r1, r2, h = values["r1"], values["r2"], values["height"]
+        rz = r1 + (r2 - r1) * z / h
+        if rz <= 0:
+            return None
+        if z > 0.5 * h:  # the top (r2) end
+            return (None if z <= 0 else
+                    (np.asarray(t, float), {"r1": r1, "r2": rz, "height": z}))
+        if h - z <= 0:
+            return None
+        return t + z * a, {"r1": rz, "r2": r2, "height": h - z}
+    return None
 
 
 def posed(kind: str, R: np.ndarray, t: np.ndarray, values: dict):

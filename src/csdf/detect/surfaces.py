@@ -30,13 +30,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["KINDS", "WIDTH", "surface_distance", "planes_from", "spheres_from",
-           "cylinders_from", "cones_from", "tori_from", "frame_z"]
+from .kernels import inlier_counts as _counts
+from .kernels import surface_values
+
+__all__ = ["KINDS", "WIDTH", "KIND_ID", "surface_distance", "inlier_counts", "planes_from",
+           "spheres_from", "cylinders_from", "cones_from", "tori_from", "frame_z"]
 
 #: the surface kinds, simplest first (a tie in explained points goes to the simpler)
 KINDS = ("plane", "sphere", "cylinder", "cone", "torus")
 #: parameters per hypothesis of each kind
 WIDTH = {"plane": 4, "sphere": 4, "cylinder": 7, "cone": 7, "torus": 8}
+#: each kind's number in the compiled kernels (:mod:`.kernels`)
+KIND_ID = {k: i for i, k in enumerate(KINDS)}
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -50,7 +55,8 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def surface_distance(kind: str, H: np.ndarray, P: np.ndarray, N: np.ndarray | None = None
                      ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Distances and normal agreements of points to hypotheses.
+    """Distances and normal agreements of points to hypotheses (compiled:
+    :func:`csdf.detect.kernels.surface_values`).
 
     Args:
         kind: one of :data:`KINDS`.
@@ -64,44 +70,20 @@ def surface_distance(kind: str, H: np.ndarray, P: np.ndarray, N: np.ndarray | No
         ``|cos|`` of the angle between each point's normal and the surface normal at its
         nearest point, or None without normals.
     """
-    P = P[None, :, :] if P.ndim == 2 else P
-    Nn = None if N is None else (N[None, :, :] if N.ndim == 2 else N)
-    if kind == "plane":
-        n = H[:, None, :3]
-        d = _dot(P, n) - H[:, None, 3]
-        c = None if Nn is None else np.abs(_dot(Nn, n))
-        return d, c
-    if kind == "sphere":
-        u, r = _unit(P - H[:, None, :3])
-        d = r - H[:, None, 3]
-        c = None if Nn is None else np.abs(_dot(Nn, u))
-        return d, c
-    a = H[:, None, 3:6]
-    v = P - H[:, None, :3]
-    h = _dot(v, a)
-    w = v - h[..., None] * a
-    w_u, rho = _unit(w)
-    if kind == "cylinder":
-        d = rho - H[:, None, 6]
-        c = None if Nn is None else np.abs(_dot(Nn, w_u))
-        return d, c
-    if kind == "cone":
-        th = H[:, None, 6]
-        ct, st = np.cos(th), np.sin(th)
-        d = rho * ct - h * st
-        behind = rho * st + h * ct < 0  # nearest point of the nappe is the apex
-        d = np.where(behind, np.sqrt(rho * rho + h * h), d)
-        if Nn is None:
-            return d, None
-        sn = ct[..., None] * w_u - st[..., None] * a
-        return d, np.abs(_dot(Nn, sn))
-    if kind == "torus":
-        e = rho - H[:, None, 6]
-        t_u, tl = _unit(e[..., None] * w_u + h[..., None] * a)
-        d = tl - H[:, None, 7]
-        c = None if Nn is None else np.abs(_dot(Nn, t_u))
-        return d, c
-    raise ValueError(f"unknown surface kind {kind!r}")
+    P3 = np.ascontiguousarray(P[None] if P.ndim == 2 else P, dtype=np.float64)
+    N3 = (np.zeros((0, 1, 3)) if N is None
+          else np.ascontiguousarray(N[None] if N.ndim == 2 else N, dtype=np.float64))
+    d, c = surface_values(KIND_ID[kind], np.ascontiguousarray(H, dtype=np.float64), P3, N3)
+    return d, (None if N is None else c)
+
+
+def inlier_counts(kind: str, H: np.ndarray, P: np.ndarray, N: np.ndarray, eps: float,
+                  cos_tol: float) -> np.ndarray:
+    """``(M,)`` how many of the points ``P`` ``(S, 3)`` with unit normals ``N``
+    ``(S, 3)`` are inliers of each hypothesis ``H`` ``(M, WIDTH[kind])``: within
+    ``eps`` (scene units) of it, normals within ``acos(cos_tol)`` of its normal."""
+    return _counts(KIND_ID[kind], np.ascontiguousarray(H, dtype=np.float64), P, N,
+                   float(eps), float(cos_tol))
 
 
 def planes_from(p: np.ndarray, n: np.ndarray, cos_tol: float) -> tuple[np.ndarray, np.ndarray]:

@@ -57,7 +57,7 @@ def _snapshot(prob: Problem) -> tuple:
 
 def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewpoint,
                   escape: bool, correct_bias: bool,
-                  scipy_solver=None) -> tuple[Problem, dict]:
+                  scipy_solver=None, coarse: bool = True) -> tuple[Problem, dict]:
     """The second half of ``loss='auto'`` (graduated non-convexity), given the finished
     Huber fit in ``prob`` (its statistics ``stats``) and the state it started from,
     ``start = (R, t, s, values)``.
@@ -78,8 +78,9 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
     biased Huber fit still has nearly every true inlier within ``3 f_scale``.)
 
     ``scipy_solver``: for ``solver='scipy'``, a function ``prob -> (prob, stats)`` used
-    for both Cauchy fits instead. Returns ``(prob, stats)``; ``stats['notes']`` says what
-    was done when Cauchy was tried."""
+    for both Cauchy fits instead; ``coarse`` as in :func:`fit` (for the restart).
+    Returns ``(prob, stats)``; ``stats['notes']`` says what was done when Cauchy was
+    tried."""
     n = len(prob.points)
     n_h, c_h = _auto_measure(prob)
     if n_h >= AUTO_CLEAN * n:
@@ -99,7 +100,7 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
         elif label == "continued":
             prob, st2 = refine(prob, max_iter, viewpoint, correct_bias, held)
         else:
-            prob, st2 = solve_lm(prob, max_iter, viewpoint, escape, correct_bias)
+            prob, st2 = solve_lm(prob, max_iter, viewpoint, escape, correct_bias, coarse)
         total += st2["nfev"]
         cands.append((label, _snapshot(prob), st2, _auto_measure(prob)[1]))
     # the lowest Cauchy cost; ties go to the Cauchy fits (listed later)
@@ -121,7 +122,7 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
 def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
         f_scale=None, multistart=False, seed=None, max_iter=100, inlier_threshold=None,
         backend="auto", viewpoint=None, solver="lm", debias=None,
-        escape=True, *, check_ranges: bool = True) -> FitResult:
+        escape=True, *, check_ranges: bool = True, coarse: bool = True) -> FitResult:
     """Fit a model to a point cloud: pose, optionally scale and shape parameters.
 
     Args:
@@ -177,6 +178,13 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
             (:class:`csdf.ParamError` naming the range); False fits with it anyway.
             Estimated parameters never leave their ranges: their initial values are
             clipped to them, as are the solvers' steps.
+        coarse: run the coarse stage (``'lm'`` only; see :mod:`csdf.fit.stages`). False
+            when the start is already close (a detection's hypothesis, the previous
+            frame): every estimated unknown is refined jointly on all points from the
+            start at once (no subsampled pose stage, no escape step, no second
+            parameter start; the scale is still held when ambiguous), a few
+            evaluations instead of dozens; ``multistart`` still runs first when
+            asked.
 
     Returns:
         :class:`FitResult`. Its ``success`` says whether the fit explains the cloud
@@ -215,10 +223,11 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
             debias = bool(prob.names)
         start = (prob.R, prob.t, prob.s, prob.values.copy())
         prob, stats = solve_lm(prob, max_iter=max_iter, viewpoint=viewpoint,
-                               escape=bool(escape), correct_bias=bool(debias))
+                               escape=bool(escape), correct_bias=bool(debias),
+                               coarse=bool(coarse))
         if auto:
             prob, stats = auto_continue(prob, stats, start, max_iter, viewpoint,
-                                        bool(escape), bool(debias))
+                                        bool(escape), bool(debias), coarse=bool(coarse))
         return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold,
                            viewpoint)
     start = (prob.R, prob.t, prob.s, prob.values.copy())

@@ -78,7 +78,8 @@ def _small_start(prob: Problem, P: np.ndarray, st: State, idx: list[int], max_it
     hi = np.array([prob.prog.params[i].hi for i in idx])
     small = np.where(np.isfinite(hi - lo), lo + SMALL_START * (hi - lo), st.cvals)
     best, nev = None, 0
-    for cvals in (st.cvals, small):
+    starts = (st.cvals,) if np.array_equal(small, st.cvals) else (st.cvals, small)
+    for cvals in starts:  # (an unbounded range has no small start: one solve)
         cand = lm_solve(prob, sub, State(st.R, st.t, st.sigma, cvals), idx, prob.f_scale,
                         max(10, max_iter // 4))
         nev += cand[2]
@@ -88,7 +89,7 @@ def _small_start(prob: Problem, P: np.ndarray, st: State, idx: list[int], max_it
 
 
 def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None, escape: bool = True,
-             correct_bias: bool = False) -> tuple[Problem, dict]:
+             correct_bias: bool = False, coarse: bool = True) -> tuple[Problem, dict]:
     """The default engine: coarse-to-fine robust Levenberg-Marquardt (:mod:`.lm`) with
     the fixed loss ``prob.loss``.
 
@@ -98,7 +99,9 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None, escape: bool = 
     estimated, the pose on all points; otherwise everything jointly on all points (scale
     held if ambiguous, see :func:`scale_ambiguity`; parameters from the better of two
     starts, see :func:`_small_start`), then the noise-bias correction
-    (:func:`csdf.fit.bias.correct_noise_bias`). ``max_iter`` bounds the evaluations of
+    (:func:`csdf.fit.bias.correct_noise_bias`). Without ``coarse`` (a start already
+    close), stage (1) and the second parameter start are left out: stage (2) runs from
+    the start. ``max_iter`` bounds the evaluations of
     each stage; ``viewpoint`` (3,) or None turns on the visibility term. Runs in place;
     returns ``(prob, stats)`` with ``stats`` keys ``nfev``, ``converged``, ``cost``,
     ``notes``, ``loss`` and ``scale_held``. (``loss='auto'`` is
@@ -113,7 +116,11 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None, escape: bool = 
     nev, cost, converged = 0, math.nan, False
     notes: list[str] = []
     held = False
-    if prob.pose:
+    if not coarse:
+        if prob.pose and not (prob.scale or prob.names):  # the pose alone, on all points
+            st, cost, k, converged = lm_rounds(prob, P, st, [], max_iter, vis)
+            nev += k
+    elif prob.pose:
         scale, names = prob.scale, prob.names
         prob.scale, prob.names = False, []
         st0 = State(st.R, st.t, st.sigma, np.zeros(0))
@@ -143,7 +150,7 @@ def solve_lm(prob: Problem, max_iter: int = 100, viewpoint=None, escape: bool = 
                     f"uniform resize (sin of the angle between the scale and parameter "
                     f"Jacobian columns {sin:.3f} < {AMBIGUITY_SIN}): scale and size are "
                     "ambiguous, so the parameters absorb the size")
-        if prob.names and prob.pose:
+        if prob.names and prob.pose and coarse:
             st, k = _small_start(prob, P, st, idx, max_iter)
             nev += k
         # with the bias correction, the biased estimate may leave the ranges a little

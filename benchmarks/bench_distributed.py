@@ -1,11 +1,17 @@
 """csdf.distributed on a local Dask cluster (issue 22), against one machine in the same run.
 
 1. A mesh at ``--resolution`` (default 1024) by ``csdf.distributed.mesh`` on a
-   ``--workers``-process ``LocalCluster`` (one thread each) against ``csdf.mesh`` in
-   this process (``check_thin=False``, the same grid): median wall time of
-   ``--repeat`` runs after a warm-up at 128 (kernels loaded on every worker), the
-   overhead, the tasks, and whether the two meshes are equal (canonical order).
-2. The same with ``out=`` a PLY file (streamed: no process holds the whole mesh).
+   ``--workers``-process ``LocalCluster`` (``csdf.distributed.connect``: one thread
+   each) against ``csdf.mesh`` in this process (``check_thin=False``, the same grid),
+   in memory to in memory: median wall time of ``--repeat`` runs after a warm-up at
+   128 (kernels loaded on every worker) and one untimed run at the resolution (each
+   worker's field for that grid made and kept, as ``csdf.mesh`` keeps its compiled
+   kernels), the overhead, the tasks, and whether the two meshes are equal
+   (canonical order).
+2. File to file: ``csdf.mesh`` then ``csdf.io.write_mesh`` (binary PLY) against
+   ``csdf.distributed.mesh(out=...)`` (the workers write their parts into the PLY;
+   no process holds the whole mesh), timed the same way; the file read back by
+   trimesh and compared with the in-memory mesh.
 3. A mesh at ``--big`` (default 2048) streamed to a PLY on a fresh cluster: wall time,
    file size and each worker's peak resident memory (``ru_maxrss``, whole process life).
 4. ``fit_many`` on ``--scans`` scans against a loop of ``csdf.fit``: seconds and whether
@@ -22,12 +28,14 @@ Run: ``python benchmarks/bench_distributed.py [--workers 2] [--resolution 1024]
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+import trimesh
 from common import median_time
 
 import csdf
@@ -65,29 +73,48 @@ def models() -> list[tuple[str, object]]:
             ("zoo gear", csdf.zoo.load("gear"))]
 
 
+def _equal(a, b) -> bool:
+    """Whether two meshes are the same up to order (:func:`canonical`)."""
+    ca, cb = canonical(a.vertices, a.faces), canonical(b.vertices, b.faces)
+    return ca[0].shape == cb[0].shape and np.array_equal(ca[0], cb[0]) and \
+        np.array_equal(ca[1], cb[1])
+
+
+def _load() -> str:
+    """The 1-minute load average now."""
+    return f"{os.getloadavg()[0]:.2f}"
+
+
 def bench_mesh(client, res: int, repeat: int) -> None:
     print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh (median of {repeat})\n")
-    print("| model | triangles | csdf.mesh s | distributed s | overhead | tasks | "
-          "super-brick | equal | streamed to PLY s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("In memory: `csdf.mesh` vs `csdf.distributed.mesh`. To file: `csdf.mesh` + "
+          "`csdf.io.write_mesh` (PLY) vs `csdf.distributed.mesh(out=...)` (PLY).\n")
+    print("| model | triangles | csdf.mesh s | distributed s | overhead | mesh + write PLY s | "
+          "distributed out= PLY s | overhead | tasks | largest cube | equal (memory, file) "
+          "| load before / after |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, shape in models():
+        load0 = _load()
         csdf.mesh(shape, resolution=128, progress=False, check_thin=False)  # warm-up
         cd.mesh(shape, resolution=128, client=client, progress=False)
         t_one, whole = _median(lambda s=shape: csdf.mesh(
             s, resolution=res, progress=False, check_thin=False), repeat)
         t_dist, dm = _median(lambda s=shape: cd.mesh(
             s, resolution=res, client=client, progress=False), repeat)
-        a, b = canonical(whole.vertices, whole.faces), canonical(dm.vertices, dm.faces)
-        equal = a[0].shape == b[0].shape and np.array_equal(a[0], b[0]) and \
-            np.array_equal(a[1], b[1])
-        del whole, dm, a, b
-        with tempfile.TemporaryDirectory() as tmp:
-            t_out, mf = _median(lambda s=shape: cd.mesh(
-                s, resolution=res, client=client, progress=False,
-                out=Path(tmp) / "m.ply"), repeat)
+        equal = _equal(whole, dm)
+        del dm
+        with tempfile.TemporaryDirectory(dir=".") as tmp:
+            one, out = Path(tmp) / "one.ply", Path(tmp) / "m.ply"
+            t_file_one, _ = _median(lambda s=shape, p=one: csdf.io.write_mesh(csdf.mesh(
+                s, resolution=res, progress=False, check_thin=False), p), repeat)
+            t_out, mf = _median(lambda s=shape, p=out: cd.mesh(
+                s, resolution=res, client=client, progress=False, out=p), repeat)
+            equal_file = _equal(whole, trimesh.load(out, process=False))
         print(f"| {name} | {mf.faces:,} | {t_one:.2f} | {t_dist:.2f} | "
-              f"{(t_dist / t_one - 1) * 100:+.0f} % | {mf.tasks} | {mf.super_brick} | "
-              f"{equal} | {t_out:.2f} |", flush=True)
+              f"{(t_dist / t_one - 1) * 100:+.0f} % | {t_file_one:.2f} | {t_out:.2f} | "
+              f"{(t_out / t_file_one - 1) * 100:+.0f} % | {mf.tasks} | {mf.super_brick} | "
+              f"{equal}, {equal_file} | {load0} / {_load()} |", flush=True)
+        del whole
 
 
 def bench_big(workers: int, res: int) -> None:
@@ -108,7 +135,7 @@ def bench_big(workers: int, res: int) -> None:
     finally:
         cd.disconnect(client)
     print(f"\n## Mesh at {res}^3 streamed to disk ({name}, {workers} workers)\n")
-    print("| triangles | vertices | file | s | tasks | super-brick | worker peak RSS | "
+    print("| triangles | vertices | file | s | tasks | largest cube | worker peak RSS | "
           "client peak RSS (before the job) |")
     print("|---|---|---|---|---|---|---|---|")
     print(f"| {mf.faces:,} | {mf.vertices:,} | {size / 2**30:.2f} GiB | {dt:.1f} | "

@@ -9,6 +9,7 @@ from collections import deque
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -16,15 +17,15 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..field import Field, as_field, check_bounds, choose_backend
-from ..io.meshstream import MeshStreamWriter
+from ..io.meshstream import MeshLayout, check_stream_path, mesh_file
 from ..mesh.api import mesh_grid, prepare_field
-from ..mesh.parts import Stitcher, plan_parts
+from ..mesh.parts import MAX_TASKS, SharedVertices, Stitcher, default_max_tasks, plan_parts
 from ..parallel import cores
 from . import tasks
 
 __all__ = ["mesh", "evaluate", "sample_surface", "sample_volume", "fit_many", "connect",
-           "disconnect",
-           "MeshFile", "FitFailure", "EVAL_CHUNK", "SAMPLE_CHUNK"]
+           "disconnect", "MeshFile", "FitFailure", "EVAL_CHUNK", "SAMPLE_CHUNK",
+           "TASKS_PER_THREAD", "WORKER_ENV"]
 
 #: points per block when :func:`evaluate` is given a NumPy array (~24 MB of points)
 EVAL_CHUNK = 1_000_000
@@ -38,8 +39,9 @@ class MeshFile:
 
     Attributes:
         path: the file; vertices, faces: the counts written; seconds: wall time;
-        tasks: super-bricks meshed; super_brick: their edge (voxels); voxel_size: the
-        grid's voxel edge (model units); dims: the grid's voxels along x, y, z.
+        tasks: parts meshed; super_brick: the largest part's cube edge (voxels);
+        voxel_size: the grid's voxel edge (model units); dims: the grid's voxels along
+        x, y, z.
     """
 
     path: Path
@@ -83,6 +85,19 @@ def _dask():
     return dask, distributed
 
 
+#: the environment of :func:`connect`'s worker processes, set before each starts (Dask's
+#: ``distributed.nanny.pre-spawn-environ``; the nanny's own ``env`` comes too late for a
+#: worker process that first imports the client's main module, and csdf with it):
+#: ``CSDF_THREADS`` (each worker's share of the cores, added by :func:`connect`;
+#: measured without it: two workers of a script importing csdf ran 2 mesher threads
+#: each on 2 cores) and no ``MALLOC_TRIM_THRESHOLD_`` (Dask sets 65536, which also turns
+#: off glibc's adaptive thresholds, so that every buffer above 128 KB is fresh memory:
+#: measured, the 1024^3 CSG mesh took 1.53 s of CPU instead of 1.26 s on one thread,
+#: 490,000 page faults instead of 140,000). Give a real cluster's workers the same
+#: (``docs/distributed.md``).
+WORKER_ENV: dict[str, str | None] = {"MALLOC_TRIM_THRESHOLD_": None}
+
+
 def connect(scheduler: str | None = None, workers: int | None = None,
             threads_per_worker: int = 1, timeout: float = 10.0):
     """A ``distributed.Client``: to the scheduler at ``scheduler`` (``'tcp://host:8786'``),
@@ -106,9 +121,19 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     # each worker's share of the cores for csdf's own threads (one thread per worker
     # on 2 cores and 2 workers): without it every worker would start a thread per core
     share = max(1, cores() // workers)
-    cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
-                                       processes=True, dashboard_address=":0",
-                                       env={"CSDF_THREADS": str(share)})
+    dask, _ = _dask()
+    env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV,
+           "CSDF_THREADS": str(share)}
+    saved = {k: os.environ.pop(k) for k in env if k in os.environ}
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+            cluster = distributed.LocalCluster(
+                n_workers=workers, threads_per_worker=threads_per_worker, processes=True,
+                dashboard_address=":0", env={"CSDF_THREADS": str(share)})
+    finally:  # (the nanny sets them in this process too, to spawn the workers with them)
+        for k in env:
+            os.environ.pop(k, None)
+        os.environ.update(saved)
     client = distributed.Client(cluster)
     client._csdf_cluster = cluster  # closed by disconnect
     return client
@@ -173,11 +198,15 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
          check_ranges: bool = True):
     """A marching-cubes mesh made by a Dask cluster, the same as :func:`csdf.mesh`'s.
 
-    The octree is cut into super-bricks (cubes of ``super_brick`` voxels that may hold
-    surface, :func:`csdf.mesh.parts.plan_parts`); each task meshes one from the
-    program's bytes; vertices on the faces between super-bricks are merged by grid edge
-    (:mod:`csdf.mesh.parts`). The result equals ``csdf.mesh(shape, resolution,
-    check_thin=False)`` vertex for vertex and face for face, up to their order
+    The client descends the octree to cells of :func:`csdf.mesh.parts.plan_level` voxels
+    and cuts it into cubes of similar work (:func:`csdf.mesh.parts.plan_parts`), the
+    fullest first; each task meshes one from the program's bytes, going on from its
+    cells down to bricks, and sends back each vertex as its grid edge inside the cube
+    and its place ``t`` along it (12 bytes) and each face as 3 int32. The client puts
+    the parts together as they arrive (:class:`csdf.mesh.parts.Stitcher`: positions
+    rebuilt with the mesher's own formula, vertices on the faces between cubes merged
+    by edge). The result equals ``csdf.mesh(shape, resolution, check_thin=False)``
+    vertex for vertex and face for face, up to their order
     (:func:`csdf.mesh.parts.canonical`), and is watertight where that one is.
 
     Args:
@@ -185,23 +214,27 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
         resolution, voxel_size, bounds, params, check_ranges: as for :func:`csdf.mesh`
             (default resolution 128; no thin-part search, which needs the whole grid).
         method: ``'mc'`` only (a dual-contouring vertex depends on voxels across the
-            super-bricks' faces).
+            tasks' faces).
         client: a ``distributed.Client``; default the current one, else a local
             cluster for this call.
-        out: a ``.ply`` or ``.stl`` path: the parts are written to it as they arrive
-            (:class:`csdf.io.meshstream.MeshStreamWriter`), so no machine holds the
-            whole mesh; returns a :class:`MeshFile` instead of the mesh.
-        super_brick: a task's cube edge in voxels (a power of two, at least 8);
-            default: the finest octree level with at most ``max_tasks`` cells holding
-            surface.
-        max_tasks: see ``super_brick``; default 96 up to 1024 voxels a side, and
-            ``(side / 1024)^2`` times as many beyond (a task's share of the surface
-            stays the same).
+        out: a ``.ply`` or ``.stl`` path: written by the workers themselves, each part
+            at the place the client plans from the parts' counts
+            (:mod:`csdf.io.meshstream`), so no machine holds the whole mesh and the
+            client never touches the bulk (a worker that does not see the path's folder
+            sends its records to the client, which writes them); returns a
+            :class:`MeshFile` instead of the mesh. The parts wait on their workers
+            (Dask spills them to disk under memory pressure) until all are counted.
+        super_brick: every task a cube of this edge in voxels (a power of two, at least
+            8). Default: cubes of any size, the fullest split first, at most
+            ``max_tasks`` of them.
+        max_tasks: see ``super_brick``; default :data:`TASKS_PER_THREAD` per worker
+            thread of the cluster, at most 96, up to 1024 voxels a side; ``(side / 1024)^2``
+            times as many beyond (a task's share of the surface stays the same).
         progress: a progress bar on stderr (Rich).
 
     Returns:
-        ``trimesh.Trimesh`` (``metadata['csdf']`` with ``tasks`` and ``super_brick``),
-        or a :class:`MeshFile` with ``out``.
+        ``trimesh.Trimesh`` (``metadata['csdf']`` with ``tasks`` and ``super_brick``, the
+        largest cube's edge), or a :class:`MeshFile` with ``out``.
 
     Raises:
         CsdfError: bad arguments (as :func:`csdf.mesh`), ``method='dc'``, a 2D shape, a
@@ -218,67 +251,156 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
     if bounds is not None:
         fld = Field(fld, bounds=check_bounds(bounds))
     grid = mesh_grid(fld.bounds, resolution, voxel_size)
-    writer = MeshStreamWriter(out) if out is not None else None  # (checks the path first)
+    path = check_stream_path(out) if out is not None else None  # (before the work)
     t0 = time.perf_counter()
-    prepare_field(fld, grid)
-    cells, size = plan_parts(fld, grid, super_brick, max_tasks)
-    blob, pvals = _blob(fld)
-    g = (np.asarray(grid.origin, dtype=np.float64), float(grid.h), tuple(grid.dims))
-    bounds_ = np.asarray(fld.bounds, dtype=np.float64)
     with _client(client) as c:
-        def submit(cell):
-            return c.submit(tasks.mesh_task, blob, pvals, bounds_, g, cell, size, pure=False)
-
-        parts_iter = _ordered(submit, list(cells), _window(c), progress,
-                              "meshing super-bricks")
-        if writer is None:  # (each part stitched in as it arrives)
-            st = Stitcher()
-            for part in parts_iter:
-                st.add(part)
-            verts, faces = st.result()
-        else:
-            with writer:
-                for part in parts_iter:
-                    writer.add(part)
+        prepare_field(fld, grid)
+        if max_tasks is None and super_brick is None:
+            most = default_max_tasks(grid)  # (MAX_TASKS times the surface's growth)
+            max_tasks = min(most, round(TASKS_PER_THREAD * _threads(c) * most / MAX_TASKS))
+        plan = plan_parts(fld, grid, super_brick, max_tasks)
+        blob, pvals = _blob(fld)
+        g = (np.asarray(grid.origin, dtype=np.float64), float(grid.h), tuple(grid.dims))
+        bounds_ = np.asarray(fld.bounds, dtype=np.float64)
+        # (one message to the scheduler for all the tasks)
+        parts = c.map(partial(tasks.mesh_task, blob, pvals, bounds_, g), plan, pure=False)
+        try:
+            if path is None:
+                verts, faces = _gather_mesh(parts, grid, plan, progress)
+            else:
+                counts = _write_file(c, parts, grid, path, progress)
+        finally:
+            for fut in parts:
+                fut.cancel()
     seconds = time.perf_counter() - t0
-    if writer is not None:
-        return MeshFile(Path(out), writer.vertices, writer.faces, seconds, len(cells), size,
+    size = max((task.size for task in plan), default=0)
+    if path is not None:
+        return MeshFile(path, counts[0], counts[1], seconds, len(plan), size,
                         float(grid.h), tuple(grid.dims))
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     m.metadata["csdf"] = {"method": "mc", "voxel_size": float(grid.h), "dims": grid.dims,
-                          "seconds": seconds, "resolution": resolution, "tasks": len(cells),
+                          "seconds": seconds, "resolution": resolution, "tasks": len(plan),
                           "super_brick": size}
     return m
+
+
+#: tasks per worker thread of the cluster that :func:`mesh` plans by default (up to
+#: 1024 voxels a side): enough that the last ones, the smallest, leave no worker idle
+#: for long, few enough that a task's fixed cost (a few ms) stays small
+TASKS_PER_THREAD = 8
+
+
+def _threads(client) -> int:
+    """The cluster's worker threads now (at least 1)."""
+    return max(1, sum(client.nthreads().values()))
+
+
+def _gather_mesh(parts: list, grid, plan: list, progress: bool
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The parts fetched as they finish and stitched in plan order (a deterministic
+    vertex order): ``(vertices (V, 3), faces (F, 3) int64)``."""
+    st = None
+    total = sum(task.weight for task in plan)
+    for part, task in zip(_in_order(parts, progress, "meshing parts"), plan):
+        if st is None:  # outputs sized from the first (fullest) part: 2x its share
+            scale = 2.0 * total / max(1, task.weight)
+            st = Stitcher(grid, int(scale * len(part.edges)), int(scale * len(part.faces)))
+        st.add(part)
+    if st is None:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    return st.result()
+
+
+def _write_file(c, parts: list, grid, path: Path, progress: bool) -> tuple[int, int]:
+    """The parts written by their workers into ``path`` (:mod:`csdf.io.meshstream`):
+    first their counts and shared vertices (merged here, numbered after all the own
+    vertices), then each part's records at their planned places. ``(vertices,
+    faces)`` written."""
+    summaries = c.map(tasks.part_summary, parts, pure=False)
+    shared = SharedVertices(grid)
+    own, n_faces, ids = [], [], []
+    for n_own, nf, keys, t in _in_order(summaries, progress, "meshing parts"):
+        own.append(n_own)
+        n_faces.append(nf)
+        ids.append(shared.add(keys, t))
+    own_total = int(sum(own))
+    layout = MeshLayout(path.suffix.lower(), own_total + shared.count, int(sum(n_faces)))
+    own_base = np.concatenate([[0], np.cumsum(own, dtype=np.int64)])
+    face_base = np.concatenate([[0], np.cumsum(n_faces, dtype=np.int64)])
+    with mesh_file(path, layout) as fh:
+        if layout.format == ".ply" and shared.count:
+            fh.write(layout.vertex_offset(own_total), layout.vertex_records(shared.vertices()))
+        where = str(Path(fh.path).resolve())
+        writes = c.map(partial(tasks.write_part, where, layout), parts,
+                       [int(b) for b in own_base[:-1]], [int(b) for b in face_base[:-1]],
+                       [own_total + i for i in ids], pure=False)
+        try:
+            for i, blocks in enumerate(_in_order(writes, progress, "writing parts")):
+                parts[i].release()
+                for offset, records in blocks or ():
+                    fh.write(offset, records)
+        finally:
+            for fut in writes:
+                fut.cancel()
+    return layout.vertices, layout.faces
+
+
+def _in_order(futures: list, progress: bool, label: str) -> Iterator[Any]:
+    """The futures' results in their order, fetched as each finishes (a result that
+    comes early waits here for those before it); each future is released once its
+    result is given."""
+    from distributed import as_completed
+
+    index = {f.key: i for i, f in enumerate(futures)}
+    early: dict[int, Any] = {}
+    nxt = 0
+    with _bar(progress, label, len(futures)) as advance:
+        for fut, result in as_completed(futures, with_results=True):
+            early[index[fut.key]] = result
+            advance()
+            while nxt in early:
+                futures[nxt].release()
+                yield early.pop(nxt)
+                nxt += 1
+
+
+@contextmanager
+def _bar(progress: bool, label: str, total: int) -> Iterator[Any]:
+    """A transient Rich progress bar on stderr (when ``progress``); yields a function
+    that advances it by one."""
+    if not progress:
+        yield lambda: None
+        return
+    from rich.progress import Progress
+
+    bar = Progress(transient=True)
+    bar.start()
+    job = bar.add_task(label, total=total)
+    try:
+        yield lambda: bar.advance(job)
+    finally:
+        bar.stop()
 
 
 def _ordered(submit, items: list, window: int, progress: bool, label: str) -> Iterator[Any]:
     """Results of ``submit(item)`` for every item, in order, with at most ``window`` tasks
     submitted and not yet taken."""
-    bar = None
-    if progress:
-        from rich.progress import Progress
-
-        bar = Progress(transient=True)
-        bar.start()
-        job = bar.add_task(label, total=len(items))
     pending: deque = deque()
     nxt = 0
-    try:
-        while nxt < len(items) or pending:
-            while nxt < len(items) and len(pending) < window:
-                pending.append(submit(items[nxt]))
-                nxt += 1
-            fut = pending.popleft()
-            result = fut.result()
-            fut.release()
-            if bar is not None:
-                bar.advance(job)
-            yield result
-    finally:
-        for fut in pending:
-            fut.cancel()
-        if bar is not None:
-            bar.stop()
+    with _bar(progress, label, len(items)) as advance:
+        try:
+            while nxt < len(items) or pending:
+                while nxt < len(items) and len(pending) < window:
+                    pending.append(submit(items[nxt]))
+                    nxt += 1
+                fut = pending.popleft()
+                result = fut.result()
+                fut.release()
+                advance()
+                yield result
+        finally:
+            for fut in pending:
+                fut.cancel()
 
 
 # ---------------------------------------------------------------------- evaluation

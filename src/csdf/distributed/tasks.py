@@ -22,12 +22,14 @@ import numpy as np
 
 from ..compiler.program import Program
 from ..field import Field, as_field
+from ..io.meshstream import MeshLayout, write_at
 from ..mesh.api import prepare_field
 from ..mesh.grid import Grid
-from ..mesh.parts import Part, mesh_part
+from ..mesh.part_kernels import file_ids
+from ..mesh.parts import Part, PartTask, mesh_part
 
-__all__ = ["worker_field", "worker_stats", "mesh_task", "eval_block", "sample_task",
-           "fit_task", "FIELDS_KEPT"]
+__all__ = ["worker_field", "worker_stats", "mesh_task", "part_summary", "write_part",
+           "eval_block", "sample_task", "fit_task", "FIELDS_KEPT"]
 
 #: fields a worker keeps between tasks
 FIELDS_KEPT = 8
@@ -85,13 +87,40 @@ def _grid(grid: tuple) -> Grid:
 
 
 def mesh_task(blob: bytes, params: dict[str, float], bounds: np.ndarray, grid: tuple,
-              cell: np.ndarray, size: int) -> Part:
-    """Marching cubes of one super-brick (:func:`csdf.mesh.parts.mesh_part`); faces as
-    int32 (a part's vertex count is far below 2^31) to halve what goes back."""
+              task: PartTask) -> Part:
+    """Marching cubes of one part (:func:`csdf.mesh.parts.mesh_part`): 12 bytes a vertex
+    (its edge inside the cube, uint32, and ``t``) and 12 a face (int32) to go back."""
     fld = worker_field(blob, params, bounds, grid)
-    part = mesh_part(fld, _grid(grid), cell, size)
-    part.faces = part.faces.astype(np.int32)
-    return part
+    return mesh_part(fld, _grid(grid), task)
+
+
+def part_summary(part: Part) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """What the client needs to lay out a file of the whole mesh: ``(own vertices,
+    faces, keys (S,) int64, t (S,))``, the counts and the shared vertices (on the cube's
+    faces: grid-wide edge numbers and ``t``), while the part stays on this worker."""
+    shared = part.shared()
+    return (int(len(shared) - shared.sum()), len(part.faces), part.keys(shared),
+            np.ascontiguousarray(part.t[shared]))
+
+
+def write_part(path: str, layout: MeshLayout, part: Part, own_base: int, face_base: int,
+               shared_ids: np.ndarray) -> list[tuple[int, np.ndarray]] | None:
+    """Write one part's records into the file ``path`` (:func:`csdf.io.meshstream.mesh_file`)
+    at the places the client planned: its own vertices as vertices ``own_base, ...``
+    (PLY), its faces as faces ``face_base, ...``, its shared vertices numbered
+    ``shared_ids (S,)`` (file vertex numbers, in the part's order). Returns None, or
+    the ``(offset, records)`` blocks when this worker does not see the file (the
+    client writes them)."""
+    verts = part.vertices()
+    if layout.format == ".stl":
+        blocks = [(layout.face_offset(face_base), layout.face_records(part.faces, verts))]
+    else:
+        shared = part.shared()
+        ids = np.empty(len(shared), dtype=np.int64)
+        file_ids(shared, int(own_base), np.asarray(shared_ids, dtype=np.int64), ids)
+        blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts[~shared])),
+                  (layout.face_offset(face_base), layout.face_records(ids[part.faces]))]
+    return None if write_at(path, blocks) else blocks
 
 
 def eval_block(points: np.ndarray, blob: bytes, params: dict[str, float], what: str,

@@ -1,163 +1,174 @@
-"""A mesh written to disk in parts, so that no machine holds it whole:
-:class:`MeshStreamWriter` takes the parts of :mod:`csdf.mesh.parts` one at a time and
-writes a binary PLY or STL.
+"""A mesh file written in blocks, by several processes at once, so that no process holds
+the whole mesh: the binary PLY or STL layout of a mesh whose counts are known
+(:class:`MeshLayout`: the header and where each vertex and face record goes), the
+records of a block of vertices or faces, and the file itself (:func:`mesh_file`: made
+beside the target at its full size, filled at offsets by whoever sees it, renamed over
+the target when complete).
 
-Each part's own vertices (those off the faces between super-bricks) go straight to a
-temporary file, numbered as they come; its faces go to another, with each shared vertex
-(on a face between parts, which a neighbour holds too) as a placeholder. Only the
-shared vertices stay in memory (a few per cent of a large mesh: the surface's traces on
-the super-bricks' faces). At the end the shared vertices are merged by grid edge and
-numbered after the others, the placeholders are replaced in one pass over the faces,
-and the file is assembled next to the target and renamed over it (atomic, like every
-csdf writer: :func:`csdf.io.atomic_path`).
+:func:`csdf.distributed.mesh` uses it with ``out=``: the workers write their parts'
+vertices and faces straight into the file (:func:`write_at`), the client only the
+header and the vertices that parts share.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import CsdfError
-from ..mesh.parts import Part, Stitcher
 from .atomic import atomic_path
 
-__all__ = ["MeshStreamWriter", "STREAM_FORMATS"]
+__all__ = ["MeshLayout", "mesh_file", "write_at", "check_stream_path", "STREAM_FORMATS"]
 
-#: the formats the writer streams, by file extension
+#: the formats written in blocks, by file extension
 STREAM_FORMATS = (".ply", ".stl")
-_BLOCK = 1 << 20  # faces per block in the final pass
+_PLY_FACE = np.dtype([("n", "u1"), ("v", "<i4", (3,))])
+_STL_FACE = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
 
 
-class MeshStreamWriter:
-    """Write a mesh that arrives in parts to a binary PLY or STL file.
-
-    Use as a context manager: ``with MeshStreamWriter(path) as w: w.add(part)``; the
-    file appears (atomically) when the block ends without an error; on an error nothing
-    is left behind. ``vertices``/``faces`` then hold the counts written.
-
-    Args:
-        path: the target, ``.ply`` (float64 vertices, int32 indices) or ``.stl``
-            (float32, as the format has it).
+def check_stream_path(path: str | os.PathLike) -> Path:
+    """``path`` as a :class:`~pathlib.Path`, checked: a ``.ply`` or ``.stl`` file in a
+    folder that exists.
 
     Raises:
-        CsdfError: another extension, or a file that cannot be written.
+        CsdfError: another extension, or no such folder.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in STREAM_FORMATS:
+        raise CsdfError(f"cannot stream a mesh to {path.name!r}: use a .ply or .stl file")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise CsdfError(f"cannot write {path}: folder {folder} does not exist")
+    return path
+
+
+@dataclass(frozen=True)
+class MeshLayout:
+    """Where the records of a binary mesh file of ``vertices`` and ``faces`` go.
+
+    PLY (little-endian): the header, the vertices (3 float64, 24 bytes each), the faces
+    (a uint8 3 and 3 int32 indices, 13 bytes each). STL: an 80-byte header, the uint32
+    face count, and per face its unit normal, its three corners (float32) and a zero
+    uint16 (50 bytes); STL has no vertex list.
+
+    Attributes:
+        format: ``'.ply'`` or ``'.stl'``; vertices, faces: the counts.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
-        self.path = Path(path)
-        self.format = self.path.suffix.lower()
-        if self.format not in STREAM_FORMATS:
-            raise CsdfError(f"cannot stream a mesh to {self.path.name!r}: use a .ply or "
-                            ".stl file")
-        folder = self.path.parent if str(self.path.parent) else Path(".")
-        if not folder.is_dir():
-            raise CsdfError(f"cannot write {self.path}: folder {folder} does not exist")
-        self.vertices = 0
-        self.faces = 0
-        self._dir: tempfile.TemporaryDirectory | None = None
-        self._folder = folder
+    format: str
+    vertices: int
+    faces: int
 
-    def __enter__(self) -> MeshStreamWriter:
-        try:
-            self._dir = tempfile.TemporaryDirectory(dir=self._folder,
-                                                    prefix=f".{self.path.name}.")
-        except OSError as exc:
-            raise CsdfError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        tmp = Path(self._dir.name)
-        self._vfile = open(tmp / "vertices", "wb")  # noqa: SIM115 (closed in __exit__)
-        self._ffile = open(tmp / "faces", "wb")  # noqa: SIM115
-        self._st = Stitcher(  # (tofile: no copy of the block as bytes)
-            lambda v: np.ascontiguousarray(v, dtype="<f8").tofile(self._vfile),
-            lambda f: np.ascontiguousarray(f, dtype="<i8").tofile(self._ffile))
-        return self
+    def header(self) -> bytes:
+        """The bytes before the first record."""
+        if self.format == ".stl":
+            return b"csdf binary STL".ljust(80, b" ") + np.uint32(self.faces).tobytes()
+        return ("ply\nformat binary_little_endian 1.0\ncomment csdf\n"
+                f"element vertex {self.vertices}\nproperty double x\nproperty double y\n"
+                f"property double z\nelement face {self.faces}\n"
+                "property list uchar int vertex_indices\nend_header\n").encode("ascii")
 
-    def add(self, part: Part) -> None:
-        """Append one :class:`csdf.mesh.parts.Part`."""
-        self._st.add(part)
+    def vertex_offset(self, i: int) -> int:
+        """Byte offset of vertex ``i`` (PLY only)."""
+        return len(self.header()) + 24 * int(i)
 
-    def __exit__(self, kind, exc, tb) -> None:
-        try:
-            self._vfile.close()
-            self._ffile.close()
-            if kind is None:
-                self._finish()
-        finally:
-            assert self._dir is not None
-            self._dir.cleanup()
+    def face_offset(self, j: int) -> int:
+        """Byte offset of face ``j``."""
+        if self.format == ".stl":
+            return 84 + 50 * int(j)
+        return self.vertex_offset(self.vertices) + 13 * int(j)
 
-    def _finish(self) -> None:
-        """Merge the shared vertices, replace the placeholders, assemble the file."""
-        st = self._st
-        shared_verts, shared_ids = st.shared()
-        self.vertices, self.faces = st.own + len(shared_verts), st.faces
-        if self.format == ".ply" and self.vertices >= 2**31:
-            raise CsdfError(f"cannot write {self.path}: {self.vertices} vertices exceed "
-                            "the PLY index type (int32)")
-        tmp = Path(self._dir.name)  # type: ignore[union-attr]
-        faces = _Blocks(tmp / "faces", self.faces)
-        with atomic_path(self.path) as out, open(out, "wb") as fh:
-            if self.format == ".ply":
-                self._ply(fh, tmp / "vertices", shared_verts, faces, shared_ids)
-            else:
-                self._stl(fh, tmp / "vertices", shared_verts, faces, shared_ids)
+    def size(self) -> int:
+        """The file's size in bytes."""
+        return self.face_offset(self.faces)
 
-    def _ply(self, fh, vpath: Path, shared_verts: np.ndarray, faces: _Blocks,
-             shared_ids: np.ndarray) -> None:
-        header = ("ply\nformat binary_little_endian 1.0\ncomment csdf\n"
-                  f"element vertex {self.vertices}\nproperty double x\nproperty double y\n"
-                  f"property double z\nelement face {self.faces}\n"
-                  "property list uchar int vertex_indices\nend_header\n")
-        fh.write(header.encode("ascii"))
-        with open(vpath, "rb") as src:
-            shutil.copyfileobj(src, fh, 1 << 24)
-        fh.write(np.ascontiguousarray(shared_verts, dtype="<f8").tobytes())
-        rec = np.dtype([("n", "u1"), ("v", "<i4", (3,))])
-        for block in faces:
-            block = Stitcher.resolve(block, shared_ids)
-            out = np.empty(len(block), dtype=rec)
+    @staticmethod
+    def vertex_records(verts: np.ndarray) -> np.ndarray:
+        """PLY records of vertices ``(n, 3)`` (model units)."""
+        return np.ascontiguousarray(verts, dtype="<f8")
+
+    def face_records(self, faces: np.ndarray, verts: np.ndarray | None = None
+                     ) -> np.ndarray:
+        """Records of faces ``(m, 3)``: PLY, their indices (file vertex numbers); STL,
+        their corners ``verts[faces]`` with ``verts (n, 3)`` float64 (model units)."""
+        if self.format == ".ply":
+            out = np.empty(len(faces), dtype=_PLY_FACE)
             out["n"] = 3
-            out["v"] = block
-            fh.write(out.tobytes())
-
-    def _stl(self, fh, vpath: Path, shared_verts: np.ndarray, faces: _Blocks,
-             shared_ids: np.ndarray) -> None:
-        fh.write(b"csdf binary STL".ljust(80, b" "))
-        fh.write(np.uint32(self.faces).tobytes())
-        n_own = self._st.own
-        own = np.memmap(vpath, dtype="<f8", mode="r", shape=(n_own, 3)) \
-            if n_own else np.zeros((0, 3))
-        rec = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
-        for block in faces:
-            block = Stitcher.resolve(block, shared_ids)
-            tri = np.empty(block.shape + (3,))
-            is_own = block < n_own
-            tri[is_own] = own[block[is_own]]
-            tri[~is_own] = shared_verts[block[~is_own] - n_own]
-            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            length = np.linalg.norm(n, axis=1, keepdims=True)
-            n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-            out = np.zeros(len(block), dtype=rec)
-            out["n"] = n
-            out["v"] = tri
-            fh.write(out.tobytes())
-        del own
+            out["v"] = faces
+            return out
+        assert verts is not None
+        tri = verts[np.asarray(faces)]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+        out = np.zeros(len(faces), dtype=_STL_FACE)
+        out["n"] = n
+        out["v"] = tri
+        return out
 
 
-class _Blocks:
-    """The faces file ``(F, 3)`` int64 read block by block (read, not mapped, so the
-    pages do not stay in this process's memory)."""
+class _File:
+    """The file being written: its temporary path and an open descriptor."""
 
-    def __init__(self, path: Path, n: int) -> None:
-        self.path, self.n = path, n
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path, self._fd = path, fd
 
-    def __iter__(self):
-        if not self.n:
-            return
-        with open(self.path, "rb") as fh:
-            for s in range(0, self.n, _BLOCK):
-                k = min(_BLOCK, self.n - s)
-                yield np.fromfile(fh, dtype="<i8", count=3 * k).reshape(k, 3)
+    def write(self, offset: int, data) -> None:
+        """Write ``data`` (bytes or a contiguous array) at byte ``offset``."""
+        _pwrite_all(self._fd, data, offset)
+
+
+@contextmanager
+def mesh_file(path: str | os.PathLike, layout: MeshLayout) -> Iterator[_File]:
+    """The file for ``layout``, made beside ``path`` at its full size with its header
+    written; yields an object with ``path`` (where others write too: :func:`write_at`)
+    and ``write(offset, data)``. When the block ends without an error, the file is
+    renamed over ``path`` (atomic); on an error nothing is left.
+
+    Raises:
+        CsdfError: the file cannot be made or written (naming the path and the reason);
+            a PLY of 2^31 vertices or more (its indices are int32).
+    """
+    target = check_stream_path(path)
+    if layout.format == ".ply" and layout.vertices >= 2**31:
+        raise CsdfError(f"cannot write {target}: {layout.vertices} vertices exceed the PLY "
+                        "index type (int32)")
+    with atomic_path(target) as tmp:
+        fd = os.open(tmp, os.O_RDWR)
+        try:
+            os.ftruncate(fd, layout.size())
+            _pwrite_all(fd, layout.header(), 0)
+            yield _File(tmp, fd)
+        finally:
+            os.close(fd)
+
+
+def write_at(path: str | os.PathLike, blocks: list[tuple[int, np.ndarray]]) -> bool:
+    """Write ``blocks`` (``(byte offset, records)``) into the file ``path`` that
+    :func:`mesh_file` made; False (and nothing written) when this process does not see
+    that file (another machine without the shared folder)."""
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except FileNotFoundError:
+        return False
+    try:
+        for offset, data in blocks:
+            _pwrite_all(fd, data, offset)
+    finally:
+        os.close(fd)
+    return True
+
+
+def _pwrite_all(fd: int, data, offset: int) -> None:
+    """``os.pwrite`` until all of ``data`` is written."""
+    if isinstance(data, np.ndarray):
+        data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+    view = memoryview(data)
+    while len(view):
+        n = os.pwrite(fd, view, offset)
+        view, offset = view[n:], offset + n

@@ -8,10 +8,12 @@
    worker's field for that grid made and kept, as ``csdf.mesh`` keeps its compiled
    kernels), the overhead, the tasks, and whether the two meshes are equal
    (canonical order).
-2. File to file: ``csdf.mesh`` then ``csdf.io.write_mesh`` (binary PLY) against
-   ``csdf.distributed.mesh(out=...)`` (the workers write their parts into the PLY;
-   no process holds the whole mesh), timed the same way; the file read back by
-   trimesh and compared with the in-memory mesh.
+2. File to file: ``csdf.mesh`` then ``csdf.io.meshstream.write_whole`` (binary PLY,
+   float64 vertices) against ``csdf.distributed.mesh(out=...)`` (the workers write
+   their parts into the same layout; no process holds the whole mesh), timed the same
+   way; the file read back by trimesh and compared with the in-memory mesh. (The same
+   file both ways: ``csdf.io.write_mesh`` goes through trimesh, which writes float32
+   vertices, a different and smaller file.)
 3. A mesh at ``--big`` (default 2048) streamed to a PLY on a fresh cluster: wall time,
    file size and each worker's peak resident memory (``ru_maxrss``, whole process life).
 4. ``fit_many`` on ``--scans`` scans against a loop of ``csdf.fit``: seconds and whether
@@ -40,6 +42,7 @@ from common import median_time
 
 import csdf
 import csdf.distributed as cd
+from csdf.io.meshstream import write_whole
 from csdf.mesh.parts import canonical
 
 
@@ -80,6 +83,11 @@ def _equal(a, b) -> bool:
         np.array_equal(ca[1], cb[1])
 
 
+def _write_whole(m, path: Path):
+    """``m`` written as :func:`csdf.distributed.mesh` writes a PLY."""
+    return write_whole(path, m.vertices, m.faces)
+
+
 def _load() -> str:
     """The 1-minute load average now."""
     return f"{os.getloadavg()[0]:.2f}"
@@ -88,7 +96,8 @@ def _load() -> str:
 def bench_mesh(client, res: int, repeat: int) -> None:
     print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh (median of {repeat})\n")
     print("In memory: `csdf.mesh` vs `csdf.distributed.mesh`. To file: `csdf.mesh` + "
-          "`csdf.io.write_mesh` (PLY) vs `csdf.distributed.mesh(out=...)` (PLY).\n")
+          "`csdf.io.meshstream.write_whole` vs `csdf.distributed.mesh(out=...)`, the same "
+          "binary PLY (float64 vertices).\n")
     print("| model | triangles | csdf.mesh s | distributed s | overhead | mesh + write PLY s | "
           "distributed out= PLY s | overhead | tasks | largest cube | equal (memory, file) "
           "| load before / after |")
@@ -105,7 +114,7 @@ def bench_mesh(client, res: int, repeat: int) -> None:
         del dm
         with tempfile.TemporaryDirectory(dir=".") as tmp:
             one, out = Path(tmp) / "one.ply", Path(tmp) / "m.ply"
-            t_file_one, _ = _median(lambda s=shape, p=one: csdf.io.write_mesh(csdf.mesh(
+            t_file_one, _ = _median(lambda s=shape, p=one: _write_whole(csdf.mesh(
                 s, resolution=res, progress=False, check_thin=False), p), repeat)
             t_out, mf = _median(lambda s=shape, p=out: cd.mesh(
                 s, resolution=res, client=client, progress=False, out=p), repeat)

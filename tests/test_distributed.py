@@ -68,8 +68,8 @@ def test_mesh_with_params_and_default_plan(client):
 @pytest.mark.parametrize("suffix", [".ply", ".stl"])
 def test_mesh_written_by_the_workers(client, tmp_path, suffix):
     whole = csdf.mesh(CSG, resolution=120, progress=False, check_thin=False)
-    d = cd.mesh(CSG, resolution=120, client=client, progress=False)
-    res = cd.mesh(CSG, resolution=120, client=client, progress=False,
+    d = cd.mesh(CSG, resolution=120, client=client, progress=False, max_tasks=20)
+    res = cd.mesh(CSG, resolution=120, client=client, progress=False, max_tasks=20,
                   out=tmp_path / f"m{suffix}")
     assert isinstance(res, cd.MeshFile) and res.tasks > 4
     assert (res.vertices, res.faces) == (len(whole.vertices), len(whole.faces))

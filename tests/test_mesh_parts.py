@@ -13,12 +13,18 @@ import csdf
 from csdf.distributed.tasks import part_summary, write_part
 from csdf.errors import CsdfError
 from csdf.field import as_field
-from csdf.io.meshstream import MeshLayout, check_stream_path, mesh_file
+from csdf.io.meshstream import MeshLayout, check_stream_path, mesh_file, write_whole
 from csdf.mesh.api import mesh_grid, prepare_field
 from csdf.mesh.grid import octree
-from csdf.mesh.part_kernels import edge_dtype, on_cube_faces, pack_edges
+from csdf.mesh.part_kernels import (
+    ESCAPE,
+    decode_faces,
+    edge_dtype,
+    encode_faces,
+    on_cube_faces,
+    pack_edges,
+)
 from csdf.mesh.parts import (
-    MAX_CUBE,
     SharedVertices,
     canonical,
     mesh_part,
@@ -63,6 +69,12 @@ def test_parts_equal_the_whole_mesh(shape, resolution, bounds, super_brick):
         assert {task.size for task in plan} == {super_brick}
     verts, faces = stitch(parts)
     assert _same(whole, verts, faces)
+    # the faces as 2-byte codes (what a task sends back) give the same mesh
+    coded = [p.encoded() for p in parts]
+    assert all(c.faces.dtype == np.uint16 for c in coded)
+    assert all(np.array_equal(c.face_indices(), p.faces) for c, p in zip(coded, parts))
+    v2, f2 = stitch(coded)
+    assert np.array_equal(v2, verts) and np.array_equal(f2, faces)
     m = trimesh.Trimesh(verts, faces, process=False)
     assert m.is_watertight and m.is_winding_consistent
     # a vertex two parts hold is on the faces of both cubes (their own ones are never
@@ -111,7 +123,21 @@ def test_edge_numbers_inside_a_cube():
     out = np.empty(4, dtype=edge_dtype(32))
     pack_edges(corner, axis, np.array([32, 0, 64]), 6, out)
     assert on_cube_faces(out, 32).tolist() == [True, True, False, False]
-    assert edge_dtype(MAX_CUBE) == np.uint32 and edge_dtype(2 * MAX_CUBE) == np.int64
+    assert edge_dtype(512) == np.uint32 and edge_dtype(1024) == np.int64
+
+
+def test_face_codes_round_trip():
+    # a strip of new vertices, then faces that reach far back (escapes) and a face of
+    # three new vertices after them
+    strip = np.array([[v, v + 1, v + 2] for v in range(0, 80_000, 3)])
+    far = np.array([[79_999, 3, 80_000], [80_000, 0, 79_998], [80_001, 80_002, 80_003]])
+    faces = np.concatenate([strip, far]).astype(np.int32)
+    codes, escapes = encode_faces(faces)
+    assert codes.dtype == np.uint16 and escapes.tolist() == [3, 0]
+    assert (codes == ESCAPE).sum() == 2
+    out = np.empty_like(faces)
+    decode_faces(codes, escapes, out)
+    assert np.array_equal(out, faces)
 
 
 def _write(parts, grid, path):
@@ -156,6 +182,13 @@ def test_file_written_in_parts(tmp_path, suffix):
         assert np.allclose(np.sort(back.triangles.reshape(-1, 9), axis=0),
                            np.sort(ref.triangles.reshape(-1, 9), axis=0), atol=1e-6)
         assert trimesh.load(path).is_watertight  # (merged on load)
+    # the same layout for a mesh held whole (the one-process baseline of the benchmark)
+    whole = tmp_path / f"w{suffix}"
+    assert write_whole(whole, verts, faces, block=1000) == layout
+    if suffix == ".ply":
+        assert _same(trimesh.load(whole, process=False), verts, faces)
+    else:  # the same triangles in the same order (parts in plan order)
+        assert whole.read_bytes() == path.read_bytes()
 
 
 def test_file_bad_input_leaves_nothing(tmp_path):

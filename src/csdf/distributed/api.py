@@ -25,7 +25,7 @@ from . import tasks
 
 __all__ = ["mesh", "evaluate", "sample_surface", "sample_volume", "fit_many", "connect",
            "disconnect", "MeshFile", "FitFailure", "EVAL_CHUNK", "SAMPLE_CHUNK",
-           "TASKS_PER_THREAD", "WORKER_ENV"]
+           "TASKS_PER_THREAD", "TASK_SURFACE", "WORKER_ENV"]
 
 #: points per block when :func:`evaluate` is given a NumPy array (~24 MB of points)
 EVAL_CHUNK = 1_000_000
@@ -202,7 +202,8 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
     and cuts it into cubes of similar work (:func:`csdf.mesh.parts.plan_parts`), the
     fullest first; each task meshes one from the program's bytes, going on from its
     cells down to bricks, and sends back each vertex as its grid edge inside the cube
-    and its place ``t`` along it (12 bytes) and each face as 3 int32. The client puts
+    and its place ``t`` along it (12 bytes) and each face as 3 codes of 2 bytes
+    (:meth:`csdf.mesh.parts.Part.encoded`). The client puts
     the parts together as they arrive (:class:`csdf.mesh.parts.Stitcher`: positions
     rebuilt with the mesher's own formula, vertices on the faces between cubes merged
     by edge). The result equals ``csdf.mesh(shape, resolution, check_thin=False)``
@@ -229,7 +230,9 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
             ``max_tasks`` of them.
         max_tasks: see ``super_brick``; default :data:`TASKS_PER_THREAD` per worker
             thread of the cluster, at most 96, up to 1024 voxels a side; ``(side / 1024)^2``
-            times as many beyond (a task's share of the surface stays the same).
+            times as many beyond (a task's share of the surface stays the same); and
+            no more than one per :data:`TASK_SURFACE` voxels of surface (at least 2 per
+            worker thread).
         progress: a progress bar on stderr (Rich).
 
     Returns:
@@ -255,15 +258,20 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
     t0 = time.perf_counter()
     with _client(client) as c:
         prepare_field(fld, grid)
+        surface, least = 0, 1
         if max_tasks is None and super_brick is None:
             most = default_max_tasks(grid)  # (MAX_TASKS times the surface's growth)
-            max_tasks = min(most, round(TASKS_PER_THREAD * _threads(c) * most / MAX_TASKS))
-        plan = plan_parts(fld, grid, super_brick, max_tasks)
+            threads = _threads(c)
+            max_tasks = min(most, round(TASKS_PER_THREAD * threads * most / MAX_TASKS))
+            surface, least = TASK_SURFACE, min(max_tasks, 2 * threads)
+        plan = plan_parts(fld, grid, super_brick, max_tasks, surface, least)
         blob, pvals = _blob(fld)
         g = (np.asarray(grid.origin, dtype=np.float64), float(grid.h), tuple(grid.dims))
         bounds_ = np.asarray(fld.bounds, dtype=np.float64)
-        # (one message to the scheduler for all the tasks)
-        parts = c.map(partial(tasks.mesh_task, blob, pvals, bounds_, g), plan, pure=False)
+        # (one message to the scheduler for all the tasks; faces encoded when they come
+        # back here, not when the workers write them)
+        parts = c.map(partial(tasks.mesh_task, blob, pvals, bounds_, g, encode=path is None),
+                      plan, pure=False)
         try:
             if path is None:
                 verts, faces = _gather_mesh(parts, grid, plan, progress)
@@ -288,6 +296,11 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
 #: 1024 voxels a side): enough that the last ones, the smallest, leave no worker idle
 #: for long, few enough that a task's fixed cost (a few ms) stays small
 TASKS_PER_THREAD = 8
+#: ... but no more than one task per this many voxels of surface (about twice as many
+#: triangles; 30-40 ms of meshing on the benchmark's machine), and at least 2 per worker
+#: thread: a task costs 5-7 ms beyond its work (scheduling, the octree below its cells,
+#: the mesher's set-up; measured on the zoo chair at 1024^3, 0.18 s in one process)
+TASK_SURFACE = 1 << 18
 
 
 def _threads(client) -> int:

@@ -25,7 +25,7 @@ from ..field import Field, as_field
 from ..io.meshstream import MeshLayout, write_at
 from ..mesh.api import prepare_field
 from ..mesh.grid import Grid
-from ..mesh.part_kernels import file_ids
+from ..mesh.part_kernels import file_part
 from ..mesh.parts import Part, PartTask, mesh_part
 
 __all__ = ["worker_field", "worker_stats", "mesh_task", "part_summary", "write_part",
@@ -87,11 +87,13 @@ def _grid(grid: tuple) -> Grid:
 
 
 def mesh_task(blob: bytes, params: dict[str, float], bounds: np.ndarray, grid: tuple,
-              task: PartTask) -> Part:
+              task: PartTask, encode: bool = False) -> Part:
     """Marching cubes of one part (:func:`csdf.mesh.parts.mesh_part`): 12 bytes a vertex
-    (its edge inside the cube, uint32, and ``t``) and 12 a face (int32) to go back."""
+    (its edge inside the cube, uint32, and ``t``) and 12 a face (int32); with
+    ``encode``, 6 a face (:meth:`csdf.mesh.parts.Part.encoded`), to go back."""
     fld = worker_field(blob, params, bounds, grid)
-    return mesh_part(fld, _grid(grid), task)
+    part = mesh_part(fld, _grid(grid), task)
+    return part.encoded() if encode else part
 
 
 def part_summary(part: Part) -> tuple[int, int, np.ndarray, np.ndarray]:
@@ -111,15 +113,19 @@ def write_part(path: str, layout: MeshLayout, part: Part, own_base: int, face_ba
     ``shared_ids (S,)`` (file vertex numbers, in the part's order). Returns None, or
     the ``(offset, records)`` blocks when this worker does not see the file (the
     client writes them)."""
-    verts = part.vertices()
     if layout.format == ".stl":
-        blocks = [(layout.face_offset(face_base), layout.face_records(part.faces, verts))]
+        blocks = [(layout.face_offset(face_base),
+                   layout.face_records(part.faces, part.vertices()))]
     else:
-        shared = part.shared()
-        ids = np.empty(len(shared), dtype=np.int64)
-        file_ids(shared, int(own_base), np.asarray(shared_ids, dtype=np.int64), ids)
-        blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts[~shared])),
-                  (layout.face_offset(face_base), layout.face_records(ids[part.faces]))]
+        n_own = len(part.edges) - len(shared_ids)
+        verts = np.empty((n_own, 3))
+        faces = np.empty(part.faces.shape, dtype=np.int32)
+        file_part(part.edges, part.t, part.faces, np.asarray(part.cell, dtype=np.int64),
+                  int(part.size), np.asarray(part.grid.origin, dtype=np.float64),
+                  float(part.grid.h), int(own_base), np.asarray(shared_ids, dtype=np.int64),
+                  verts, faces)
+        blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts)),
+                  (layout.face_offset(face_base), layout.face_records(faces))]
     return None if write_at(path, blocks) else blocks
 
 

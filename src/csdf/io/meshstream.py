@@ -23,7 +23,8 @@ import numpy as np
 from ..errors import CsdfError
 from .atomic import atomic_path
 
-__all__ = ["MeshLayout", "mesh_file", "write_at", "check_stream_path", "STREAM_FORMATS"]
+__all__ = ["MeshLayout", "mesh_file", "write_at", "write_whole", "check_stream_path",
+           "STREAM_FORMATS"]
 
 #: the formats written in blocks, by file extension
 STREAM_FORMATS = (".ply", ".stl")
@@ -146,6 +147,24 @@ def mesh_file(path: str | os.PathLike, layout: MeshLayout) -> Iterator[_File]:
             yield _File(tmp, fd)
         finally:
             os.close(fd)
+
+
+def write_whole(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray,
+                block: int = 1 << 20) -> MeshLayout:
+    """A mesh held in memory, ``vertices (V, 3)`` float64 (model units) and ``faces (F,
+    3)``, written to ``path`` in the same layout as the blocks of a mesh made in parts
+    (PLY: float64 vertices, so that it reads back bit for bit; ``csdf.io.write_mesh``
+    writes float32 ones through trimesh), ``block`` faces at a time. Returns the
+    layout."""
+    path = check_stream_path(path)
+    verts = np.asarray(vertices, dtype=np.float64)
+    layout = MeshLayout(path.suffix.lower(), len(verts), len(faces))
+    with mesh_file(path, layout) as fh:
+        if layout.format == ".ply":
+            fh.write(layout.vertex_offset(0), layout.vertex_records(verts))
+        for s in range(0, len(faces), block):
+            fh.write(layout.face_offset(s), layout.face_records(faces[s:s + block], verts))
+    return layout
 
 
 def write_at(path: str | os.PathLike, blocks: list[tuple[int, np.ndarray]]) -> bool:

@@ -30,7 +30,7 @@ from the cells they are given, so the octree is descended once in all.
 from __future__ import annotations
 
 import heapq
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,7 +42,7 @@ from .kernels import fresh_array
 from .stream import extract_mc
 
 __all__ = ["Part", "PartTask", "plan_parts", "plan_level", "mesh_part", "Stitcher",
-           "SharedVertices", "stitch", "canonical", "MAX_TASKS", "MAX_CUBE", "PLAN_CELLS",
+           "SharedVertices", "stitch", "canonical", "MAX_TASKS", "PLAN_CELLS",
            "default_max_tasks"]
 
 #: the default most parts :func:`plan_parts` cuts a grid of up to 1024 voxels a side
@@ -50,9 +50,6 @@ __all__ = ["Part", "PartTask", "plan_parts", "plan_level", "mesh_part", "Stitche
 #: too small to be tasks); finer grids get more in proportion to their surface, (side /
 #: 1024)^2 times as many, so that a task's share of the surface stays the same
 MAX_TASKS = 96
-#: the largest cube :func:`plan_parts` makes by itself (voxels): its edge numbers fit
-#: in 32 bits (:func:`csdf.mesh.part_kernels.edge_dtype`)
-MAX_CUBE = 512
 #: the plan's cells are the root cube's edge / PLAN_CELLS (at least 4 bricks): ~32^2 of
 #: them across a surface, whatever the resolution
 PLAN_CELLS = 32
@@ -93,7 +90,10 @@ class Part:
             faces (:meth:`shared`) may be held by a neighbouring part too.
         t: ``(V,)`` float64 in ``[0, 1]``, each vertex's parameter along its edge.
         faces: ``(F, 3)`` int32, indices into the part's vertices, counter-clockwise
-            seen from outside.
+            seen from outside; or, with ``escapes``, their uint16 codes
+            (:meth:`encoded`).
+        escapes: None, or ``(E,)`` int32, the indices the codes do not hold
+            (:func:`csdf.mesh.part_kernels.encode_faces`).
     """
 
     grid: Grid
@@ -102,6 +102,23 @@ class Part:
     edges: np.ndarray
     t: np.ndarray
     faces: np.ndarray
+    escapes: np.ndarray | None = None
+
+    def encoded(self) -> Part:
+        """This part with its faces as 2-byte codes (:func:`~csdf.mesh.part_kernels.
+        encode_faces`): what a task sends back, 6 bytes a face instead of 12."""
+        if self.escapes is not None:
+            return self
+        codes, escapes = PK.encode_faces(self.faces)
+        return replace(self, faces=codes, escapes=escapes)
+
+    def face_indices(self) -> np.ndarray:
+        """The faces ``(F, 3)`` int32 as vertex indices (decoded if they are codes)."""
+        if self.escapes is None:
+            return self.faces
+        out = np.empty(self.faces.shape, dtype=np.int32)
+        PK.decode_faces(self.faces, self.escapes, out)
+        return out
 
     def shared(self) -> np.ndarray:
         """Bool ``(V,)``: the vertices on the cube's faces."""
@@ -149,7 +166,8 @@ def plan_level(grid: Grid) -> int:
 
 
 def plan_parts(fld: Field, grid: Grid, super_brick: int | None = None,
-               max_tasks: int | None = None) -> list[PartTask]:
+               max_tasks: int | None = None, task_surface: int = 0,
+               min_tasks: int = 1) -> list[PartTask]:
     """The parts to mesh, the fullest first.
 
     Args:
@@ -158,9 +176,13 @@ def plan_parts(fld: Field, grid: Grid, super_brick: int | None = None,
         super_brick: every part a cube of this edge in voxels (a power of two, at least
             ``BRICK``). Default: cubes of the octree of any size down to
             :func:`plan_level`, the fullest split first (into its 8 children that may
-            hold surface; those over :data:`MAX_CUBE` before all) while there are at
-            most ``max_tasks``.
+            hold surface) while there are at most ``max_tasks``.
         max_tasks: see ``super_brick``; default :func:`default_max_tasks`.
+        task_surface, min_tasks: without ``super_brick``, at most one part per
+            ``task_surface`` voxels of surface (estimated as the plan cells' count times
+            their face area, ``level^2``: a voxel of surface is about 2 triangles), but
+            at least ``min_tasks`` (0: no such bound): a small mesh is not cut into
+            more parts than its work is worth.
 
     Returns:
         :class:`PartTask` s, by decreasing weight (then by x, y, z), so that a pool of
@@ -193,7 +215,9 @@ def plan_parts(fld: Field, grid: Grid, super_brick: int | None = None,
                 or max_tasks < 1:
             raise CsdfError(f"max_tasks must be a positive integer, got {max_tasks!r}")
         cells = _sorted(octree(grid, fld.intervals, None, stop=level))
-        tasks = _split_fullest(cells, top, level, int(max_tasks))
+        worth = -(-len(cells) * level**2 // int(task_surface)) if task_surface > 0 \
+            else int(max_tasks)
+        tasks = _split_fullest(cells, top, level, int(max_tasks), worth, int(min_tasks))
     tasks.sort(key=lambda p: (-p.weight, *p.cell.tolist()))
     return tasks
 
@@ -203,12 +227,14 @@ def _sorted(cells: np.ndarray) -> np.ndarray:
     return cells[np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))]
 
 
-def _split_fullest(cells: np.ndarray, top: int, level: int, max_tasks: int
-                   ) -> list[PartTask]:
+def _split_fullest(cells: np.ndarray, top: int, level: int, max_tasks: int,
+                   worth: int | None = None, min_tasks: int = 1) -> list[PartTask]:
     """Cubes holding ``cells (K, 3)`` (edge ``level``): from the root cube (edge ``top``),
     the fullest cube split into its children that hold cells, as long as the count
-    stays at most ``max_tasks`` (a cube whose split would pass it, or of edge
-    ``level``, is kept whole and the next fullest tried)."""
+    stays at most ``worth`` (default ``max_tasks``), or at most ``max_tasks`` while it
+    is below ``min_tasks`` (a cube whose split would pass them, or of edge ``level``,
+    is kept whole and the next fullest tried)."""
+    worth = max_tasks if worth is None else min(worth, max_tasks)
     if not len(cells):
         return []
     root = PartTask(np.zeros(3, dtype=np.int64), top, cells, level)
@@ -218,7 +244,9 @@ def _split_fullest(cells: np.ndarray, top: int, level: int, max_tasks: int
     while heap:
         cube = heapq.heappop(heap)[2]
         children = _children(cube) if cube.size > level else []
-        if not children or len(done) + len(heap) + len(children) > max_tasks:
+        now = len(done) + len(heap) + 1
+        after = now - 1 + len(children)
+        if not children or after > max_tasks or (after > worth and now >= min_tasks):
             done.append(cube)
             continue
         for c in children:
@@ -227,10 +255,9 @@ def _split_fullest(cells: np.ndarray, top: int, level: int, max_tasks: int
     return done
 
 
-def _priority(cube: PartTask) -> tuple[bool, int]:
-    """Heap order of :func:`_split_fullest`: cubes over :data:`MAX_CUBE` first (their
-    edge numbers would need 64 bits), then the fullest."""
-    return (cube.size <= MAX_CUBE, -cube.weight)
+def _priority(cube: PartTask) -> int:
+    """Heap order of :func:`_split_fullest`: the fullest first."""
+    return -cube.weight
 
 
 def _children(cube: PartTask) -> list[PartTask]:
@@ -300,7 +327,7 @@ class Stitcher:
         self._verts = _room(self._verts, self.vertices, len(part.edges))
         self._faces = _room(self._faces, self.faces, len(part.faces))
         self._table, self._used, self.vertices, self.faces = PK.place_part(
-            part.edges, part.t, part.faces, np.asarray(part.cell, dtype=np.int64),
+            part.edges, part.t, part.faces, part.escapes, np.asarray(part.cell, dtype=np.int64),
             int(part.size), self._dims, self._origin, float(self.grid.h), self._table,
             self._used, self._verts, self.vertices, self._faces, self.faces)
 

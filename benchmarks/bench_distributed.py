@@ -6,8 +6,9 @@
    in memory to in memory: median wall time of ``--repeat`` runs after a warm-up at
    128 (kernels loaded on every worker) and one untimed run at the resolution (each
    worker's field for that grid made and kept, as ``csdf.mesh`` keeps its compiled
-   kernels), the overhead, the tasks, and whether the two meshes are equal
-   (canonical order).
+   kernels), the overhead, the tasks, how the mesh was put together
+   (``metadata['csdf']['assembled']``: ``shared``, the workers wrote it into shared
+   memory) and whether the two meshes are equal (canonical order).
 2. File to file: ``csdf.mesh`` then ``csdf.io.meshstream.write_whole`` (binary PLY,
    float64 vertices) against ``csdf.distributed.mesh(out=...)`` (the workers write
    their parts into the same layout; no process holds the whole mesh), timed the same
@@ -99,9 +100,9 @@ def bench_mesh(client, res: int, repeat: int) -> None:
           "`csdf.io.meshstream.write_whole` vs `csdf.distributed.mesh(out=...)`, the same "
           "binary PLY (float64 vertices).\n")
     print("| model | triangles | csdf.mesh s | distributed s | overhead | mesh + write PLY s | "
-          "distributed out= PLY s | overhead | tasks | largest cube | equal (memory, file) "
-          "| load before / after |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "distributed out= PLY s | overhead | tasks | largest cube | assembled | "
+          "equal (memory, file) | load before / after |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, shape in models():
         load0 = _load()
         csdf.mesh(shape, resolution=128, progress=False, check_thin=False)  # warm-up
@@ -111,6 +112,7 @@ def bench_mesh(client, res: int, repeat: int) -> None:
         t_dist, dm = _median(lambda s=shape: cd.mesh(
             s, resolution=res, client=client, progress=False), repeat)
         equal = _equal(whole, dm)
+        assembled = dm.metadata["csdf"]["assembled"]
         del dm
         with tempfile.TemporaryDirectory(dir=".") as tmp:
             one, out = Path(tmp) / "one.ply", Path(tmp) / "m.ply"
@@ -122,7 +124,7 @@ def bench_mesh(client, res: int, repeat: int) -> None:
         print(f"| {name} | {mf.faces:,} | {t_one:.2f} | {t_dist:.2f} | "
               f"{(t_dist / t_one - 1) * 100:+.0f} % | {t_file_one:.2f} | {t_out:.2f} | "
               f"{(t_out / t_file_one - 1) * 100:+.0f} % | {mf.tasks} | {mf.super_brick} | "
-              f"{equal}, {equal_file} | {load0} / {_load()} |", flush=True)
+              f"{assembled} | {equal}, {equal_file} | {load0} / {_load()} |", flush=True)
         del whole
 
 

@@ -41,14 +41,32 @@ def _same(a, b):
         np.array_equal(ca[1], cb[1])
 
 
-def test_mesh_equals_one_machine_mesh(client):
+def _blocks_left() -> list[str]:
+    folder = cd.api.SHARED_FOLDER
+    return [n for n in os.listdir(folder) if n.startswith("csdf-")] if folder else []
+
+
+@pytest.mark.parametrize("assembly", ["workers", "client", "records"])
+def test_mesh_equals_one_machine_mesh(client, monkeypatch, assembly):
+    # workers: they write the mesh into a shared memory block (they run on this
+    # machine); client: the parts come back and are stitched here (workers elsewhere);
+    # records: the block has no room in the shared folder, the workers send their
+    # records and the client writes them
+    if assembly == "client":
+        monkeypatch.setattr(cd.api, "SHARED_FOLDER", None)
+    if assembly == "records":
+        monkeypatch.setattr(cd.api, "_room", lambda folder, layout: False)
+    left = _blocks_left()
     whole = csdf.mesh(CSG, resolution=160, progress=False, check_thin=False)
     before = client.run(cd.worker_stats)
     d = cd.mesh(CSG, resolution=160, client=client, super_brick=32, progress=False)
     meta = d.metadata["csdf"]
     assert meta["tasks"] > 20 and meta["super_brick"] == 32
+    assert meta["assembled"] == {"workers": "shared", "client": "parts",
+                                 "records": "records"}[assembly]
     assert _same(whole, d)
     assert d.is_watertight and d.is_winding_consistent
+    assert _blocks_left() == left  # (the block's file is gone; its memory is the mesh's)
     after = client.run(cd.worker_stats)
     made = sum(after[w]["fields_made"] - before[w]["fields_made"] for w in after)
     ran = sum(after[w]["tasks"] - before[w]["tasks"] for w in after)

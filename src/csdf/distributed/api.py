@@ -4,6 +4,8 @@ cluster, put the answers together."""
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -17,7 +19,7 @@ import numpy as np
 
 from ..errors import CsdfError
 from ..field import Field, as_field, check_bounds, choose_backend
-from ..io.meshstream import MeshLayout, check_stream_path, mesh_file
+from ..io.meshstream import ARRAYS, MeshLayout, check_stream_path, mesh_file, shared_block
 from ..mesh.api import mesh_grid, prepare_field
 from ..mesh.parts import MAX_TASKS, SharedVertices, Stitcher, default_max_tasks, plan_parts
 from ..parallel import cores
@@ -25,7 +27,7 @@ from . import tasks
 
 __all__ = ["mesh", "evaluate", "sample_surface", "sample_volume", "fit_many", "connect",
            "disconnect", "MeshFile", "FitFailure", "EVAL_CHUNK", "SAMPLE_CHUNK",
-           "TASKS_PER_THREAD", "TASK_SURFACE", "WORKER_ENV"]
+           "TASKS_PER_THREAD", "TASK_SURFACE", "WORKER_ENV", "SHARED_FOLDER"]
 
 #: points per block when :func:`evaluate` is given a NumPy array (~24 MB of points)
 EVAL_CHUNK = 1_000_000
@@ -201,14 +203,25 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
     The client descends the octree to cells of :func:`csdf.mesh.parts.plan_level` voxels
     and cuts it into cubes of similar work (:func:`csdf.mesh.parts.plan_parts`), the
     fullest first; each task meshes one from the program's bytes, going on from its
-    cells down to bricks, and sends back each vertex as its grid edge inside the cube
-    and its place ``t`` along it (12 bytes) and each face as 3 codes of 2 bytes
-    (:meth:`csdf.mesh.parts.Part.encoded`). The client puts
-    the parts together as they arrive (:class:`csdf.mesh.parts.Stitcher`: positions
-    rebuilt with the mesher's own formula, vertices on the faces between cubes merged
-    by edge). The result equals ``csdf.mesh(shape, resolution, check_thin=False)``
-    vertex for vertex and face for face, up to their order
-    (:func:`csdf.mesh.parts.canonical`), and is watertight where that one is.
+    cells down to bricks, and keeps each vertex as its grid edge inside the cube and its
+    place ``t`` along it (:class:`csdf.mesh.parts.Part`). Then the mesh is put together
+    in one of three ways (``metadata['csdf']['assembled']``):
+
+    * ``'shared'`` (the workers run on this machine: they see a file made in
+      :data:`SHARED_FOLDER`): each part sends its counts and its shared vertices (those
+      on its cube's faces, merged here by grid edge), and each worker writes its part's
+      vertices and faces, in their final numbers, straight into a block of shared
+      memory that becomes the mesh's arrays; the client never touches the bulk;
+    * ``'parts'`` (workers elsewhere): the parts come back, 12 bytes a vertex and 6 a
+      face (:meth:`csdf.mesh.parts.Part.encoded`), and are stitched here as they arrive
+      (:class:`csdf.mesh.parts.Stitcher`);
+    * ``'records'`` (no room in the shared folder): as ``'shared'``, but the workers
+      send their parts' records and the client writes them.
+
+    Positions are rebuilt with the mesher's own formula, so the result equals
+    ``csdf.mesh(shape, resolution, check_thin=False)`` vertex for vertex and face for
+    face, up to their order (:func:`csdf.mesh.parts.canonical`), and is watertight where
+    that one is.
 
     Args:
         shape: a 3D :class:`csdf.Shape`, :class:`csdf.Program` or :class:`csdf.Field`.
@@ -236,8 +249,8 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
         progress: a progress bar on stderr (Rich).
 
     Returns:
-        ``trimesh.Trimesh`` (``metadata['csdf']`` with ``tasks`` and ``super_brick``, the
-        largest cube's edge), or a :class:`MeshFile` with ``out``.
+        ``trimesh.Trimesh`` (``metadata['csdf']`` with ``tasks``, ``super_brick``, the
+        largest cube's edge, and ``assembled``), or a :class:`MeshFile` with ``out``.
 
     Raises:
         CsdfError: bad arguments (as :func:`csdf.mesh`), ``method='dc'``, a 2D shape, a
@@ -270,13 +283,25 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
         bounds_ = np.asarray(fld.bounds, dtype=np.float64)
         # (one message to the scheduler for all the tasks; faces encoded when they come
         # back here, not when the workers write them)
-        parts = c.map(partial(tasks.mesh_task, blob, pvals, bounds_, g, encode=path is None),
+        # the workers write the mesh themselves into a file, or into a block of shared
+        # memory when they run on this machine; else they send their parts back here
+        folder = None if path is not None else _shared_folder(c)
+        gather = path is None and folder is None
+        parts = c.map(partial(tasks.mesh_task, blob, pvals, bounds_, g, encode=gather),
                       plan, pure=False)
         try:
-            if path is None:
+            if gather:
                 verts, faces = _gather_mesh(parts, grid, plan, progress)
+                assembled = "parts"
+            elif path is None:
+                (verts, faces), _, where = _write_parts(
+                    c, parts, grid, progress, ARRAYS,
+                    lambda lay: shared_block(lay, folder if _room(folder, lay) else None))
+                assembled = "records" if where is None else "shared"
             else:
-                counts = _write_file(c, parts, grid, path, progress)
+                _, layout, _ = _write_parts(c, parts, grid, progress, path.suffix.lower(),
+                                            lambda lay: mesh_file(path, lay))
+                counts = (layout.vertices, layout.faces)
         finally:
             for fut in parts:
                 fut.cancel()
@@ -288,7 +313,7 @@ def mesh(shape: Any, resolution: int | None = None, voxel_size: float | None = N
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     m.metadata["csdf"] = {"method": "mc", "voxel_size": float(grid.h), "dims": grid.dims,
                           "seconds": seconds, "resolution": resolution, "tasks": len(plan),
-                          "super_brick": size}
+                          "super_brick": size, "assembled": assembled}
     return m
 
 
@@ -324,11 +349,39 @@ def _gather_mesh(parts: list, grid, plan: list, progress: bool
     return st.result()
 
 
-def _write_file(c, parts: list, grid, path: Path, progress: bool) -> tuple[int, int]:
-    """The parts written by their workers into ``path`` (:mod:`csdf.io.meshstream`):
-    first their counts and shared vertices (merged here, numbered after all the own
-    vertices), then each part's records at their planned places. ``(vertices,
-    faces)`` written."""
+#: where :func:`mesh` asks workers on this machine to write an in-memory mesh (a shared
+#: memory folder; None: never, the parts come back to the client)
+SHARED_FOLDER: str | None = "/dev/shm"
+
+
+def _shared_folder(c) -> str | None:
+    """:data:`SHARED_FOLDER` when every worker sees it (they run on this machine: a file
+    made here is found there), else None."""
+    folder = SHARED_FOLDER
+    if folder is None or not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        return None
+    fd, probe = tempfile.mkstemp(dir=folder, prefix="csdf-probe-")
+    os.close(fd)
+    try:
+        seen = c.run(os.path.exists, probe)
+    finally:
+        os.unlink(probe)
+    return folder if seen and all(seen.values()) else None
+
+
+def _room(folder: str, layout: MeshLayout) -> bool:
+    """Whether ``folder`` has room for ``layout`` (a tenth to spare)."""
+    return shutil.disk_usage(folder).free > 1.1 * layout.size()
+
+
+def _write_parts(c, parts: list, grid, progress: bool, fmt: str, sink
+                 ) -> tuple[Any, MeshLayout, str | None]:
+    """The parts written by their workers (:mod:`csdf.io.meshstream`): first their counts
+    and shared vertices (merged here, numbered after all the own vertices), then each
+    part's records at their planned places in ``sink(layout)``, a file or a shared
+    memory block of format ``fmt`` (a worker that does not see it sends its records,
+    written here). Returns what the sink gives (a block's arrays), the layout, and the
+    path the workers were given (None: they sent their records)."""
     summaries = c.map(tasks.part_summary, parts, pure=False)
     shared = SharedVertices(grid)
     own, n_faces, ids = [], [], []
@@ -337,13 +390,13 @@ def _write_file(c, parts: list, grid, path: Path, progress: bool) -> tuple[int, 
         n_faces.append(nf)
         ids.append(shared.add(keys, t))
     own_total = int(sum(own))
-    layout = MeshLayout(path.suffix.lower(), own_total + shared.count, int(sum(n_faces)))
+    layout = MeshLayout(fmt, own_total + shared.count, int(sum(n_faces)))
     own_base = np.concatenate([[0], np.cumsum(own, dtype=np.int64)])
     face_base = np.concatenate([[0], np.cumsum(n_faces, dtype=np.int64)])
-    with mesh_file(path, layout) as fh:
-        if layout.format == ".ply" and shared.count:
+    with sink(layout) as fh:
+        if layout.format != ".stl" and shared.count:
             fh.write(layout.vertex_offset(own_total), layout.vertex_records(shared.vertices()))
-        where = str(Path(fh.path).resolve())
+        where = None if fh.path is None else str(Path(fh.path).resolve())
         writes = c.map(partial(tasks.write_part, where, layout), parts,
                        [int(b) for b in own_base[:-1]], [int(b) for b in face_base[:-1]],
                        [own_total + i for i in ids], pure=False)
@@ -355,7 +408,8 @@ def _write_file(c, parts: list, grid, path: Path, progress: bool) -> tuple[int, 
         finally:
             for fut in writes:
                 fut.cancel()
-    return layout.vertices, layout.faces
+        result = fh.arrays() if layout.format == ARRAYS else None
+    return result, layout, where
 
 
 def _in_order(futures: list, progress: bool, label: str) -> Iterator[Any]:

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..compiler.program import Program
 from ..field import Field, as_field
-from ..io.meshstream import MeshLayout, write_at
+from ..io.meshstream import ARRAYS, MeshLayout, map_block, write_at
 from ..mesh.api import prepare_field
 from ..mesh.grid import Grid
 from ..mesh.part_kernels import file_part
@@ -105,28 +105,42 @@ def part_summary(part: Part) -> tuple[int, int, np.ndarray, np.ndarray]:
             np.ascontiguousarray(part.t[shared]))
 
 
-def write_part(path: str, layout: MeshLayout, part: Part, own_base: int, face_base: int,
-               shared_ids: np.ndarray) -> list[tuple[int, np.ndarray]] | None:
-    """Write one part's records into the file ``path`` (:func:`csdf.io.meshstream.mesh_file`)
-    at the places the client planned: its own vertices as vertices ``own_base, ...``
-    (PLY), its faces as faces ``face_base, ...``, its shared vertices numbered
-    ``shared_ids (S,)`` (file vertex numbers, in the part's order). Returns None, or
-    the ``(offset, records)`` blocks when this worker does not see the file (the
-    client writes them)."""
+def write_part(path: str | None, layout: MeshLayout, part: Part, own_base: int,
+               face_base: int, shared_ids: np.ndarray) -> list[tuple[int, np.ndarray]] | None:
+    """Write one part's records into the file or shared memory block ``path``
+    (:func:`csdf.io.meshstream.mesh_file`, :func:`~csdf.io.meshstream.shared_block`) at
+    the places the client planned: its own vertices as vertices ``own_base, ...`` (not
+    STL), its faces as faces ``face_base, ...``, its shared vertices numbered
+    ``shared_ids (S,)`` (the mesh's vertex numbers, in the part's order). Returns None,
+    or the ``(offset, records)`` blocks when this worker does not see ``path`` (or it
+    is None): the client writes them."""
     if layout.format == ".stl":
         blocks = [(layout.face_offset(face_base),
                    layout.face_records(part.faces, part.vertices()))]
+        return None if path is not None and write_at(path, blocks) else blocks
+    n_own = len(part.edges) - len(shared_ids)
+    block = map_block(path) if layout.format == ARRAYS and path is not None else None
+    if block is not None:  # (positions and faces written in place, in their final form)
+        verts = np.frombuffer(block, dtype=np.float64, count=3 * n_own,
+                              offset=layout.vertex_offset(own_base)).reshape(-1, 3)
+        faces = np.frombuffer(block, dtype=np.int64, count=part.faces.size,
+                              offset=layout.face_offset(face_base)).reshape(-1, 3)
     else:
-        n_own = len(part.edges) - len(shared_ids)
         verts = np.empty((n_own, 3))
-        faces = np.empty(part.faces.shape, dtype=np.int32)
-        file_part(part.edges, part.t, part.faces, np.asarray(part.cell, dtype=np.int64),
-                  int(part.size), np.asarray(part.grid.origin, dtype=np.float64),
-                  float(part.grid.h), int(own_base), np.asarray(shared_ids, dtype=np.int64),
-                  verts, faces)
-        blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts)),
-                  (layout.face_offset(face_base), layout.face_records(faces))]
-    return None if write_at(path, blocks) else blocks
+        faces = np.empty(part.faces.shape, dtype=np.int64 if layout.format == ARRAYS
+                         else np.int32)
+    file_part(part.edges, part.t, part.face_indices(), np.asarray(part.cell, dtype=np.int64),
+              int(part.size), np.asarray(part.grid.origin, dtype=np.float64),
+              float(part.grid.h), int(own_base), np.asarray(shared_ids, dtype=np.int64),
+              verts, faces)
+    if block is not None:
+        del verts, faces  # (the views first: a map with exported buffers cannot close)
+        block.close()
+        return None
+    blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts)),
+              (layout.face_offset(face_base), layout.face_records(faces))]
+    return None if layout.format != ARRAYS and path is not None and write_at(path, blocks) \
+        else blocks
 
 
 def eval_block(points: np.ndarray, blob: bytes, params: dict[str, float], what: str,

@@ -1,18 +1,24 @@
-"""A mesh file written in blocks, by several processes at once, so that no process holds
-the whole mesh: the binary PLY or STL layout of a mesh whose counts are known
-(:class:`MeshLayout`: the header and where each vertex and face record goes), the
-records of a block of vertices or faces, and the file itself (:func:`mesh_file`: made
-beside the target at its full size, filled at offsets by whoever sees it, renamed over
-the target when complete).
+"""A mesh written in blocks, by several processes at once, so that no process holds the
+whole mesh or copies another's part: the binary PLY or STL layout of a mesh whose counts
+are known (:class:`MeshLayout`: the header and where each vertex and face record goes),
+the records of a block of vertices or faces, and the file itself (:func:`mesh_file`:
+made beside the target at its full size, filled at offsets by whoever sees it, renamed
+over the target when complete).
 
-:func:`csdf.distributed.mesh` uses it with ``out=``: the workers write their parts'
-vertices and faces straight into the file (:func:`write_at`), the client only the
-header and the vertices that parts share.
+The same for a mesh in memory (:func:`shared_block`, layout ``'array'``: the vertex
+array ``(V, 3)`` float64 then the face array ``(F, 3)`` int64, in a file of a shared
+memory folder that the processes of one machine map, and the caller keeps as arrays).
+
+:func:`csdf.distributed.mesh` uses them: the workers write their parts' vertices and
+faces straight into the file or the block (:func:`write_at`, :func:`map_block`), the
+client only the header and the vertices that parts share.
 """
 
 from __future__ import annotations
 
+import mmap
 import os
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -24,10 +30,13 @@ from ..errors import CsdfError
 from .atomic import atomic_path
 
 __all__ = ["MeshLayout", "mesh_file", "write_at", "write_whole", "check_stream_path",
-           "STREAM_FORMATS"]
+           "shared_block", "map_block", "STREAM_FORMATS", "ARRAYS"]
 
 #: the formats written in blocks, by file extension
 STREAM_FORMATS = (".ply", ".stl")
+#: the layout of a mesh in memory: the vertex array (V, 3) float64, then the face array
+#: (F, 3) int64 (what trimesh keeps)
+ARRAYS = "array"
 _PLY_FACE = np.dtype([("n", "u1"), ("v", "<i4", (3,))])
 _STL_FACE = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
 
@@ -55,10 +64,11 @@ class MeshLayout:
     PLY (little-endian): the header, the vertices (3 float64, 24 bytes each), the faces
     (a uint8 3 and 3 int32 indices, 13 bytes each). STL: an 80-byte header, the uint32
     face count, and per face its unit normal, its three corners (float32) and a zero
-    uint16 (50 bytes); STL has no vertex list.
+    uint16 (50 bytes); STL has no vertex list. :data:`ARRAYS`: no header, the vertices
+    (3 float64), the faces (3 int64, 24 bytes), native byte order.
 
     Attributes:
-        format: ``'.ply'`` or ``'.stl'``; vertices, faces: the counts.
+        format: ``'.ply'``, ``'.stl'`` or :data:`ARRAYS`; vertices, faces: the counts.
     """
 
     format: str
@@ -67,6 +77,8 @@ class MeshLayout:
 
     def header(self) -> bytes:
         """The bytes before the first record."""
+        if self.format == ARRAYS:
+            return b""
         if self.format == ".stl":
             return b"csdf binary STL".ljust(80, b" ") + np.uint32(self.faces).tobytes()
         return ("ply\nformat binary_little_endian 1.0\ncomment csdf\n"
@@ -75,14 +87,14 @@ class MeshLayout:
                 "property list uchar int vertex_indices\nend_header\n").encode("ascii")
 
     def vertex_offset(self, i: int) -> int:
-        """Byte offset of vertex ``i`` (PLY only)."""
+        """Byte offset of vertex ``i`` (not STL)."""
         return len(self.header()) + 24 * int(i)
 
     def face_offset(self, j: int) -> int:
         """Byte offset of face ``j``."""
         if self.format == ".stl":
             return 84 + 50 * int(j)
-        return self.vertex_offset(self.vertices) + 13 * int(j)
+        return self.vertex_offset(self.vertices) + (24 if self.format == ARRAYS else 13) * int(j)
 
     def size(self) -> int:
         """The file's size in bytes."""
@@ -95,8 +107,11 @@ class MeshLayout:
 
     def face_records(self, faces: np.ndarray, verts: np.ndarray | None = None
                      ) -> np.ndarray:
-        """Records of faces ``(m, 3)``: PLY, their indices (file vertex numbers); STL,
-        their corners ``verts[faces]`` with ``verts (n, 3)`` float64 (model units)."""
+        """Records of faces ``(m, 3)``: PLY and :data:`ARRAYS`, their indices (file vertex
+        numbers); STL, their corners ``verts[faces]`` with ``verts (n, 3)`` float64
+        (model units)."""
+        if self.format == ARRAYS:
+            return np.ascontiguousarray(faces, dtype=np.int64)
         if self.format == ".ply":
             out = np.empty(len(faces), dtype=_PLY_FACE)
             out["n"] = 3
@@ -167,6 +182,66 @@ def write_whole(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray
     return layout
 
 
+class _Block:
+    """A mesh in a shared memory block: its file (while it is written), the map."""
+
+    def __init__(self, path: Path | None, m: mmap.mmap | None, layout: MeshLayout) -> None:
+        self.path, self._map, self.layout = path, m, layout
+
+    def write(self, offset: int, data) -> None:
+        """Write ``data`` (bytes or a contiguous array) at byte ``offset``."""
+        view = _bytes(data)
+        self._map[offset:offset + len(view)] = view
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(vertices (V, 3) float64, faces (F, 3) int64)``, views of the block."""
+        lay = self.layout
+        if self._map is None:
+            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        verts = np.frombuffer(self._map, dtype=np.float64, count=3 * lay.vertices)
+        faces = np.frombuffer(self._map, dtype=np.int64, count=3 * lay.faces,
+                              offset=lay.face_offset(0))
+        return verts.reshape(-1, 3), faces.reshape(-1, 3)
+
+
+@contextmanager
+def shared_block(layout: MeshLayout, folder: str | os.PathLike | None) -> Iterator[_Block]:
+    """A block for a mesh of ``layout`` (format :data:`ARRAYS`) in memory: a file in
+    ``folder`` (a shared memory folder such as ``/dev/shm``: other processes of this
+    machine map it, :func:`map_block`), or private memory when ``folder`` is None (then
+    only this process writes it). Yields an object with ``path`` (None without a
+    folder), ``write(offset, data)`` and ``arrays()``; the file is removed when the
+    block ends (the arrays stay valid: they map its memory)."""
+    size = layout.size()
+    if size == 0:
+        yield _Block(None, None, layout)
+        return
+    if folder is None:
+        yield _Block(None, mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS),
+                     layout)
+        return
+    fd, name = tempfile.mkstemp(dir=folder, prefix="csdf-mesh-", suffix=".block")
+    try:
+        os.ftruncate(fd, size)
+        yield _Block(Path(name), mmap.mmap(fd, size, flags=mmap.MAP_SHARED), layout)
+    finally:
+        os.close(fd)
+        os.unlink(name)
+
+
+def map_block(path: str | os.PathLike) -> mmap.mmap | None:
+    """The block ``path`` of :func:`shared_block` mapped for writing, or None when this
+    process does not see it (another machine)."""
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except FileNotFoundError:
+        return None
+    try:
+        return mmap.mmap(fd, 0, flags=mmap.MAP_SHARED)
+    finally:
+        os.close(fd)
+
+
 def write_at(path: str | os.PathLike, blocks: list[tuple[int, np.ndarray]]) -> bool:
     """Write ``blocks`` (``(byte offset, records)``) into the file ``path`` that
     :func:`mesh_file` made; False (and nothing written) when this process does not see
@@ -183,11 +258,16 @@ def write_at(path: str | os.PathLike, blocks: list[tuple[int, np.ndarray]]) -> b
     return True
 
 
-def _pwrite_all(fd: int, data, offset: int) -> None:
-    """``os.pwrite`` until all of ``data`` is written."""
+def _bytes(data) -> memoryview:
+    """``data`` (bytes or an array) as a flat byte view."""
     if isinstance(data, np.ndarray):
         data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
-    view = memoryview(data)
+    return memoryview(data)
+
+
+def _pwrite_all(fd: int, data, offset: int) -> None:
+    """``os.pwrite`` until all of ``data`` is written."""
+    view = _bytes(data)
     while len(view):
         n = os.pwrite(fd, view, offset)
         view, offset = view[n:], offset + n

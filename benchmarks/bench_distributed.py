@@ -3,18 +3,22 @@
 1. A mesh at ``--resolution`` (default 1024) by ``csdf.distributed.mesh`` on a
    ``--workers``-process ``LocalCluster`` (``csdf.distributed.connect``: one thread
    each) against ``csdf.mesh`` in this process (``check_thin=False``, the same grid),
-   in memory to in memory: median wall time of ``--repeat`` runs after a warm-up at
-   128 (kernels loaded on every worker) and one untimed run at the resolution (each
-   worker's field for that grid made and kept, as ``csdf.mesh`` keeps its compiled
-   kernels), the overhead, the tasks, how the mesh was put together
-   (``metadata['csdf']['assembled']``: ``shared``, the workers wrote it into shared
-   memory) and whether the two meshes are equal (canonical order).
-2. File to file: ``csdf.mesh`` then ``csdf.io.meshstream.write_whole`` (binary PLY,
+   in memory to in memory, and
+2. file to file: ``csdf.mesh`` then ``csdf.io.meshstream.write_whole`` (binary PLY,
    float64 vertices) against ``csdf.distributed.mesh(out=...)`` (the workers write
-   their parts into the same layout; no process holds the whole mesh), timed the same
-   way; the file read back by trimesh and compared with the in-memory mesh. (The same
-   file both ways: ``csdf.io.write_mesh`` goes through trimesh, which writes float32
-   vertices, a different and smaller file.)
+   their parts into the same layout; no process holds the whole mesh). The same file
+   both ways: ``csdf.io.write_mesh`` goes through trimesh, which writes float32
+   vertices, a different and smaller file.
+
+   After a warm-up at 128 (kernels loaded on every worker) and an untimed round at the
+   resolution (each worker's field for that grid made and kept, as this process keeps
+   its compiled kernels), ``--repeat`` rounds of the four runs one after the other;
+   a round counts only if other processes on the machine used under 5 % of a core
+   during each of its runs (measured from the CPU times of the machine and of this
+   process tree). Medians, the overheads, the tasks, how the mesh was put together
+   (``metadata['csdf']['assembled']``: ``shared``, the workers wrote it into shared
+   memory), whether the meshes and the file equal the one-process mesh (canonical
+   order), the load average and the rounds kept and dropped.
 3. A mesh at ``--big`` (default 2048) streamed to a PLY on a fresh cluster: wall time,
    file size and each worker's peak resident memory (``ru_maxrss``, whole process life).
 4. ``fit_many`` on ``--scans`` scans against a loop of ``csdf.fit``: seconds and whether
@@ -25,7 +29,7 @@ cheap field, so the mesh's size, not the field, sets the cost: the hard case for
 shipping results) and the zoo chair (a heavier field).
 
 Run: ``python benchmarks/bench_distributed.py [--workers 2] [--resolution 1024]
-[--big 2048] [--scans 200] [--repeat 3]`` (needs the ``dask`` extra).
+[--big 2048] [--scans 200] [--repeat 5] [--wait-load 1]`` (needs the ``dask`` extra).
 """
 
 from __future__ import annotations
@@ -33,13 +37,14 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+import psutil
 import trimesh
-from common import median_time
 
 import csdf
 import csdf.distributed as cd
@@ -65,9 +70,8 @@ def _peak_rss_mb(field: str = "VmHWM") -> float:
     return float("nan")
 
 
-def _median(fn, repeat: int):
-    """Median seconds of ``repeat`` runs after a warm-up, and the last result."""
-    return median_time(fn, repeat)
+#: a timed run counts only if other processes used less than this share of a core
+OTHERS = 0.05
 
 
 def models() -> list[tuple[str, object]]:
@@ -94,37 +98,112 @@ def _load() -> str:
     return f"{os.getloadavg()[0]:.2f}"
 
 
-def bench_mesh(client, res: int, repeat: int) -> None:
-    print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh (median of {repeat})\n")
+def _busy() -> float:
+    """CPU seconds the whole machine's processes have used (interrupts left out: the
+    loopback network between the client and its workers is handled there)."""
+    t = psutil.cpu_times()
+    return t.user + t.system + t.nice
+
+
+def _ours() -> float:
+    """CPU seconds of this process and its children (the cluster's workers)."""
+    total = 0.0
+    me = psutil.Process()
+    for p in [me, *me.children(recursive=True)]:
+        try:
+            c = p.cpu_times()
+        except psutil.Error:
+            continue
+        total += c.user + c.system
+    return total
+
+
+def _timed(fn) -> tuple[float, bool, object]:
+    """``(wall seconds, quiet, result)`` of ``fn()``: quiet when other processes used
+    less than :data:`OTHERS` of a core meanwhile (give or take 3 clock ticks of 10 ms,
+    the resolution of the CPU times)."""
+    b0, o0, t0 = _busy(), _ours(), time.perf_counter()
+    out = fn()
+    dt = time.perf_counter() - t0
+    return dt, (_busy() - b0) - (_ours() - o0) < OTHERS * dt + 0.03, out
+
+
+def _wait_load(limit: float, most: float = 900.0) -> None:
+    """Wait (at most ``most`` seconds) until the 1-minute load average is below
+    ``limit``."""
+    t0 = time.time()
+    while os.getloadavg()[0] >= limit and time.time() - t0 < most:
+        time.sleep(10)
+
+
+def bench_mesh(client, res: int, repeat: int, wait_load: float | None,
+               only: list[str] | None = None) -> None:
+    print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh\n")
     print("In memory: `csdf.mesh` vs `csdf.distributed.mesh`. To file: `csdf.mesh` + "
           "`csdf.io.meshstream.write_whole` vs `csdf.distributed.mesh(out=...)`, the same "
-          "binary PLY (float64 vertices).\n")
+          "binary PLY (float64 vertices). Medians of "
+          f"{repeat} rounds of the four, one after the other, after an untimed round; a "
+          f"round is kept only if other processes used under {OTHERS:.0%} of a core during "
+          "each of its runs (the last column: the 1-minute load average when the model's "
+          "runs began, rounds kept and dropped).\n")
     print("| model | triangles | csdf.mesh s | distributed s | overhead | mesh + write PLY s | "
           "distributed out= PLY s | overhead | tasks | largest cube | assembled | "
-          "equal (memory, file) | load before / after |")
+          "equal (memory, file) | load; rounds kept / dropped |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, shape in models():
-        load0 = _load()
+        if only and not any(o in name for o in only):
+            continue
         csdf.mesh(shape, resolution=128, progress=False, check_thin=False)  # warm-up
         cd.mesh(shape, resolution=128, client=client, progress=False)
-        t_one, whole = _median(lambda s=shape: csdf.mesh(
-            s, resolution=res, progress=False, check_thin=False), repeat)
-        t_dist, dm = _median(lambda s=shape: cd.mesh(
-            s, resolution=res, client=client, progress=False), repeat)
-        equal = _equal(whole, dm)
-        assembled = dm.metadata["csdf"]["assembled"]
-        del dm
         with tempfile.TemporaryDirectory(dir=".") as tmp:
             one, out = Path(tmp) / "one.ply", Path(tmp) / "m.ply"
-            t_file_one, _ = _median(lambda s=shape, p=one: _write_whole(csdf.mesh(
-                s, resolution=res, progress=False, check_thin=False), p), repeat)
-            t_out, mf = _median(lambda s=shape, p=out: cd.mesh(
-                s, resolution=res, client=client, progress=False, out=p), repeat)
+            runs = {
+                "one": lambda s=shape: csdf.mesh(s, resolution=res, progress=False,
+                                                 check_thin=False),
+                "dist": lambda s=shape: cd.mesh(s, resolution=res, client=client,
+                                                progress=False),
+                "file_one": lambda s=shape, p=one: _write_whole(csdf.mesh(
+                    s, resolution=res, progress=False, check_thin=False), p),
+                "file_dist": lambda s=shape, p=out: cd.mesh(
+                    s, resolution=res, client=client, progress=False, out=p),
+            }
+            for fn in runs.values():  # (each worker's field for this grid made and kept)
+                fn()
+            if wait_load is not None:
+                _wait_load(wait_load)
+            load0 = _load()
+            kept: dict[str, list[float]] = {k: [] for k in runs}
+            dropped = 0
+            while len(kept["one"]) < repeat and dropped < 4 * repeat:
+                got = {}
+                for k, fn in runs.items():
+                    dt, quiet, result = _timed(fn)
+                    got[k] = (dt, quiet)
+                    if k in ("one", "dist"):
+                        last = result  # (the in-memory meshes, compared below)
+                        if k == "one":
+                            whole = result
+                    del result
+                if all(q for _, q in got.values()):
+                    for k, (dt, _) in got.items():
+                        kept[k].append(dt)
+                else:
+                    dropped += 1
+            n_kept = len(kept["one"])
+            if not n_kept:  # (never quiet: the last round, said so)
+                kept = {k: [got[k][0]] for k in runs}
+            med = {k: statistics.median(v) for k, v in kept.items()}
+            equal = _equal(whole, last)
+            assembled = last.metadata["csdf"]["assembled"]
+            del last
+            mf = runs["file_dist"]()
             equal_file = _equal(whole, trimesh.load(out, process=False))
-        print(f"| {name} | {mf.faces:,} | {t_one:.2f} | {t_dist:.2f} | "
-              f"{(t_dist / t_one - 1) * 100:+.0f} % | {t_file_one:.2f} | {t_out:.2f} | "
-              f"{(t_out / t_file_one - 1) * 100:+.0f} % | {mf.tasks} | {mf.super_brick} | "
-              f"{assembled} | {equal}, {equal_file} | {load0} / {_load()} |", flush=True)
+        print(f"| {name} | {mf.faces:,} | {med['one']:.2f} | {med['dist']:.2f} | "
+              f"{(med['dist'] / med['one'] - 1) * 100:+.0f} % | {med['file_one']:.2f} | "
+              f"{med['file_dist']:.2f} | {(med['file_dist'] / med['file_one'] - 1) * 100:+.0f} % "
+              f"| {mf.tasks} | {mf.super_brick} | {assembled} | {equal}, {equal_file} | "
+              f"{load0}; {n_kept} / {dropped}{'' if n_kept else ' (none quiet: the last)'} |",
+              flush=True)
         del whole
 
 
@@ -189,16 +268,28 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=1024)
     ap.add_argument("--big", type=int, default=2048, help="0 skips the out-of-core run")
     ap.add_argument("--scans", type=int, default=200, help="0 skips fit_many")
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--models", default=None, help="only the models whose names hold one "
+                    "of these comma-separated words")
+    ap.add_argument("--wait-load", type=float, default=None, help="before each model's "
+                    "timed runs, wait (up to 15 min) until the 1-minute load average is "
+                    "below this")
     a = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, "
           f"{csdf.parallel.N_THREADS} cores; {a.workers} worker processes x 1 thread")
     if a.big:  # first, so that no earlier job's memory is in the client's figure
+        if a.wait_load is not None:
+            _wait_load(a.wait_load)
+        print(f"(1-minute load average before: {_load()})")
         bench_big(a.workers, a.big)
     client = cd.connect(workers=a.workers)  # (each worker gets its share of the cores)
     try:
-        bench_mesh(client, a.resolution, a.repeat)
+        bench_mesh(client, a.resolution, a.repeat, a.wait_load,
+                   a.models.split(",") if a.models else None)
         if a.scans:
+            if a.wait_load is not None:
+                _wait_load(a.wait_load)
+            print(f"\n(1-minute load average before: {_load()})")
             bench_fit(client, a.scans)
     finally:
         cd.disconnect(client)

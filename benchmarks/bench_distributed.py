@@ -1,11 +1,24 @@
 """csdf.distributed on a local Dask cluster (issue 22), against one machine in the same run.
 
 1. A mesh at ``--resolution`` (default 1024) by ``csdf.distributed.mesh`` on a
-   ``--workers``-process ``LocalCluster`` (one thread each) against ``csdf.mesh`` in
-   this process (``check_thin=False``, the same grid): median wall time of
-   ``--repeat`` runs after a warm-up at 128 (kernels loaded on every worker), the
-   overhead, the tasks, and whether the two meshes are equal (canonical order).
-2. The same with ``out=`` a PLY file (streamed: no process holds the whole mesh).
+   ``--workers``-process ``LocalCluster`` (``csdf.distributed.connect``: one thread
+   each) against ``csdf.mesh`` in this process (``check_thin=False``, the same grid),
+   in memory to in memory, and
+2. file to file: ``csdf.mesh`` then ``csdf.io.meshstream.write_whole`` (binary PLY,
+   float64 vertices) against ``csdf.distributed.mesh(out=...)`` (the workers write
+   their parts into the same layout; no process holds the whole mesh). The same file
+   both ways: ``csdf.io.write_mesh`` goes through trimesh, which writes float32
+   vertices, a different and smaller file.
+
+   After a warm-up at 128 (kernels loaded on every worker) and an untimed round at the
+   resolution (each worker's field for that grid made and kept, as this process keeps
+   its compiled kernels), ``--repeat`` rounds of the four runs one after the other;
+   a round counts only if other processes on the machine used under 5 % of a core
+   during each of its runs (measured from the CPU times of the machine and of this
+   process tree). Medians, the overheads, the tasks, how the mesh was put together
+   (``metadata['csdf']['assembled']``: ``shared``, the workers wrote it into shared
+   memory), whether the meshes and the file equal the one-process mesh (canonical
+   order), the load average and the rounds kept and dropped.
 3. A mesh at ``--big`` (default 2048) streamed to a PLY on a fresh cluster: wall time,
    file size and each worker's peak resident memory (``ru_maxrss``, whole process life).
 4. ``fit_many`` on ``--scans`` scans against a loop of ``csdf.fit``: seconds and whether
@@ -16,22 +29,26 @@ cheap field, so the mesh's size, not the field, sets the cost: the hard case for
 shipping results) and the zoo chair (a heavier field).
 
 Run: ``python benchmarks/bench_distributed.py [--workers 2] [--resolution 1024]
-[--big 2048] [--scans 200] [--repeat 3]`` (needs the ``dask`` extra).
+[--big 2048] [--scans 200] [--repeat 5] [--wait-load 1]`` (needs the ``dask`` extra).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
+import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from common import median_time
+import psutil
+import trimesh
 
 import csdf
 import csdf.distributed as cd
+from csdf.io.meshstream import write_whole
 from csdf.mesh.parts import canonical
 
 
@@ -53,9 +70,8 @@ def _peak_rss_mb(field: str = "VmHWM") -> float:
     return float("nan")
 
 
-def _median(fn, repeat: int):
-    """Median seconds of ``repeat`` runs after a warm-up, and the last result."""
-    return median_time(fn, repeat)
+#: a timed run counts only if other processes used less than this share of a core
+OTHERS = 0.05
 
 
 def models() -> list[tuple[str, object]]:
@@ -65,29 +81,130 @@ def models() -> list[tuple[str, object]]:
             ("zoo gear", csdf.zoo.load("gear"))]
 
 
-def bench_mesh(client, res: int, repeat: int) -> None:
-    print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh (median of {repeat})\n")
-    print("| model | triangles | csdf.mesh s | distributed s | overhead | tasks | "
-          "super-brick | equal | streamed to PLY s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+def _equal(a, b) -> bool:
+    """Whether two meshes are the same up to order (:func:`canonical`)."""
+    ca, cb = canonical(a.vertices, a.faces), canonical(b.vertices, b.faces)
+    return ca[0].shape == cb[0].shape and np.array_equal(ca[0], cb[0]) and \
+        np.array_equal(ca[1], cb[1])
+
+
+def _write_whole(m, path: Path):
+    """``m`` written as :func:`csdf.distributed.mesh` writes a PLY."""
+    return write_whole(path, m.vertices, m.faces)
+
+
+def _load() -> str:
+    """The 1-minute load average now."""
+    return f"{os.getloadavg()[0]:.2f}"
+
+
+def _busy() -> float:
+    """CPU seconds the whole machine's processes have used (interrupts left out: the
+    loopback network between the client and its workers is handled there)."""
+    t = psutil.cpu_times()
+    return t.user + t.system + t.nice
+
+
+def _ours() -> float:
+    """CPU seconds of this process and its children (the cluster's workers)."""
+    total = 0.0
+    me = psutil.Process()
+    for p in [me, *me.children(recursive=True)]:
+        try:
+            c = p.cpu_times()
+        except psutil.Error:
+            continue
+        total += c.user + c.system
+    return total
+
+
+def _timed(fn) -> tuple[float, bool, object]:
+    """``(wall seconds, quiet, result)`` of ``fn()``: quiet when other processes used
+    less than :data:`OTHERS` of a core meanwhile (give or take 3 clock ticks of 10 ms,
+    the resolution of the CPU times)."""
+    b0, o0, t0 = _busy(), _ours(), time.perf_counter()
+    out = fn()
+    dt = time.perf_counter() - t0
+    return dt, (_busy() - b0) - (_ours() - o0) < OTHERS * dt + 0.03, out
+
+
+def _wait_load(limit: float, most: float = 900.0) -> None:
+    """Wait (at most ``most`` seconds) until the 1-minute load average is below
+    ``limit``."""
+    t0 = time.time()
+    while os.getloadavg()[0] >= limit and time.time() - t0 < most:
+        time.sleep(10)
+
+
+def bench_mesh(client, res: int, repeat: int, wait_load: float | None,
+               only: list[str] | None = None) -> None:
+    print(f"\n## Mesh at {res}^3: csdf.distributed.mesh vs csdf.mesh\n")
+    print("In memory: `csdf.mesh` vs `csdf.distributed.mesh`. To file: `csdf.mesh` + "
+          "`csdf.io.meshstream.write_whole` vs `csdf.distributed.mesh(out=...)`, the same "
+          "binary PLY (float64 vertices). Medians of "
+          f"{repeat} rounds of the four, one after the other, after an untimed round; a "
+          f"round is kept only if other processes used under {OTHERS:.0%} of a core during "
+          "each of its runs (the last column: the 1-minute load average when the model's "
+          "runs began, rounds kept and dropped).\n")
+    print("| model | triangles | csdf.mesh s | distributed s | overhead | mesh + write PLY s | "
+          "distributed out= PLY s | overhead | tasks | largest cube | assembled | "
+          "equal (memory, file) | load; rounds kept / dropped |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, shape in models():
+        if only and not any(o in name for o in only):
+            continue
         csdf.mesh(shape, resolution=128, progress=False, check_thin=False)  # warm-up
         cd.mesh(shape, resolution=128, client=client, progress=False)
-        t_one, whole = _median(lambda s=shape: csdf.mesh(
-            s, resolution=res, progress=False, check_thin=False), repeat)
-        t_dist, dm = _median(lambda s=shape: cd.mesh(
-            s, resolution=res, client=client, progress=False), repeat)
-        a, b = canonical(whole.vertices, whole.faces), canonical(dm.vertices, dm.faces)
-        equal = a[0].shape == b[0].shape and np.array_equal(a[0], b[0]) and \
-            np.array_equal(a[1], b[1])
-        del whole, dm, a, b
-        with tempfile.TemporaryDirectory() as tmp:
-            t_out, mf = _median(lambda s=shape: cd.mesh(
-                s, resolution=res, client=client, progress=False,
-                out=Path(tmp) / "m.ply"), repeat)
-        print(f"| {name} | {mf.faces:,} | {t_one:.2f} | {t_dist:.2f} | "
-              f"{(t_dist / t_one - 1) * 100:+.0f} % | {mf.tasks} | {mf.super_brick} | "
-              f"{equal} | {t_out:.2f} |", flush=True)
+        with tempfile.TemporaryDirectory(dir=".") as tmp:
+            one, out = Path(tmp) / "one.ply", Path(tmp) / "m.ply"
+            runs = {
+                "one": lambda s=shape: csdf.mesh(s, resolution=res, progress=False,
+                                                 check_thin=False),
+                "dist": lambda s=shape: cd.mesh(s, resolution=res, client=client,
+                                                progress=False),
+                "file_one": lambda s=shape, p=one: _write_whole(csdf.mesh(
+                    s, resolution=res, progress=False, check_thin=False), p),
+                "file_dist": lambda s=shape, p=out: cd.mesh(
+                    s, resolution=res, client=client, progress=False, out=p),
+            }
+            for fn in runs.values():  # (each worker's field for this grid made and kept)
+                fn()
+            if wait_load is not None:
+                _wait_load(wait_load)
+            load0 = _load()
+            kept: dict[str, list[float]] = {k: [] for k in runs}
+            dropped = 0
+            while len(kept["one"]) < repeat and dropped < 4 * repeat:
+                got = {}
+                for k, fn in runs.items():
+                    dt, quiet, result = _timed(fn)
+                    got[k] = (dt, quiet)
+                    if k in ("one", "dist"):
+                        last = result  # (the in-memory meshes, compared below)
+                        if k == "one":
+                            whole = result
+                    del result
+                if all(q for _, q in got.values()):
+                    for k, (dt, _) in got.items():
+                        kept[k].append(dt)
+                else:
+                    dropped += 1
+            n_kept = len(kept["one"])
+            if not n_kept:  # (never quiet: the last round, said so)
+                kept = {k: [got[k][0]] for k in runs}
+            med = {k: statistics.median(v) for k, v in kept.items()}
+            equal = _equal(whole, last)
+            assembled = last.metadata["csdf"]["assembled"]
+            del last
+            mf = runs["file_dist"]()
+            equal_file = _equal(whole, trimesh.load(out, process=False))
+        print(f"| {name} | {mf.faces:,} | {med['one']:.2f} | {med['dist']:.2f} | "
+              f"{(med['dist'] / med['one'] - 1) * 100:+.0f} % | {med['file_one']:.2f} | "
+              f"{med['file_dist']:.2f} | {(med['file_dist'] / med['file_one'] - 1) * 100:+.0f} % "
+              f"| {mf.tasks} | {mf.super_brick} | {assembled} | {equal}, {equal_file} | "
+              f"{load0}; {n_kept} / {dropped}{'' if n_kept else ' (none quiet: the last)'} |",
+              flush=True)
+        del whole
 
 
 def bench_big(workers: int, res: int) -> None:
@@ -108,7 +225,7 @@ def bench_big(workers: int, res: int) -> None:
     finally:
         cd.disconnect(client)
     print(f"\n## Mesh at {res}^3 streamed to disk ({name}, {workers} workers)\n")
-    print("| triangles | vertices | file | s | tasks | super-brick | worker peak RSS | "
+    print("| triangles | vertices | file | s | tasks | largest cube | worker peak RSS | "
           "client peak RSS (before the job) |")
     print("|---|---|---|---|---|---|---|---|")
     print(f"| {mf.faces:,} | {mf.vertices:,} | {size / 2**30:.2f} GiB | {dt:.1f} | "
@@ -151,16 +268,28 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=1024)
     ap.add_argument("--big", type=int, default=2048, help="0 skips the out-of-core run")
     ap.add_argument("--scans", type=int, default=200, help="0 skips fit_many")
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--models", default=None, help="only the models whose names hold one "
+                    "of these comma-separated words")
+    ap.add_argument("--wait-load", type=float, default=None, help="before each model's "
+                    "timed runs, wait (up to 15 min) until the 1-minute load average is "
+                    "below this")
     a = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, "
           f"{csdf.parallel.N_THREADS} cores; {a.workers} worker processes x 1 thread")
     if a.big:  # first, so that no earlier job's memory is in the client's figure
+        if a.wait_load is not None:
+            _wait_load(a.wait_load)
+        print(f"(1-minute load average before: {_load()})")
         bench_big(a.workers, a.big)
     client = cd.connect(workers=a.workers)  # (each worker gets its share of the cores)
     try:
-        bench_mesh(client, a.resolution, a.repeat)
+        bench_mesh(client, a.resolution, a.repeat, a.wait_load,
+                   a.models.split(",") if a.models else None)
         if a.scans:
+            if a.wait_load is not None:
+                _wait_load(a.wait_load)
+            print(f"\n(1-minute load average before: {_load()})")
             bench_fit(client, a.scans)
     finally:
         cd.disconnect(client)

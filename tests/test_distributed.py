@@ -41,14 +41,32 @@ def _same(a, b):
         np.array_equal(ca[1], cb[1])
 
 
-def test_mesh_equals_one_machine_mesh(client):
+def _blocks_left() -> list[str]:
+    folder = cd.api.SHARED_FOLDER
+    return [n for n in os.listdir(folder) if n.startswith("csdf-")] if folder else []
+
+
+@pytest.mark.parametrize("assembly", ["workers", "client", "records"])
+def test_mesh_equals_one_machine_mesh(client, monkeypatch, assembly):
+    # workers: they write the mesh into a shared memory block (they run on this
+    # machine); client: the parts come back and are stitched here (workers elsewhere);
+    # records: the block has no room in the shared folder, the workers send their
+    # records and the client writes them
+    if assembly == "client":
+        monkeypatch.setattr(cd.api, "SHARED_FOLDER", None)
+    if assembly == "records":
+        monkeypatch.setattr(cd.api, "_room", lambda folder, layout: False)
+    left = _blocks_left()
     whole = csdf.mesh(CSG, resolution=160, progress=False, check_thin=False)
     before = client.run(cd.worker_stats)
     d = cd.mesh(CSG, resolution=160, client=client, super_brick=32, progress=False)
     meta = d.metadata["csdf"]
     assert meta["tasks"] > 20 and meta["super_brick"] == 32
+    assert meta["assembled"] == {"workers": "shared", "client": "parts",
+                                 "records": "records"}[assembly]
     assert _same(whole, d)
     assert d.is_watertight and d.is_winding_consistent
+    assert _blocks_left() == left  # (the block's file is gone; its memory is the mesh's)
     after = client.run(cd.worker_stats)
     made = sum(after[w]["fields_made"] - before[w]["fields_made"] for w in after)
     ran = sum(after[w]["tasks"] - before[w]["tasks"] for w in after)
@@ -65,13 +83,52 @@ def test_mesh_with_params_and_default_plan(client):
     assert _same(whole, d)
 
 
-def test_mesh_streamed_to_disk(client, tmp_path):
+@pytest.mark.parametrize("suffix", [".ply", ".stl"])
+def test_mesh_written_by_the_workers(client, tmp_path, suffix):
     whole = csdf.mesh(CSG, resolution=120, progress=False, check_thin=False)
-    res = cd.mesh(CSG, resolution=120, client=client, super_brick=32, progress=False,
-                  out=tmp_path / "m.ply")
-    assert isinstance(res, cd.MeshFile) and res.tasks > 8
+    d = cd.mesh(CSG, resolution=120, client=client, progress=False, max_tasks=20)
+    res = cd.mesh(CSG, resolution=120, client=client, progress=False, max_tasks=20,
+                  out=tmp_path / f"m{suffix}")
+    assert isinstance(res, cd.MeshFile) and res.tasks > 4
     assert (res.vertices, res.faces) == (len(whole.vertices), len(whole.faces))
-    assert _same(whole, trimesh.load(res.path, process=False))
+    assert [p.name for p in tmp_path.iterdir()] == [f"m{suffix}"]  # no temporaries
+    back = trimesh.load(res.path, process=False)
+    if suffix == ".ply":  # the workers' file is the in-memory mesh, bit for bit
+        assert _same(d, back) and _same(whole, back)
+        assert back.is_watertight and back.is_winding_consistent
+    else:  # float32 corners, one triple per face
+        assert len(back.faces) == len(whole.faces)
+        assert np.allclose(np.sort(back.triangles.reshape(-1, 9), axis=0),
+                           np.sort(whole.triangles.reshape(-1, 9), axis=0), atol=1e-6)
+        assert trimesh.load(res.path).is_watertight  # (merged on load)
+    again = cd.mesh(CSG, resolution=120, client=client, progress=False, super_brick=32,
+                    out=tmp_path / f"m{suffix}")  # (one cube size, many parts)
+    assert again.tasks > 20 and (again.vertices, again.faces) == (res.vertices, res.faces)
+
+
+def test_default_plan(client):
+    fld = csdf.as_field(CSG)
+    d = cd.mesh(CSG, resolution=256, client=client, progress=False)
+    meta = d.metadata["csdf"]
+    assert 1 < meta["tasks"] <= cd.TASKS_PER_THREAD * 2  # (two workers)
+    assert meta["super_brick"] <= 512
+    assert _same(csdf.mesh(fld, resolution=256, progress=False, check_thin=False), d)
+    assert d.is_watertight
+
+
+def test_connect_sets_the_workers_environment(monkeypatch):
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")  # (as Dask's own clusters leave)
+    monkeypatch.delenv("CSDF_THREADS", raising=False)
+    c = cd.connect(workers=2)
+    try:
+        env = c.run(lambda: (os.environ.get("CSDF_THREADS"),
+                             os.environ.get("MALLOC_TRIM_THRESHOLD_")))
+    finally:
+        cd.disconnect(c)
+    share = str(max(1, len(os.sched_getaffinity(0)) // 2))
+    assert list(env.values()) == [(share, None)] * 2
+    assert os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"  # this process's, as it was
+    assert "CSDF_THREADS" not in os.environ
 
 
 def test_mesh_bad_arguments(client, tmp_path):

@@ -318,13 +318,15 @@ def mesh(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     scheduler: str | None = typer.Option(None, "--scheduler", help=_SCHEDULER_HELP + " "
                                          "Marching cubes only; no thin-part search; .ply "
-                                         "and .stl are streamed to disk as tasks finish."),
+                                         "and .stl are written by the workers (in a folder "
+                                         "they see, else through the client)."),
     workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
     colors: bool = typer.Option(False, "--colors", help="Vertex colours from the model's "
                                 "color() nodes (kept by .ply, .glb and .obj)."),
     super_brick: int | None = typer.Option(None, "--super-brick", help="With --scheduler/"
-                                           "--workers: voxels along a task's cube (a power "
-                                           "of two; default: at most 96 tasks)."),
+                                           "--workers: voxels along every task's cube (a "
+                                           "power of two; default: cubes of similar work, "
+                                           "8 tasks per worker thread)."),
 ):
     """Mesh a model to a watertight triangle mesh."""
 

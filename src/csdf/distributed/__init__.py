@@ -18,6 +18,9 @@ worker. ``docs/distributed.md`` says how to run on a real cluster.
 from .api import (
     EVAL_CHUNK,
     SAMPLE_CHUNK,
+    TASK_SURFACE,
+    TASKS_PER_THREAD,
+    WORKER_ENV,
     FitFailure,
     MeshFile,
     connect,
@@ -32,4 +35,4 @@ from .tasks import worker_stats
 
 __all__ = ["mesh", "evaluate", "sample_surface", "sample_volume", "fit_many", "connect",
            "disconnect", "MeshFile", "FitFailure", "worker_stats", "EVAL_CHUNK",
-           "SAMPLE_CHUNK"]
+           "SAMPLE_CHUNK", "TASKS_PER_THREAD", "TASK_SURFACE", "WORKER_ENV"]

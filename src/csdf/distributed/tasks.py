@@ -22,12 +22,14 @@ import numpy as np
 
 from ..compiler.program import Program
 from ..field import Field, as_field
+from ..io.meshstream import ARRAYS, MeshLayout, map_block, write_at
 from ..mesh.api import prepare_field
 from ..mesh.grid import Grid
-from ..mesh.parts import Part, mesh_part
+from ..mesh.part_kernels import file_part
+from ..mesh.parts import Part, PartTask, mesh_part
 
-__all__ = ["worker_field", "worker_stats", "mesh_task", "eval_block", "sample_task",
-           "fit_task", "FIELDS_KEPT"]
+__all__ = ["worker_field", "worker_stats", "mesh_task", "part_summary", "write_part",
+           "eval_block", "sample_task", "fit_task", "FIELDS_KEPT"]
 
 #: fields a worker keeps between tasks
 FIELDS_KEPT = 8
@@ -85,13 +87,60 @@ def _grid(grid: tuple) -> Grid:
 
 
 def mesh_task(blob: bytes, params: dict[str, float], bounds: np.ndarray, grid: tuple,
-              cell: np.ndarray, size: int) -> Part:
-    """Marching cubes of one super-brick (:func:`csdf.mesh.parts.mesh_part`); faces as
-    int32 (a part's vertex count is far below 2^31) to halve what goes back."""
+              task: PartTask, encode: bool = False) -> Part:
+    """Marching cubes of one part (:func:`csdf.mesh.parts.mesh_part`): 12 bytes a vertex
+    (its edge inside the cube, uint32, and ``t``) and 12 a face (int32); with
+    ``encode``, 6 a face (:meth:`csdf.mesh.parts.Part.encoded`), to go back."""
     fld = worker_field(blob, params, bounds, grid)
-    part = mesh_part(fld, _grid(grid), cell, size)
-    part.faces = part.faces.astype(np.int32)
-    return part
+    part = mesh_part(fld, _grid(grid), task)
+    return part.encoded() if encode else part
+
+
+def part_summary(part: Part) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """What the client needs to lay out a file of the whole mesh: ``(own vertices,
+    faces, keys (S,) int64, t (S,))``, the counts and the shared vertices (on the cube's
+    faces: grid-wide edge numbers and ``t``), while the part stays on this worker."""
+    shared = part.shared()
+    return (int(len(shared) - shared.sum()), len(part.faces), part.keys(shared),
+            np.ascontiguousarray(part.t[shared]))
+
+
+def write_part(path: str | None, layout: MeshLayout, part: Part, own_base: int,
+               face_base: int, shared_ids: np.ndarray) -> list[tuple[int, np.ndarray]] | None:
+    """Write one part's records into the file or shared memory block ``path``
+    (:func:`csdf.io.meshstream.mesh_file`, :func:`~csdf.io.meshstream.shared_block`) at
+    the places the client planned: its own vertices as vertices ``own_base, ...`` (not
+    STL), its faces as faces ``face_base, ...``, its shared vertices numbered
+    ``shared_ids (S,)`` (the mesh's vertex numbers, in the part's order). Returns None,
+    or the ``(offset, records)`` blocks when this worker does not see ``path`` (or it
+    is None): the client writes them."""
+    if layout.format == ".stl":
+        blocks = [(layout.face_offset(face_base),
+                   layout.face_records(part.faces, part.vertices()))]
+        return None if path is not None and write_at(path, blocks) else blocks
+    n_own = len(part.edges) - len(shared_ids)
+    block = map_block(path) if layout.format == ARRAYS and path is not None else None
+    if block is not None:  # (positions and faces written in place, in their final form)
+        verts = np.frombuffer(block, dtype=np.float64, count=3 * n_own,
+                              offset=layout.vertex_offset(own_base)).reshape(-1, 3)
+        faces = np.frombuffer(block, dtype=np.int64, count=part.faces.size,
+                              offset=layout.face_offset(face_base)).reshape(-1, 3)
+    else:
+        verts = np.empty((n_own, 3))
+        faces = np.empty(part.faces.shape, dtype=np.int64 if layout.format == ARRAYS
+                         else np.int32)
+    file_part(part.edges, part.t, part.face_indices(), np.asarray(part.cell, dtype=np.int64),
+              int(part.size), np.asarray(part.grid.origin, dtype=np.float64),
+              float(part.grid.h), int(own_base), np.asarray(shared_ids, dtype=np.int64),
+              verts, faces)
+    if block is not None:
+        del verts, faces  # (the views first: a map with exported buffers cannot close)
+        block.close()
+        return None
+    blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts)),
+              (layout.face_offset(face_base), layout.face_records(faces))]
+    return None if layout.format != ARRAYS and path is not None and write_at(path, blocks) \
+        else blocks
 
 
 def eval_block(points: np.ndarray, blob: bytes, params: dict[str, float], what: str,

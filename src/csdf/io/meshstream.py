@@ -1,163 +1,273 @@
-"""A mesh written to disk in parts, so that no machine holds it whole:
-:class:`MeshStreamWriter` takes the parts of :mod:`csdf.mesh.parts` one at a time and
-writes a binary PLY or STL.
+"""A mesh written in blocks, by several processes at once, so that no process holds the
+whole mesh or copies another's part: the binary PLY or STL layout of a mesh whose counts
+are known (:class:`MeshLayout`: the header and where each vertex and face record goes),
+the records of a block of vertices or faces, and the file itself (:func:`mesh_file`:
+made beside the target at its full size, filled at offsets by whoever sees it, renamed
+over the target when complete).
 
-Each part's own vertices (those off the faces between super-bricks) go straight to a
-temporary file, numbered as they come; its faces go to another, with each shared vertex
-(on a face between parts, which a neighbour holds too) as a placeholder. Only the
-shared vertices stay in memory (a few per cent of a large mesh: the surface's traces on
-the super-bricks' faces). At the end the shared vertices are merged by grid edge and
-numbered after the others, the placeholders are replaced in one pass over the faces,
-and the file is assembled next to the target and renamed over it (atomic, like every
-csdf writer: :func:`csdf.io.atomic_path`).
+The same for a mesh in memory (:func:`shared_block`, layout ``'array'``: the vertex
+array ``(V, 3)`` float64 then the face array ``(F, 3)`` int64, in a file of a shared
+memory folder that the processes of one machine map, and the caller keeps as arrays).
+
+:func:`csdf.distributed.mesh` uses them: the workers write their parts' vertices and
+faces straight into the file or the block (:func:`write_at`, :func:`map_block`), the
+client only the header and the vertices that parts share.
 """
 
 from __future__ import annotations
 
+import mmap
 import os
-import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import CsdfError
-from ..mesh.parts import Part, Stitcher
 from .atomic import atomic_path
 
-__all__ = ["MeshStreamWriter", "STREAM_FORMATS"]
+__all__ = ["MeshLayout", "mesh_file", "write_at", "write_whole", "check_stream_path",
+           "shared_block", "map_block", "STREAM_FORMATS", "ARRAYS"]
 
-#: the formats the writer streams, by file extension
+#: the formats written in blocks, by file extension
 STREAM_FORMATS = (".ply", ".stl")
-_BLOCK = 1 << 20  # faces per block in the final pass
+#: the layout of a mesh in memory: the vertex array (V, 3) float64, then the face array
+#: (F, 3) int64 (what trimesh keeps)
+ARRAYS = "array"
+_PLY_FACE = np.dtype([("n", "u1"), ("v", "<i4", (3,))])
+_STL_FACE = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
 
 
-class MeshStreamWriter:
-    """Write a mesh that arrives in parts to a binary PLY or STL file.
-
-    Use as a context manager: ``with MeshStreamWriter(path) as w: w.add(part)``; the
-    file appears (atomically) when the block ends without an error; on an error nothing
-    is left behind. ``vertices``/``faces`` then hold the counts written.
-
-    Args:
-        path: the target, ``.ply`` (float64 vertices, int32 indices) or ``.stl``
-            (float32, as the format has it).
+def check_stream_path(path: str | os.PathLike) -> Path:
+    """``path`` as a :class:`~pathlib.Path`, checked: a ``.ply`` or ``.stl`` file in a
+    folder that exists.
 
     Raises:
-        CsdfError: another extension, or a file that cannot be written.
+        CsdfError: another extension, or no such folder.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in STREAM_FORMATS:
+        raise CsdfError(f"cannot stream a mesh to {path.name!r}: use a .ply or .stl file")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise CsdfError(f"cannot write {path}: folder {folder} does not exist")
+    return path
+
+
+@dataclass(frozen=True)
+class MeshLayout:
+    """Where the records of a binary mesh file of ``vertices`` and ``faces`` go.
+
+    PLY (little-endian): the header, the vertices (3 float64, 24 bytes each), the faces
+    (a uint8 3 and 3 int32 indices, 13 bytes each). STL: an 80-byte header, the uint32
+    face count, and per face its unit normal, its three corners (float32) and a zero
+    uint16 (50 bytes); STL has no vertex list. :data:`ARRAYS`: no header, the vertices
+    (3 float64), the faces (3 int64, 24 bytes), native byte order.
+
+    Attributes:
+        format: ``'.ply'``, ``'.stl'`` or :data:`ARRAYS`; vertices, faces: the counts.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
-        self.path = Path(path)
-        self.format = self.path.suffix.lower()
-        if self.format not in STREAM_FORMATS:
-            raise CsdfError(f"cannot stream a mesh to {self.path.name!r}: use a .ply or "
-                            ".stl file")
-        folder = self.path.parent if str(self.path.parent) else Path(".")
-        if not folder.is_dir():
-            raise CsdfError(f"cannot write {self.path}: folder {folder} does not exist")
-        self.vertices = 0
-        self.faces = 0
-        self._dir: tempfile.TemporaryDirectory | None = None
-        self._folder = folder
+    format: str
+    vertices: int
+    faces: int
 
-    def __enter__(self) -> MeshStreamWriter:
-        try:
-            self._dir = tempfile.TemporaryDirectory(dir=self._folder,
-                                                    prefix=f".{self.path.name}.")
-        except OSError as exc:
-            raise CsdfError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        tmp = Path(self._dir.name)
-        self._vfile = open(tmp / "vertices", "wb")  # noqa: SIM115 (closed in __exit__)
-        self._ffile = open(tmp / "faces", "wb")  # noqa: SIM115
-        self._st = Stitcher(  # (tofile: no copy of the block as bytes)
-            lambda v: np.ascontiguousarray(v, dtype="<f8").tofile(self._vfile),
-            lambda f: np.ascontiguousarray(f, dtype="<i8").tofile(self._ffile))
-        return self
+    def header(self) -> bytes:
+        """The bytes before the first record."""
+        if self.format == ARRAYS:
+            return b""
+        if self.format == ".stl":
+            return b"csdf binary STL".ljust(80, b" ") + np.uint32(self.faces).tobytes()
+        return ("ply\nformat binary_little_endian 1.0\ncomment csdf\n"
+                f"element vertex {self.vertices}\nproperty double x\nproperty double y\n"
+                f"property double z\nelement face {self.faces}\n"
+                "property list uchar int vertex_indices\nend_header\n").encode("ascii")
 
-    def add(self, part: Part) -> None:
-        """Append one :class:`csdf.mesh.parts.Part`."""
-        self._st.add(part)
+    def vertex_offset(self, i: int) -> int:
+        """Byte offset of vertex ``i`` (not STL)."""
+        return len(self.header()) + 24 * int(i)
 
-    def __exit__(self, kind, exc, tb) -> None:
-        try:
-            self._vfile.close()
-            self._ffile.close()
-            if kind is None:
-                self._finish()
-        finally:
-            assert self._dir is not None
-            self._dir.cleanup()
+    def face_offset(self, j: int) -> int:
+        """Byte offset of face ``j``."""
+        if self.format == ".stl":
+            return 84 + 50 * int(j)
+        return self.vertex_offset(self.vertices) + (24 if self.format == ARRAYS else 13) * int(j)
 
-    def _finish(self) -> None:
-        """Merge the shared vertices, replace the placeholders, assemble the file."""
-        st = self._st
-        shared_verts, shared_ids = st.shared()
-        self.vertices, self.faces = st.own + len(shared_verts), st.faces
-        if self.format == ".ply" and self.vertices >= 2**31:
-            raise CsdfError(f"cannot write {self.path}: {self.vertices} vertices exceed "
-                            "the PLY index type (int32)")
-        tmp = Path(self._dir.name)  # type: ignore[union-attr]
-        faces = _Blocks(tmp / "faces", self.faces)
-        with atomic_path(self.path) as out, open(out, "wb") as fh:
-            if self.format == ".ply":
-                self._ply(fh, tmp / "vertices", shared_verts, faces, shared_ids)
-            else:
-                self._stl(fh, tmp / "vertices", shared_verts, faces, shared_ids)
+    def size(self) -> int:
+        """The file's size in bytes."""
+        return self.face_offset(self.faces)
 
-    def _ply(self, fh, vpath: Path, shared_verts: np.ndarray, faces: _Blocks,
-             shared_ids: np.ndarray) -> None:
-        header = ("ply\nformat binary_little_endian 1.0\ncomment csdf\n"
-                  f"element vertex {self.vertices}\nproperty double x\nproperty double y\n"
-                  f"property double z\nelement face {self.faces}\n"
-                  "property list uchar int vertex_indices\nend_header\n")
-        fh.write(header.encode("ascii"))
-        with open(vpath, "rb") as src:
-            shutil.copyfileobj(src, fh, 1 << 24)
-        fh.write(np.ascontiguousarray(shared_verts, dtype="<f8").tobytes())
-        rec = np.dtype([("n", "u1"), ("v", "<i4", (3,))])
-        for block in faces:
-            block = Stitcher.resolve(block, shared_ids)
-            out = np.empty(len(block), dtype=rec)
+    @staticmethod
+    def vertex_records(verts: np.ndarray) -> np.ndarray:
+        """PLY records of vertices ``(n, 3)`` (model units)."""
+        return np.ascontiguousarray(verts, dtype="<f8")
+
+    def face_records(self, faces: np.ndarray, verts: np.ndarray | None = None
+                     ) -> np.ndarray:
+        """Records of faces ``(m, 3)``: PLY and :data:`ARRAYS`, their indices (file vertex
+        numbers); STL, their corners ``verts[faces]`` with ``verts (n, 3)`` float64
+        (model units)."""
+        if self.format == ARRAYS:
+            return np.ascontiguousarray(faces, dtype=np.int64)
+        if self.format == ".ply":
+            out = np.empty(len(faces), dtype=_PLY_FACE)
             out["n"] = 3
-            out["v"] = block
-            fh.write(out.tobytes())
-
-    def _stl(self, fh, vpath: Path, shared_verts: np.ndarray, faces: _Blocks,
-             shared_ids: np.ndarray) -> None:
-        fh.write(b"csdf binary STL".ljust(80, b" "))
-        fh.write(np.uint32(self.faces).tobytes())
-        n_own = self._st.own
-        own = np.memmap(vpath, dtype="<f8", mode="r", shape=(n_own, 3)) \
-            if n_own else np.zeros((0, 3))
-        rec = np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
-        for block in faces:
-            block = Stitcher.resolve(block, shared_ids)
-            tri = np.empty(block.shape + (3,))
-            is_own = block < n_own
-            tri[is_own] = own[block[is_own]]
-            tri[~is_own] = shared_verts[block[~is_own] - n_own]
-            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            length = np.linalg.norm(n, axis=1, keepdims=True)
-            n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-            out = np.zeros(len(block), dtype=rec)
-            out["n"] = n
-            out["v"] = tri
-            fh.write(out.tobytes())
-        del own
+            out["v"] = faces
+            return out
+        assert verts is not None
+        tri = verts[np.asarray(faces)]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+        out = np.zeros(len(faces), dtype=_STL_FACE)
+        out["n"] = n
+        out["v"] = tri
+        return out
 
 
-class _Blocks:
-    """The faces file ``(F, 3)`` int64 read block by block (read, not mapped, so the
-    pages do not stay in this process's memory)."""
+class _File:
+    """The file being written: its temporary path and an open descriptor."""
 
-    def __init__(self, path: Path, n: int) -> None:
-        self.path, self.n = path, n
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path, self._fd = path, fd
 
-    def __iter__(self):
-        if not self.n:
-            return
-        with open(self.path, "rb") as fh:
-            for s in range(0, self.n, _BLOCK):
-                k = min(_BLOCK, self.n - s)
-                yield np.fromfile(fh, dtype="<i8", count=3 * k).reshape(k, 3)
+    def write(self, offset: int, data) -> None:
+        """Write ``data`` (bytes or a contiguous array) at byte ``offset``."""
+        _pwrite_all(self._fd, data, offset)
+
+
+@contextmanager
+def mesh_file(path: str | os.PathLike, layout: MeshLayout) -> Iterator[_File]:
+    """The file for ``layout``, made beside ``path`` at its full size with its header
+    written; yields an object with ``path`` (where others write too: :func:`write_at`)
+    and ``write(offset, data)``. When the block ends without an error, the file is
+    renamed over ``path`` (atomic); on an error nothing is left.
+
+    Raises:
+        CsdfError: the file cannot be made or written (naming the path and the reason);
+            a PLY of 2^31 vertices or more (its indices are int32).
+    """
+    target = check_stream_path(path)
+    if layout.format == ".ply" and layout.vertices >= 2**31:
+        raise CsdfError(f"cannot write {target}: {layout.vertices} vertices exceed the PLY "
+                        "index type (int32)")
+    with atomic_path(target) as tmp:
+        fd = os.open(tmp, os.O_RDWR)
+        try:
+            os.ftruncate(fd, layout.size())
+            _pwrite_all(fd, layout.header(), 0)
+            yield _File(tmp, fd)
+        finally:
+            os.close(fd)
+
+
+def write_whole(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray,
+                block: int = 1 << 20) -> MeshLayout:
+    """A mesh held in memory, ``vertices (V, 3)`` float64 (model units) and ``faces (F,
+    3)``, written to ``path`` in the same layout as the blocks of a mesh made in parts
+    (PLY: float64 vertices, so that it reads back bit for bit; ``csdf.io.write_mesh``
+    writes float32 ones through trimesh), ``block`` faces at a time. Returns the
+    layout."""
+    path = check_stream_path(path)
+    verts = np.asarray(vertices, dtype=np.float64)
+    layout = MeshLayout(path.suffix.lower(), len(verts), len(faces))
+    with mesh_file(path, layout) as fh:
+        if layout.format == ".ply":
+            fh.write(layout.vertex_offset(0), layout.vertex_records(verts))
+        for s in range(0, len(faces), block):
+            fh.write(layout.face_offset(s), layout.face_records(faces[s:s + block], verts))
+    return layout
+
+
+class _Block:
+    """A mesh in a shared memory block: its file (while it is written), the map."""
+
+    def __init__(self, path: Path | None, m: mmap.mmap | None, layout: MeshLayout) -> None:
+        self.path, self._map, self.layout = path, m, layout
+
+    def write(self, offset: int, data) -> None:
+        """Write ``data`` (bytes or a contiguous array) at byte ``offset``."""
+        view = _bytes(data)
+        self._map[offset:offset + len(view)] = view
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(vertices (V, 3) float64, faces (F, 3) int64)``, views of the block."""
+        lay = self.layout
+        if self._map is None:
+            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        verts = np.frombuffer(self._map, dtype=np.float64, count=3 * lay.vertices)
+        faces = np.frombuffer(self._map, dtype=np.int64, count=3 * lay.faces,
+                              offset=lay.face_offset(0))
+        return verts.reshape(-1, 3), faces.reshape(-1, 3)
+
+
+@contextmanager
+def shared_block(layout: MeshLayout, folder: str | os.PathLike | None) -> Iterator[_Block]:
+    """A block for a mesh of ``layout`` (format :data:`ARRAYS`) in memory: a file in
+    ``folder`` (a shared memory folder such as ``/dev/shm``: other processes of this
+    machine map it, :func:`map_block`), or private memory when ``folder`` is None (then
+    only this process writes it). Yields an object with ``path`` (None without a
+    folder), ``write(offset, data)`` and ``arrays()``; the file is removed when the
+    block ends (the arrays stay valid: they map its memory)."""
+    size = layout.size()
+    if size == 0:
+        yield _Block(None, None, layout)
+        return
+    if folder is None:
+        yield _Block(None, mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS),
+                     layout)
+        return
+    fd, name = tempfile.mkstemp(dir=folder, prefix="csdf-mesh-", suffix=".block")
+    try:
+        os.ftruncate(fd, size)
+        yield _Block(Path(name), mmap.mmap(fd, size, flags=mmap.MAP_SHARED), layout)
+    finally:
+        os.close(fd)
+        os.unlink(name)
+
+
+def map_block(path: str | os.PathLike) -> mmap.mmap | None:
+    """The block ``path`` of :func:`shared_block` mapped for writing, or None when this
+    process does not see it (another machine)."""
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except FileNotFoundError:
+        return None
+    try:
+        return mmap.mmap(fd, 0, flags=mmap.MAP_SHARED)
+    finally:
+        os.close(fd)
+
+
+def write_at(path: str | os.PathLike, blocks: list[tuple[int, np.ndarray]]) -> bool:
+    """Write ``blocks`` (``(byte offset, records)``) into the file ``path`` that
+    :func:`mesh_file` made; False (and nothing written) when this process does not see
+    that file (another machine without the shared folder)."""
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except FileNotFoundError:
+        return False
+    try:
+        for offset, data in blocks:
+            _pwrite_all(fd, data, offset)
+    finally:
+        os.close(fd)
+    return True
+
+
+def _bytes(data) -> memoryview:
+    """``data`` (bytes or an array) as a flat byte view."""
+    if isinstance(data, np.ndarray):
+        data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+    return memoryview(data)
+
+
+def _pwrite_all(fd: int, data, offset: int) -> None:
+    """``os.pwrite`` until all of ``data`` is written."""
+    view = _bytes(data)
+    while len(view):
+        n = os.pwrite(fd, view, offset)
+        view, offset = view[n:], offset + n

@@ -28,7 +28,8 @@ from numba import njit
 from ..memory import map_array, private_map
 
 __all__ = [
-    "all_points", "brick_points", "brick_points_into", "close_on_box", "mc_chunk", "new_hash",
+    "all_points", "edge_coord", "brick_points", "brick_points_into", "close_on_box",
+    "mc_chunk", "new_hash",
     "root_points", "root_start", "root_update", "clip_to_box", "edges_on_box", "fresh_array",
     "neg_columns", "column_crossed", "voxel_case", "lowest_bit", "face_index", "face_key",
 ]
@@ -368,6 +369,18 @@ def edges_on_box(e_corner: np.ndarray, e_axis: np.ndarray, dims: np.ndarray) -> 
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def edge_coord(o: float, c: int, step: int, h: float, t: float) -> float:
+    """One coordinate of the vertex at parameter ``t`` along a grid edge: ``p0 + t (p1 -
+    p0)`` with ``p0 = o + c h``, ``p1 = o + (c + step) h`` (``o``: the grid origin's
+    coordinate, ``c``: the edge's lower sample index, ``step``: 1 along the edge's axis,
+    else 0). The mesher's one formula, so that a vertex rebuilt elsewhere from its edge
+    and ``t`` (:mod:`.parts`) is the same float64, bit for bit."""
+    p0 = o + c * h
+    p1 = o + (c + step) * h
+    return p0 + t * (p1 - p0)
+
+
 @njit(cache=True, nogil=True)
 def root_points(idx, e_corner, e_axis, t, origin, h) -> np.ndarray:
     """Points ``(m, 3)`` at parameter ``t[e]`` along edges ``e = idx[r]``:
@@ -384,10 +397,8 @@ def all_points(idx, e_corner, e_axis, t, origin, h, out) -> None:
     for r in range(m):
         e = r if idx is None else idx[r]
         for d in range(3):
-            c = e_corner[e, d]
-            p0 = origin[d] + c * h
-            p1 = origin[d] + (c + (1 if e_axis[e] == d else 0)) * h
-            out[r, d] = p0 + t[e] * (p1 - p0)
+            out[r, d] = edge_coord(origin[d], e_corner[e, d], 1 if e_axis[e] == d else 0,
+                                   h, t[e])
 
 
 @njit(cache=True, nogil=True)

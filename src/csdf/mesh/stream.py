@@ -64,7 +64,9 @@ def extract_mc(
     serial: Callable | None = None,
     scan: Callable | None = None,
     bricks: np.ndarray | None = None,
-    edge_keys: bool = False,
+    edge_keys: bool | Callable = False,
+    edge_t: bool = False,
+    face_dtype: type = np.int64,
 ) -> tuple[np.ndarray, ...]:
     """Marching cubes of the zero set on ``grid``, streamed over the octree's bricks.
 
@@ -84,36 +86,45 @@ def extract_mc(
         bricks: the lower corners ``(K, 3)`` of the bricks to mesh, sorted by x, y, z
             (default: the octree's; a subset meshes part of the grid, see
             :mod:`.parts`).
-        edge_keys: also return each vertex's grid edge (:func:`edge_key`).
+        edge_keys: also return each vertex's grid edge (:func:`edge_key`), or numbered
+            by ``edge_keys(corner (E, 3) int64, axis (E,) int64, dims (3,)) -> (E,)``
+            (:mod:`.parts` numbers them inside a part's cube).
+        edge_t: give each vertex as its parameter ``t`` in ``[0, 1]`` along its grid edge
+            instead of its position (the position is
+            :func:`csdf.mesh.kernels.edge_coord` of the edge and ``t``): a third of the
+            bytes, for meshes made in parts (:mod:`.parts`).
+        face_dtype: the faces' integer type (int32 for a part, whose vertices are far
+            fewer than 2^31).
 
     Returns:
-        ``vertices (V, 3)`` float64 and ``faces (F, 3)`` int64 (what ``trimesh`` keeps, so
-        it makes no copy), counter-clockwise seen from outside; with ``edge_keys``, then
-        ``keys (V,)`` int64.
+        ``vertices (V, 3)`` float64 (``t (V,)`` float64 with ``edge_t``) and ``faces (F,
+        3)`` int64 (what ``trimesh`` keeps, so it makes no copy), counter-clockwise seen
+        from outside; with ``edge_keys``, then ``keys (V,)``.
     """
     if bricks is None:
         bricks = _sorted_bricks(grid, intervals, progress, scan)
     if len(bricks) == 0:
-        empty = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+        empty = (np.zeros(0 if edge_t else (0, 3)), np.zeros((0, 3), dtype=face_dtype))
         return (*empty, np.zeros(0, dtype=np.int64)) if edge_keys else empty
     dims = np.array(grid.dims, dtype=np.int64)
     # initial sizes from the brick count, grown on demand: ~2 faces and ~1 vertex per
     # surface voxel, ~B^2 surface voxels per brick. The outputs get twice that: pages
     # never written cost address space, not memory, and a growth would copy everything
     est_faces = int(len(bricks) * 4.0 * BRICK * BRICK) + 1024
-    out = [K.fresh_array((est_faces, 3), np.int64), 0]  # faces, rows used
+    out = [K.fresh_array((est_faces, 3), face_dtype), 0]  # faces, rows used
     keys: list[np.ndarray] = []
+    number = edge_keys if callable(edge_keys) else edge_key
 
     def kernel(chunk, vals, table, n_used, n_verts, ebuf):
         table, n_used, out[0], out[1], *ebuf, n_new = K.mc_chunk(
             chunk, vals, dims, EDGE_ORIGIN, EDGE_AXIS, _TRI, _N_TRI, table, n_used,
             out[0], out[1], n_verts, *ebuf)
         if edge_keys:  # (the new edges are vertices n_verts, n_verts + 1, ...)
-            keys.append(edge_key(ebuf[0][:n_new], ebuf[1][:n_new], dims))
+            keys.append(number(ebuf[0][:n_new], ebuf[1][:n_new], dims))
         return table, n_used, ebuf, n_new
 
     verts = _stream(grid, bricks, values, progress, tol, chunk_samples, kernel,
-                    est_faces // 2, serial, scan)
+                    est_faces // 2, serial, scan, edge_t)
     if edge_keys:
         return verts, out[0][:out[1]], np.concatenate(keys)
     return verts, out[0][:out[1]]
@@ -227,7 +238,8 @@ def _sorted_bricks(grid: Grid, intervals: Callable, progress: Callable | None,
 
 def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable | None,
             tol: float, chunk_samples: int, kernel: Callable, est_verts: int,
-            serial: Callable | None = None, scan: Callable | None = None) -> np.ndarray:
+            serial: Callable | None = None, scan: Callable | None = None,
+            edge_t: bool = False) -> np.ndarray:
     """Stream over ``bricks (K, 3)`` chunk by chunk: evaluate the samples, run ``kernel``
     (``(chunk, vals, table, n_used, n_verts, ebuf) -> (table, n_used, ebuf, n_new)``, which
     numbers the chunk's new crossed edges from ``n_verts`` in the edge hash map ``table``
@@ -238,7 +250,8 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
     :func:`csdf.backends.fast.serial_values`) the stages overlap on a pool of
     :data:`WORKERS` threads: chunks ahead are sampled, and the roots of chunks behind
     searched, while this thread runs ``kernel`` (the one stage that must go in order).
-    The result is the same, vertex for vertex, as without ``serial``."""
+    The result is the same, vertex for vertex, as without ``serial``. With ``edge_t``
+    the result is each root's parameter ``t (V,)`` along its edge instead."""
     dims = np.array(grid.dims, dtype=np.int64)
     origin = np.asarray(grid.origin, dtype=np.float64)
     h = float(grid.h)
@@ -247,7 +260,7 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
     # ~2 B of a brick's crossed edges on its faces: the hash map's keys (at most half full)
     table = K.new_hash(len(bricks) * 4 * BRICK + 1024)
     n_used = 0  # occupied slots of the hash map
-    verts = K.fresh_array((est_verts, 3), np.float64)
+    verts = K.fresh_array((est_verts,) if edge_t else (est_verts, 3), np.float64)
     n_verts = 0
     stragglers: list[_Roots] = []
     cap = per_chunk * 2 * BRICK * BRICK  # edge buffers, grown on demand
@@ -264,7 +277,7 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
         roots = _Roots(e_c, e_a, e_f0, e_f1, origin, h, tol * h, box,
                        clip=on if on.any() else None)
         roots.run(f, FIRST_ITERATIONS)
-        roots.points(out)
+        roots.points(out)  # (or their t, for edge_t)
         return roots.pending(base) if len(roots.idx) else None
 
     # with ``serial`` a pool of workers runs the sampling and the searches; without it,
@@ -320,7 +333,7 @@ def _stream(grid: Grid, bricks: np.ndarray, values: Callable, progress: Callable
     if stragglers:  # the few slow roots (kinks, flat spots) of all chunks together
         rest = _Roots.concat(stragglers)
         rest.run(values, ITERATIONS)
-        verts[rest.vid] = rest.points(np.empty((len(rest.vid), 3)))
+        verts[rest.vid] = rest.points(np.empty(verts[:len(rest.vid)].shape))
     if progress:
         progress("roots", n_verts, n_verts)
     return verts[:n_verts]
@@ -331,7 +344,8 @@ def _room(verts: np.ndarray, n_verts: int, n_new: int) -> np.ndarray:
     doubling, into fresh memory)."""
     if n_verts + n_new <= len(verts):
         return verts
-    grown = K.fresh_array((max(n_verts + n_new, 2 * len(verts)), 3), np.float64)
+    grown = K.fresh_array((max(n_verts + n_new, 2 * len(verts)),) + verts.shape[1:],
+                          np.float64)
     grown[:n_verts] = verts[:n_verts]
     return grown
 
@@ -420,8 +434,12 @@ class _Roots:
             self.it += 1
 
     def points(self, out: np.ndarray) -> np.ndarray:
-        """The current points ``(E, 3)``, written into ``out``."""
-        K.all_points(None, self.e_c, self.e_a, self.state[0], self.origin, self.h, out)
+        """The current points ``(E, 3)``, written into ``out``; with ``out (E,)``, their
+        parameters ``t`` along the edges."""
+        if out.ndim == 1:
+            out[:] = self.state[0]
+        else:
+            K.all_points(None, self.e_c, self.e_a, self.state[0], self.origin, self.h, out)
         return out
 
     def pending(self, vert_base: int) -> _Roots:

@@ -71,7 +71,12 @@ FREE_POINTS = 2000
 #: free-space points on rays past the object's silhouette (with a viewpoint)
 BACKGROUND_POINTS = 2000
 #: points the joint refinement fits (a seeded subsample)
-FIT_POINTS = 3000
+FIT_POINTS = 2000
+#: free-space points the joint refinement keeps out of the material (with a viewpoint)
+FIT_FREE_POINTS = 1500
+#: shares of the time limit by which the search (beams, refinements) and the face moves
+#: stop at the latest (the rest builds the result)
+SEARCH_UNTIL, FACES_UNTIL = 0.85, 0.95
 #: the cost of one primitive: it must explain more than this share of the points
 PENALTY = 0.004
 #: trees kept per size in the beam, per second of the time limit (at least 8)
@@ -190,7 +195,8 @@ class _Problem:
         vp: ``(3,)`` the viewpoint or None.
         ks: the primitive kinds.
         fit_points: ``(F, 3)`` the sample of the points the joint refinement fits;
-            ``fit_normals`` their outward normals or None.
+            ``fit_normals`` their outward normals or None; ``fit_free`` ``(G, 3)`` the
+            free-space points it keeps out of the material, or None.
         tau: the noise level of the score (scene units).
         diag: the cloud's bounding diagonal (scene units).
         spacing: the median distance between neighbouring points (scene units).
@@ -205,6 +211,7 @@ class _Problem:
     ks: tuple[str, ...]
     fit_points: np.ndarray
     fit_normals: np.ndarray | None
+    fit_free: np.ndarray | None
     tau: float
     diag: float
     spacing: float
@@ -303,7 +310,10 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
     reach, area = support_scales(kd, S, len(P), tau)
     pool = Pool(S, NS, free, kd, N, reach, area, tau, float(penalty), rng, view)
     fit_idx = np.sort(rng.choice(len(P), size=min(FIT_POINTS, len(P)), replace=False))
-    prob = _Problem(P, N, vp, ks, P[fit_idx], None if N is None else N[fit_idx], tau, diag,
+    fit_free = None if free is None else free[np.sort(rng.choice(
+        len(free), size=min(FIT_FREE_POINTS, len(free)), replace=False))]
+    prob = _Problem(P, N, vp, ks, P[fit_idx], None if N is None else N[fit_idx], fit_free,
+                    tau, diag,
                     nb.spacing, pool, rng, seed)
     eps = max(3.0 * float(np.median(rmse)), 1e-4 * diag)
     leaves = _candidates(prob, dets, np.arange(len(P)), eps)
@@ -331,7 +341,7 @@ def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
             values[f"{name}_{a}"] = float(v)
     try:
         res = refine_params(shape, values, sizes, prob.fit_points, prob.fit_normals,
-                            prob.pool.free, prob.tau, SOLID_BACKEND)
+                            prob.fit_free, prob.tau, SOLID_BACKEND)
     except (CsdfError, np.linalg.LinAlgError):
         return {i: leaves[i] for i in names}
     out = {}
@@ -403,17 +413,18 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
     return _candidates(prob, dets, sub, prob.tau)
 
 
-def _move_faces(prob: _Problem, best: Scored, rounds: int = FACE_ROUNDS) -> Scored:
+def _move_faces(prob: _Problem, best: Scored, deadline: float, rounds: int = FACE_ROUNDS
+                ) -> Scored:
     """``best`` with faces of its boxes and caps of its cylinders moved
     (:func:`.candidates.face_moves`) while that lowers the score: the joint refinement
     fits faces to the points on them, but leaves a face with none where it was, though
     it may make up surface there (a box's back reaching too little into the part it
-    is joined to)."""
+    is joined to). Stops at ``deadline`` (a ``time.perf_counter()``)."""
     pool = prob.pool
     for _ in range(rounds):
         start = best
         for c in T.leaves(start.tree):
-            if c not in T.leaves(best.tree):
+            if c not in T.leaves(best.tree) or time.perf_counter() > deadline:
                 continue
             mark = len(pool.leaves)
             idx = pool.add(face_moves(pool.leaves[c], prob.P))
@@ -564,8 +575,9 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
             object should be in the sensor's view).
         time_limit: seconds. The search's effort grows with it (beam width, trees
             refined) and is otherwise fixed, so that a seed gives the same result on
-            any machine; the search stops early at the limit on a machine too slow
-            for that effort.
+            any machine; on a machine too slow for that effort the search stops at
+            :data:`SEARCH_UNTIL` of the limit and the final face moves at
+            :data:`FACES_UNTIL`, with the best tree found by then.
         seed: equal seeds give equal results.
         epsilon: the noise level ``tau`` (scene units) of the score; default three
             times the detections' median rmse, at least ``1e-3`` of the cloud's
@@ -596,7 +608,7 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     _note(t0, "setup", len(prob.pool.leaves))
     pool = prob.pool
     run = _Search(prob, maxp, max(8, int(BEAM_PER_SECOND * time_limit)),
-                  t0 + float(time_limit), t0)
+                  t0 + SEARCH_UNTIL * float(time_limit), t0)
     found = run.beam()
     # the points the best tree leaves unexplained: detected again, and the search
     # resumed with what they show
@@ -613,7 +625,7 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         run.refine(tree)
     run.drops()
     assert run.best is not None
-    best = _move_faces(prob, run.best)
+    best = _move_faces(prob, run.best, t0 + FACES_UNTIL * float(time_limit))
     if best is not run.best:
         run.history.append((time.perf_counter() - t0, T.size(best.tree), best.total, best.tree))
     history = run.history

@@ -292,7 +292,7 @@ def bench_zoo(time_limit: float, seed: int, out_dir: str | None) -> None:
         n_hand = sum(1 for c in csdf.as_field(shape).program.calls)
         print(f"| {name} | {len(pts):,} | {len(res.primitives)} / {n_hand} | "
               f"{iou(res.shape, shape, box):.3f} | {chamfer(res.shape, shape, diag):.2%} | "
-              f"{res.seconds:.1f} | `{res.tree}` |", flush=True)
+              f"{res.seconds:.1f} | `{res.tree.replace('|', chr(92) + '|')}` |", flush=True)
         if out_dir:
             from pathlib import Path
 

@@ -31,6 +31,7 @@ def test_tree_canonical_forms():
     assert T.canonical(("intersection", 0, 1)) != T.canonical(("union", 0, 1))
     t = ("union", ("difference", 0, 1), 2)
     assert T.remove(t, 1) == ("union", 0, 2) and T.remove(t, 2) == ("difference", 0, 1)
+    assert T.from_text(T.to_text(a), int) == a
     assert T.remove(0, 0) is None
     vals = np.array([[1.0, -1.0], [0.5, 0.5], [-2.0, 3.0]])
     assert T.evaluate(t, vals).tolist() == [-2.0, -0.5]
@@ -38,7 +39,7 @@ def test_tree_canonical_forms():
 
 def test_recovers_structure_and_parameters(cloud):
     pts, nrm = cloud
-    res = infer(pts, nrm, seed=0)
+    res = infer(pts, nrm, seed=0, time_limit=300, effort=30)
     kinds = sorted(p["kind"] for p in res.primitives)
     assert kinds == ["box", "cylinder", "sphere"]
     # the hole does not reach the sphere: cutting before or after the union is the same
@@ -60,7 +61,7 @@ def test_recovers_structure_and_parameters(cloud):
     q = np.random.default_rng(2).uniform(-1.5, 1.5, (500, 3))
     assert np.allclose(csdf.as_field(m).value(q), csdf.as_field(res.shape).value(q))
     # deterministic for a seed
-    again = infer(pts, nrm, seed=0)
+    again = infer(pts, nrm, seed=0, time_limit=300, effort=30)
     assert again.text == res.text and again.history[-1][2] == res.history[-1][2]
 
 
@@ -70,7 +71,7 @@ def test_single_view_scan_with_viewpoint():
     pc, _ = csdf.scan(shape, cam, noise=0.002, seed=0)
     M = cam.pose
     pts = pc @ M[:3, :3].T + M[:3, 3]
-    res = infer(pts, viewpoint=cam.pose[:3, 3], seed=0, time_limit=10)
+    res = infer(pts, viewpoint=cam.pose[:3, 3], seed=0, time_limit=120, effort=10)
     assert sorted(p["kind"] for p in res.primitives) == ["box", "cylinder"]
     assert "|" in res.tree and res.inlier_fraction > 0.9
 
@@ -85,6 +86,8 @@ def test_bad_input(cloud):
         infer(pts, max_primitives=0)
     with pytest.raises(CsdfError, match="time_limit"):
         infer(pts, time_limit=-1)
+    with pytest.raises(CsdfError, match="effort"):
+        infer(pts, effort=0)
     with pytest.raises(CsdfError, match="normals"):
         infer(pts, nrm[:5])
     with pytest.raises(CsdfError, match="no primitive"):
@@ -115,10 +118,75 @@ def test_a_hole_seen_from_one_side_goes_through():
     cam = csdf.Camera.look_at((1.2, -1.0, 2.2), (0.0, 0.0, 0.0), width=320, height=240)
     pc, _ = csdf.scan(shape, cam, noise=0.002, seed=1)
     M = cam.pose
-    res = infer(pc @ M[:3, :3].T + M[:3, 3], viewpoint=M[:3, 3], seed=0, time_limit=10)
+    res = infer(pc @ M[:3, :3].T + M[:3, 3], viewpoint=M[:3, 3], seed=0, time_limit=120, effort=10)
     assert res.tree.replace(" ", "") == "(box_1-cylinder_1)"
     cyl = next(p for p in res.primitives if p["kind"] == "cylinder")
     assert cyl["height"] >= 0.5  # at least through the box
     # the opening is open: points on the axis just inside the top face are outside
     f = csdf.as_field(res.shape).value(np.array([[0.0, 0.0, 0.24], [0.0, 0.0, -0.2]]))
     assert (f > 0).all()
+
+
+# trees of 4-5 primitives whose structure the points determine (every cut reaches every
+# part it is applied after: a cut that reached none would fit as well before the
+# union): the shape, its tree over labels, and a point on each label's visible surface
+SEEDED_TREES = {
+    "A": ((csdf.box((1.6, 1.2, 0.6)) | csdf.cylinder(0.35, 0.8).translate((0.3, 0.0, 0.55)))
+          - csdf.sphere(0.3).translate((0.65, 0.0, 0.3)))
+         - csdf.cylinder(0.15, 2.0).translate((0.3, 0.0, 0.0)),
+    "B": ((csdf.sphere(0.8) & csdf.box((1.2, 1.2, 1.2)))
+          | csdf.cylinder(0.25, 1.0).translate((0.0, 0.0, 0.8))) - csdf.cylinder(0.12, 3.0),
+    "C": (((csdf.box((1.4, 1.0, 0.5)) - csdf.box((0.5, 1.2, 0.3)).translate((0.5, 0.0, 0.2)))
+           | csdf.sphere(0.35).translate((-0.5, 0.0, 0.25)))
+          - csdf.cylinder(0.1, 2.0).translate((-0.5, 0.0, 0.0)))
+         | csdf.torus(0.3, 0.08).orient("x").translate((0.8, 0.0, 0.0)),
+}
+SEEDED_STRUCTURE = {
+    "A": ("(((block | post) - ball) - hole)",
+          {"block": ("box", (-0.8, 0.0, 0.0)), "post": ("cylinder", (0.65, 0.0, 0.8)),
+           "ball": ("sphere", (0.65, -0.3, 0.3)), "hole": ("cylinder", (0.45, 0.0, 0.0))}),
+    "B": ("(((cube & ball) | post) - hole)",
+          {"cube": ("box", (0.0, 0.0, -0.6)), "ball": ("sphere", (0.46, 0.46, 0.46)),
+           "post": ("cylinder", (0.25, 0.0, 1.0)), "hole": ("cylinder", (0.12, 0.0, 0.0))}),
+    "C": ("((((block - notch) | ball) - hole) | ring)",
+          {"block": ("box", (-0.2, -0.5, 0.0)), "notch": ("box", (0.5, 0.0, 0.05)),
+           "ball": ("sphere", (-0.5, 0.35, 0.25)), "hole": ("cylinder", (-0.4, 0.0, -0.25)),
+           "ring": ("torus", (0.8, 0.0, 0.38))}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SEEDED_TREES))
+def test_exact_structure_of_seeded_trees(name):
+    """Boxes from faces that do not meet (a box trimmed by a sphere), a notch cut from a
+    block (its floor and wall: a cut box), holes through two parts: the exact tree, up
+    to the order of commutative operands, each primitive where its surface shows."""
+    shape = SEEDED_TREES[name]
+    want, where = SEEDED_STRUCTURE[name]
+    p, n = csdf.sample_surface(shape, 12_000, seed=0)
+    p = p + np.random.default_rng(1).normal(0.0, 0.004, p.shape)
+    res = infer(p, n, seed=0, time_limit=120, effort=10)
+    assert len(res.primitives) == len(where), res.tree
+    # each label: the primitive of its kind whose surface passes nearest its point
+    label = {}
+    for lab, (kind, at) in where.items():
+        best = min((abs(float(_prim_field(pr).value(np.array([at]))[0])), pr["name"])
+                   for pr in res.primitives if pr["kind"] == kind)
+        assert best[0] < 0.02, (lab, best)
+        label[best[1]] = lab
+    assert len(label) == len(where), res.tree
+    labels = sorted(label.values())
+    got = T.from_text(res.tree, lambda k: labels.index(label[k]))
+    expect = T.from_text(want, labels.index)
+    assert T.canonical(got) == T.canonical(expect), res.tree
+    q = np.random.default_rng(2).uniform(-1.2, 1.2, (20_000, 3))
+    a = csdf.as_field(shape).value(q) <= 0
+    b = csdf.as_field(res.shape).value(q) <= 0
+    assert (a & b).sum() / (a | b).sum() > 0.97
+
+
+def _prim_field(pr: dict):
+    from csdf.detect.solids import posed
+
+    vals = {k: v for k, v in pr.items() if k not in ("name", "kind", "rotation", "translation")}
+    return csdf.as_field(posed(pr["kind"], np.asarray(pr["rotation"]),
+                               np.asarray(pr["translation"]), vals))

@@ -1,19 +1,32 @@
 """``csdf.infer``: a parametric CSG model of csdf primitives from a point cloud.
 
-1. **Candidates**: :func:`csdf.detect_primitives` finds spheres, cylinders, cones,
-   tori and boxes (each refined by :func:`csdf.fit` on its inliers).
-2. **Structure**: a beam search over union / intersection / difference trees of the
-   candidates (:mod:`.search`), scored on the candidates' exact distances at a sample
-   of the points: a truncated quadratic of the residuals, a size penalty, and with a
-   viewpoint the material put where the sensor saw free space (without one, the
-   tree's surface where no point was measured).
-3. **Parameters**: the best trees' continuous parameters (every primitive's sizes and
+1. **Candidates** (:mod:`.candidates`): :func:`csdf.detect_primitives` finds spheres,
+   cylinders, cones, tori, boxes and planes; boxes are also assembled from the planes
+   (a box cut or hidden in part shows as a few faces), a cylinder is also offered as a
+   cone and a cone as a cylinder when that fits their points better, and boxes and
+   cylinders also with their faces that hold no points moved out beyond the cloud.
+   Each candidate knows from the points' normals whether it is material or a cut.
+2. **Structure** (:mod:`.search`): a beam search over union / intersection /
+   difference trees of the candidates, scored on the candidates' exact distances at a
+   sample of the points: a truncated quadratic of the residuals (a point whose normal
+   disagrees with the tree's is not explained), a size penalty, and the free space:
+   with a viewpoint, material where the sensor saw through (towards its points and past
+   the object's silhouette), without one the share of the tree's surface where no
+   point was measured.
+3. **Residuals**: the points the best tree leaves unexplained are searched for
+   primitives again (a small feature the first detection missed, or took for part of
+   another surface); the beam search resumes with those candidates too.
+4. **Parameters**: the best trees' continuous parameters (every primitive's sizes and
    position, named ``cylinder_1_radius``, ``cylinder_1_x``, ...) refined jointly by
    :func:`csdf.fit` (Levenberg-Marquardt on the exact parameter Jacobian of the whole
-   tree, Huber loss at the noise level); the refined tree with the lowest score wins.
+   tree, Huber loss at the noise level); each refined tree is polished by local moves
+   over all candidates and its own refined primitives, and refined again when that
+   changed it; the lowest score wins.
 
-Deterministic for a seed. The orientations of the primitives are the detected ones
-(not refined jointly).
+The effort (beam width, trees refined) is fixed for a given ``time_limit``, so that a
+seed gives the same result on any machine; the time limit stops the search early only
+on a machine too slow for that effort. The orientations of the primitives are the
+detected ones (not refined jointly).
 """
 
 from __future__ import annotations
@@ -25,17 +38,27 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..detect.neighbours import normals_arg, points_arg, viewpoint_arg
+from ..detect.neighbours import neighbourhood, normals_arg, points_arg, viewpoint_arg
 from ..detect.primitives import detect_primitives
-from ..detect.solids import SOLID_BACKEND, SOLID_PARAMS, solid_values
+from ..detect.solids import SOLID_BACKEND, SOLID_PARAMS
 from ..errors import CsdfError
 from ..expr import param
-from ..fit import fit
 from ..lang.printer import dumps
 from ..shapes import box, capped_cone, cylinder, sphere, torus
 from ..shapes.domain import orient_matrix
 from . import tree as T
-from .search import Scorer, beam_search, polish, through_cuts
+from .candidates import (
+    Leaf,
+    extended,
+    face_moves,
+    orientation,
+    other_kind,
+    plane_boxes,
+    snap,
+)
+from .pool import Pool, View, free_points, oriented_normals, support_scales
+from .refine import refine_params
+from .search import Scored, beam_search, evaluate_oriented, parities, polish, swap
 
 __all__ = ["infer", "InferResult", "SOLID_KINDS", "SEARCH_POINTS", "FIT_POINTS"]
 
@@ -43,24 +66,31 @@ __all__ = ["infer", "InferResult", "SOLID_KINDS", "SEARCH_POINTS", "FIT_POINTS"]
 SOLID_KINDS = ("box", "cylinder", "sphere", "cone", "torus")
 #: points the structure search scores trees on (a seeded subsample)
 SEARCH_POINTS = 4000
-#: free-space points (with a viewpoint)
+#: free-space points on the rays to measured points (with a viewpoint)
 FREE_POINTS = 2000
+#: free-space points on rays past the object's silhouette (with a viewpoint)
+BACKGROUND_POINTS = 2000
 #: points the joint refinement fits (a seeded subsample)
-FIT_POINTS = 3000
-#: trees refined jointly after the search
-REFINE_TREES = 3
-#: axes within this many degrees of a coordinate axis are turned onto it
-SNAP_DEGREES = 1.0
-#: a face of a detected box or cylinder with fewer inliers than this is moved out to the
-#: cloud's extent in an extra candidate
-EXTEND_BELOW = 10
-#: points on each candidate's surface for the made-up-surface term (clouds without a
-#: viewpoint)
-SURFACE_SAMPLES = 150
-#: trees kept per size in the beam
-BEAM = 8
-#: seconds the local polish of the refined trees may run past the time limit at most
-POLISH_SECONDS = 5.0
+FIT_POINTS = 2000
+#: free-space points the joint refinement keeps out of the material (with a viewpoint)
+FIT_FREE_POINTS = 1500
+#: shares of the time limit by which the search (beams, refinements) and the face moves
+#: stop at the latest (the rest builds the result)
+SEARCH_UNTIL, FACES_UNTIL = 0.85, 0.95
+#: the cost of one primitive: it must explain more than this share of the points
+PENALTY = 0.004
+#: trees kept per size in the beam, per second of the time limit (at least 8)
+BEAM_PER_SECOND = 0.5
+#: trees refined jointly after the search, per second of the time limit (at least 3)
+REFINE_PER_SECOND = 0.3
+#: rounds of detection on the points the best tree leaves unexplained
+RESIDUAL_ROUNDS = 2
+#: the fewest unexplained points a residual detection looks at
+RESIDUAL_MIN = 30
+#: rounds of dropping each leaf of the best tree and refining the rest
+DROP_ROUNDS = 1
+#: rounds of moving the best tree's faces (:func:`_move_faces`)
+FACE_ROUNDS = 3
 
 
 @dataclass
@@ -96,42 +126,8 @@ class InferResult:
     candidates: int = 0
 
 
-@dataclass
-class _Leaf:
-    kind: str
-    R: np.ndarray
-    t: np.ndarray
-    vals: dict
-
-
 _AXIS_NAMES = {(0, 1): "x", (0, -1): "-x", (1, 1): "y", (1, -1): "-y", (2, 1): "z",
                (2, -1): "-z"}
-
-
-def _snap(lf: _Leaf) -> _Leaf:
-    """A leaf whose axes lie within :data:`SNAP_DEGREES` of the coordinate axes, turned
-    onto them (CAD parts are mostly axis-aligned, and the model reads better: no
-    rotation, or ``orient('x')``); others unchanged. A cylinder's, cone's or torus's
-    turn about its own axis is dropped (it changes nothing)."""
-    tol = math.sin(math.radians(SNAP_DEGREES))
-    if lf.kind == "box":
-        P = np.round(lf.R)
-        if np.abs(lf.R - P).max() > tol or abs(abs(np.linalg.det(P)) - 1) > 1e-9 or \
-                np.abs(P).sum() != 3:
-            return lf
-        sizes = [lf.vals[k] for k in ("size_x", "size_y", "size_z")]
-        world = [sizes[int(np.argmax(np.abs(P[k])))] for k in range(3)]
-        return _Leaf("box", np.eye(3), lf.t, dict(zip(("size_x", "size_y", "size_z"), world)))
-    if lf.kind == "sphere":
-        return _Leaf("sphere", np.eye(3), lf.t, lf.vals)
-    a = lf.R[:, 2]
-    k = int(np.argmax(np.abs(a)))
-    if math.sqrt(max(0.0, 1.0 - a[k] ** 2)) <= tol:
-        a = np.zeros(3)
-        a[k] = 1.0 if lf.R[k, 2] > 0 or lf.kind != "cone" else -1.0
-        if lf.kind != "cone" and a[k] < 0:
-            a = -a
-    return _Leaf(lf.kind, orient_matrix(a), lf.t, lf.vals)
 
 
 def _kinds(kinds) -> tuple[str, ...]:
@@ -145,7 +141,7 @@ def _kinds(kinds) -> tuple[str, ...]:
     return ks
 
 
-def _names(tree, leaves: list[_Leaf]) -> dict[int, str]:
+def _names(tree, leaves: list[Leaf]) -> dict[int, str]:
     """``{leaf index: 'cylinder_1', ...}``: numbered per kind in the tree's leaf order."""
     count: dict[str, int] = {}
     out = {}
@@ -156,7 +152,7 @@ def _names(tree, leaves: list[_Leaf]) -> dict[int, str]:
     return out
 
 
-def _leaf_shape(lf: _Leaf, name: str):
+def _leaf_shape(lf: Leaf, name: str):
     """A leaf as a csdf shape: sizes and position as parameters named after ``name``."""
     p = {k: param(f"{name}_{k}", float(v), 0.0, math.inf) for k, v in lf.vals.items()}
     if lf.kind == "sphere":
@@ -184,120 +180,414 @@ def _leaf_shape(lf: _Leaf, name: str):
     return s.translate(pos)
 
 
-def _shape(tree, leaves: list[_Leaf]):
+def _shape(tree, leaves: list[Leaf]):
     names = _names(tree, leaves)
     return T.build(tree, lambda i: _leaf_shape(leaves[i], names[i])), names
 
 
-def _free_points(P: np.ndarray, vp: np.ndarray, tau: float, rng, n: int) -> np.ndarray:
-    """Points the sensor looked through: on the rays from ``vp`` to a sample of the
-    points, at least ``3 tau`` in front of them."""
-    idx = rng.choice(len(P), size=min(n, len(P)), replace=False)
-    Q = P[idx]
-    d = Q - vp
-    r = np.linalg.norm(d, axis=1)
-    ok = r > 6 * tau
-    Q, d, r = Q[ok], d[ok], r[ok]
-    u = rng.uniform(0.2, 1.0, size=len(Q)) * (1.0 - 3 * tau / r)
-    return vp + u[:, None] * d
+@dataclass
+class _Problem:
+    """One inference's data.
+
+    Attributes:
+        P: ``(N, 3)`` the points (scene units); ``N`` ``(N, 3)`` their outward normals
+            or None (unknown sign).
+        vp: ``(3,)`` the viewpoint or None.
+        ks: the primitive kinds.
+        fit_points: ``(F, 3)`` the sample of the points the joint refinement fits;
+            ``fit_normals`` their outward normals or None; ``fit_free`` ``(G, 3)`` the
+            free-space points it keeps out of the material, or None.
+        tau: the noise level of the score (scene units).
+        diag: the cloud's bounding diagonal (scene units).
+        spacing: the median distance between neighbouring points (scene units).
+        pool: the candidates and their score tables.
+        rng: the seeded generator of the run.
+        seed: the run's seed.
+    """
+
+    P: np.ndarray
+    N: np.ndarray | None
+    vp: np.ndarray | None
+    ks: tuple[str, ...]
+    fit_points: np.ndarray
+    fit_normals: np.ndarray | None
+    fit_free: np.ndarray | None
+    tau: float
+    diag: float
+    spacing: float
+    pool: Pool
+    rng: np.random.Generator
+    seed: int
+
+    def tree_values(self, tree, X: np.ndarray) -> np.ndarray:
+        """``(len(X),)`` the tree's field at points ``X`` ``(M, 3)``."""
+        used = T.leaves(tree)
+        vals = np.zeros((len(self.pool.leaves), len(X)))
+        for i in set(used):
+            vals[i] = self.pool.leaves[i].values(X)[0]
+        return T.evaluate(tree, vals)
 
 
-def _refine(tree, leaves: list[_Leaf], P: np.ndarray, tau: float, viewpoint, max_iter: int
-            ) -> list[_Leaf]:
-    """The tree's leaves after a joint fit of all their sizes and positions."""
+def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list[Leaf]:
+    """Candidate leaves from detections ``dets`` made on the points ``P[sub]``: the solids
+    (and a cylinder's cone, a cone's cylinder), boxes from the planes, each box and
+    cylinder also with its point-less faces moved out. ``eps``: the detections' inlier
+    distance."""
+    P, N = prob.P, prob.N
+    out: list[tuple[Leaf, Leaf | None]] = []  # (leaf, its variant moved out)
+
+    def sign_of(lf: Leaf, inl: np.ndarray) -> int:
+        return 0 if N is None else orientation(lf, P[inl], N[inl])
+
+    planes = []
+    for d in dets:
+        inl = sub[d.inliers]
+        if d.kind == "plane":
+            planes.append((np.asarray(d.params["normal"], float), float(d.params["offset"]),
+                           P[inl]))
+            continue
+        if d.solid is None or d.kind not in prob.ks:
+            continue
+        lf = Leaf(d.solid[0], np.asarray(d.solid[1], float), np.asarray(d.solid[2], float),
+                  dict(d.solid[3]))
+        lf = lf.moved(sign=sign_of(lf, inl))
+        alt = other_kind(lf, P[inl], d.rmse, eps)
+        for c in (lf, alt):
+            if c is not None and c.kind in prob.ks:
+                out.append((snap(c), _snapped(extended(c, P, P[inl]))))
+    if "box" in prob.ks:
+        out += [(snap(b), None) for b in plane_boxes(planes, P, eps, 4.0 * prob.spacing)]
+    leaves: list[Leaf] = []
+    for lf, v in out:
+        leaves.append(lf)
+        if v is not None:
+            leaves.append(v)
+    return leaves
+
+
+def _snapped(lf: Leaf | None) -> Leaf | None:
+    return None if lf is None else snap(lf)
+
+
+def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple[str, ...],
+           max_primitives: int, seed: int, epsilon, penalty) -> _Problem:
+    """Normals, detection, candidates, the noise level, penalty and score samples."""
+    rng = np.random.default_rng(seed)
+    nb = neighbourhood(P, viewpoint=vp, want_normals=N is None)
+    if N is None:  # estimated: oriented when turned to a viewpoint
+        N_det = nb.normals
+        N = nb.normals if vp is not None else None
+    else:  # given: detection ignores their signs, the score needs them outward
+        oriented = oriented_normals(P, N)
+        N_det = N if oriented is None else oriented
+        N = oriented
+    det_kinds = tuple(ks) + (("plane",) if "box" in ks else ())
+    dets = detect_primitives(P, N_det, kinds=det_kinds, seed=seed, viewpoint=vp,
+                             max_primitives=max(3 * max_primitives, 12))
+    solids = [d for d in dets if d.solid is not None]
+    if not solids and not any(d.kind == "plane" for d in dets):
+        raise CsdfError("infer: no primitive of the kinds "
+                        f"{', '.join(ks)} found in the cloud")
+    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    rmse = [d.rmse for d in dets] or [0.0]
+    if epsilon is None:
+        tau = max(3.0 * float(np.median(rmse)), 1e-3 * diag)
+    else:
+        if not (isinstance(epsilon, (int, float)) and epsilon > 0):
+            raise CsdfError(f"epsilon must be a positive number, got {epsilon!r}")
+        tau = float(epsilon)
+    if penalty is None:
+        penalty = PENALTY
+    sample = np.sort(rng.choice(len(P), size=min(SEARCH_POINTS, len(P)), replace=False))
+    S = P[sample]
+    NS = None if N is None else N[sample]
+    free = view = None
+    if vp is not None:
+        view = View(P, vp, rng)
+        free = np.concatenate([free_points(P, vp, tau, diag, rng, FREE_POINTS),
+                               view.background(diag, rng, BACKGROUND_POINTS)])
+    kd = cKDTree(P)
+    reach, area = support_scales(kd, S, len(P), tau)
+    pool = Pool(S, NS, free, kd, N, reach, area, tau, float(penalty), rng, view)
+    fit_idx = np.sort(rng.choice(len(P), size=min(FIT_POINTS, len(P)), replace=False))
+    fit_free = None if free is None else free[np.sort(rng.choice(
+        len(free), size=min(FIT_FREE_POINTS, len(free)), replace=False))]
+    prob = _Problem(P, N, vp, ks, P[fit_idx], None if N is None else N[fit_idx], fit_free,
+                    tau, diag,
+                    nb.spacing, pool, rng, seed)
+    eps = max(3.0 * float(np.median(rmse)), 1e-4 * diag)
+    leaves = _candidates(prob, dets, np.arange(len(P)), eps)
+    if not leaves:
+        raise CsdfError("infer: no primitive of the kinds "
+                        f"{', '.join(ks)} found in the cloud")
+    prob.pool.add(leaves)
+    return prob
+
+
+def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
+    """The tree's leaves after a joint fit of all their sizes and positions
+    (:func:`.refine.refine_params` on the fit sample and, with a viewpoint, the
+    free-space points): ``{leaf index: refined Leaf}`` (unchanged when the fit fails)."""
+    leaves = prob.pool.leaves
     shape, names = _shape(tree, leaves)
-    init = {"rotation": np.eye(3), "translation": np.zeros(3), "scale": 1.0}
-    res = fit(shape, P, init=init, estimate=("params",), loss="huber", f_scale=tau / 3.0,
-              escape=False, debias=False, backend=SOLID_BACKEND, max_iter=max_iter,
-              viewpoint=viewpoint, check_ranges=False)
-    out = list(leaves)
+    values: dict[str, float] = {}
+    sizes: set[str] = set()
     for i, name in names.items():
         lf = leaves[i]
-        vals = {k: max(float(res.params[f"{name}_{k}"]), 0.0) for k in SOLID_PARAMS[lf.kind]}
-        t = np.array([res.params[f"{name}_{a}"] for a in "xyz"], dtype=np.float64)
-        out[i] = _Leaf(lf.kind, lf.R, t, vals)
+        for k in SOLID_PARAMS[lf.kind]:
+            values[f"{name}_{k}"] = float(lf.vals[k])
+            sizes.add(f"{name}_{k}")
+        for a, v in zip("xyz", lf.t):
+            values[f"{name}_{a}"] = float(v)
+    try:
+        res = refine_params(shape, values, sizes, prob.fit_points, prob.fit_normals,
+                            prob.fit_free, prob.tau, SOLID_BACKEND)
+    except (CsdfError, np.linalg.LinAlgError):
+        return {i: leaves[i] for i in names}
+    out = {}
+    for i, name in names.items():
+        lf = leaves[i]
+        vals = {k: float(res[f"{name}_{k}"]) for k in SOLID_PARAMS[lf.kind]}
+        t = np.array([res[f"{name}_{a}"] for a in "xyz"], dtype=np.float64)
+        if not (np.all(np.isfinite(t)) and all(np.isfinite(v) for v in vals.values())):
+            return {i: leaves[i] for i in names}
+        out[i] = lf.moved(t=t, vals=vals, origin="refined")
     return out
 
 
-def _extended(lf: _Leaf, P: np.ndarray, inl: np.ndarray) -> _Leaf | None:
-    """The box or cylinder ``lf`` with each face that holds few of its inliers moved out
-    to the cloud ``P``'s extent along that axis (None when every face holds some, or
-    for other kinds)."""
-    if lf.kind not in ("box", "cylinder"):
-        return None
-    q = (inl - lf.t) @ lf.R  # the inliers in the solid's frame
-    a = (P - lf.t) @ lf.R  # the cloud in the solid's frame
-    axes = (0, 1, 2) if lf.kind == "box" else (2,)
-    half = [lf.vals[k] / 2 for k in ("size_x", "size_y", "size_z")] if lf.kind == "box" \
-        else [0.0, 0.0, lf.vals["height"] / 2]
-    lo, hi = [-h for h in half], list(half)
-    changed = False
-    for k in axes:
-        tol = 0.02 * max(2 * half[k], 1e-12)
-        # points on the face itself, not on the faces around it near its edges
-        if lf.kind == "box":
-            inside = np.all([np.abs(q[:, j]) < half[j] - 0.02 * 2 * half[j]
-                             for j in range(3) if j != k], axis=0)
-        else:
-            inside = np.hypot(q[:, 0], q[:, 1]) < 0.9 * lf.vals["radius"]
-        if np.sum(inside & (np.abs(q[:, k] - hi[k]) <= tol)) < EXTEND_BELOW:
-            hi[k], changed = max(hi[k], float(a[:, k].max())), True
-        if np.sum(inside & (np.abs(q[:, k] - lo[k]) <= tol)) < EXTEND_BELOW:
-            lo[k], changed = min(lo[k], float(a[:, k].min())), True
-    if not changed:
-        return None
-    mid = np.array([(lo[k] + hi[k]) / 2 for k in range(3)])
-    vals = dict(lf.vals)
-    if lf.kind == "box":
-        for k, name in enumerate(("size_x", "size_y", "size_z")):
-            vals[name] = hi[k] - lo[k]
-    else:
-        vals["height"] = hi[2] - lo[2]
-        mid[:2] = 0.0
-    return _Leaf(lf.kind, lf.R, lf.t + lf.R @ mid, vals)
-
-
-def _leaf_surface(lf: _Leaf, n: int, rng) -> np.ndarray:
-    """``(n, 3)`` points on a leaf's surface: random points around it moved onto it along
-    the exact distance's gradient (two steps)."""
-    size = max(lf.vals.values())
-    q = lf.t + rng.normal(0.0, size, (n, 3))
+def _refine_and_polish(prob: _Problem, tree, maxp: int, deadline: float) -> Scored:
+    """``tree`` refined jointly, polished by local moves (:func:`search.polish`) over
+    every candidate and its refined leaves, and refined again when that changed it."""
+    pool = prob.pool
+    sc = pool.scorer().score(tree)
     for _ in range(2):
-        f, g = solid_values(lf.kind, lf.R, lf.t, lf.vals, q)
-        q = q - f[:, None] * g
-    return q
+        tree = _refined_tree(prob, tree)
+        sc = polish(pool.scorer(), tree, list(range(len(pool.leaves))), maxp, deadline,
+                    pool.kinds)
+        if T.normal_form(sc.tree) == T.normal_form(tree):
+            break
+        tree = sc.tree
+    return sc
 
 
-def _refined(tree, leaves: list[_Leaf], P: np.ndarray, tau: float, viewpoint) -> list[_Leaf]:
-    """:func:`_refine`, or the leaves unchanged when the joint fit fails."""
+def _relabel(tree, mapping: dict[int, int]):
+    if isinstance(tree, (int, np.integer)):
+        return mapping.get(int(tree), int(tree))
+    return (tree[0], _relabel(tree[1], mapping), _relabel(tree[2], mapping))
+
+
+def _refined_tree(prob: _Problem, tree):
+    """The tree over its jointly refined leaves (added to the pool)."""
+    new = _refine(prob, tree)
+    keys = list(new)
+    idx = prob.pool.add([new[k] for k in keys])
+    return _relabel(tree, dict(zip(keys, idx)))
+
+
+def _residual(prob: _Problem, tree) -> list[Leaf]:
+    """Candidates detected among the points ``tree`` leaves unexplained (farther than
+    ``2 tau`` from its surface, or on it with the normal the other way)."""
+    P, N = prob.P, prob.N
+    used = sorted(set(T.leaves(tree)))
+    vals = np.zeros((len(prob.pool.leaves), len(P)))
+    dots = None if N is None else np.zeros_like(vals)
+    for i in used:
+        f, g = prob.pool.leaves[i].values(P)
+        vals[i] = f
+        if dots is not None:
+            dots[i] = np.einsum("ij,ij->i", g, N)
+    f, d = evaluate_oriented(tree, vals, dots)
+    bad = np.abs(f) > 2 * prob.tau
+    if d is not None:
+        bad |= d <= 0
+    sub = np.flatnonzero(bad)
+    if len(sub) < RESIDUAL_MIN:
+        return []
+    det_kinds = tuple(prob.ks) + (("plane",) if "box" in prob.ks else ())
     try:
-        return _refine(tree, leaves, P, tau, viewpoint, 40)
+        dets = detect_primitives(P[sub], None if N is None else N[sub], kinds=det_kinds,
+                                 seed=prob.seed, viewpoint=prob.vp,
+                                 min_points=RESIDUAL_MIN, max_primitives=12)
     except CsdfError:
-        return leaves
+        return []
+    return _candidates(prob, dets, sub, prob.tau)
+
+
+def _move_faces(prob: _Problem, best: Scored, deadline: float, rounds: int = FACE_ROUNDS
+                ) -> Scored:
+    """``best`` with faces of its boxes and caps of its cylinders moved
+    (:func:`.candidates.face_moves`) while that lowers the score: the joint refinement
+    fits faces to the points on them, but leaves a face with none where it was, though
+    it may make up surface there (a box's back reaching too little into the part it
+    is joined to). Stops at ``deadline`` (a ``time.perf_counter()``)."""
+    pool = prob.pool
+    for _ in range(rounds):
+        start = best
+        for c in T.leaves(start.tree):
+            if c not in T.leaves(best.tree) or time.perf_counter() > deadline:
+                continue
+            mark = len(pool.leaves)
+            idx = pool.add(face_moves(pool.leaves[c], prob.P))
+            scorer = pool.scorer()
+            win = None
+            for v in idx:
+                sc = scorer.score(swap(best.tree, c, v))
+                if sc.total < best.total - 1e-9 and (win is None or sc.total < win[0].total):
+                    win = (sc, v)
+            v = pool.truncate(mark, None if win is None else win[1])
+            if win is not None:
+                best = pool.scorer().score(swap(best.tree, c, v))
+        if best is start:
+            break
+    return best
+
+
+def _through_final(prob: _Problem, best: Scored) -> Scored:
+    """``best`` with each cut (a box or cylinder cut away) moved out where no point
+    shows its faces, unless that scores worse by more than a hundredth of the penalty:
+    a hole whose bottom no point shows goes through (the points seen on its wall say
+    nothing of its length, and a closed skin over its opening costs only the few
+    free-space samples that fall in it)."""
+    pool = prob.pool
+    tree = best.tree
+    for c, odd in sorted(parities(tree).items()):
+        lf = pool.leaves[c]
+        if not odd or lf.kind not in ("box", "cylinder"):
+            continue
+        inl = prob.P[np.abs(lf.values(prob.P)[0]) <= 2 * prob.tau]
+        ext = extended(lf, prob.P, inl)
+        if ext is None:
+            continue
+        v = pool.add([ext])[0]
+        if v in T.leaves(tree):
+            continue
+        sc = pool.scorer().score(swap(tree, c, v))
+        if sc.total <= best.total + 0.01 * pool.penalty:
+            best, tree = sc, sc.tree
+    return best
+
+
+def _to_refine(found: list[Scored], n: int) -> list:
+    """Up to ``n`` trees of ``found`` (best first) to refine: by turns the best not yet
+    taken of the best tree's size, of one leaf fewer and of one leaf more."""
+    k = T.size(found[0].tree)
+    groups = [[s.tree for s in found if T.size(s.tree) == m] for m in (k, k - 1, k + 1)]
+    out: list = []
+    while len(out) < n and any(groups):
+        for g in groups:
+            if g and len(out) < n:
+                out.append(g.pop(0))
+    return out
+
+
+class _Search:
+    """The search's state: the best tree so far and what has been refined.
+
+    Args:
+        prob: the problem.
+        maxp: the most leaves of a tree.
+        beam: trees kept per size in a beam search.
+        deadline: a ``time.perf_counter()`` to stop at (a safety net: the effort is
+            fixed by the other arguments).
+        t0: the start of the run.
+    """
+
+    def __init__(self, prob: _Problem, maxp: int, beam: int, deadline: float, t0: float):
+        self.prob, self.maxp, self.width, self.deadline, self.t0 = prob, maxp, beam, \
+            deadline, t0
+        self.best: Scored | None = None
+        self.history: list = []
+        self.done: set[str] = set()
+        self.slowest = 0.0
+
+    def _better(self, sc: Scored) -> None:
+        if self.best is None or sc.total < self.best.total - 1e-12:
+            self.best = sc
+            self.history.append((time.perf_counter() - self.t0, T.size(sc.tree), sc.total,
+                                 sc.tree))
+
+    def _time_left(self) -> bool:
+        return time.perf_counter() + self.slowest <= self.deadline
+
+    def beam(self, seeds: list | None = None) -> list[Scored]:
+        """A beam search over every candidate (seeded with ``seeds``); its best trees."""
+        pool = self.prob.pool
+        found = beam_search(pool.scorer(), list(range(len(pool.leaves))), self.maxp,
+                            self.width, self.deadline, None, self.t0, seeds)
+        _note(self.t0, "beam", len(pool.leaves), found[0].total, found[0].tree)
+        self._better(found[0])
+        return found
+
+    def refine(self, tree) -> None:
+        """Refine and polish ``tree`` (:func:`_refine_and_polish`) unless one of its
+        normal form was, or no time is left."""
+        key = T.normal_form(tree)
+        if key in self.done or (self.best is not None and not self._time_left()):
+            return
+        self.done.add(key)
+        ts = time.perf_counter()
+        sc = _refine_and_polish(self.prob, tree, self.maxp, self.deadline)
+        self.slowest = max(self.slowest, time.perf_counter() - ts)
+        self._better(sc)
+        _note(self.t0, "refined", sc.total, sc.tree)
+
+    def drops(self) -> None:
+        """Each leaf of the best tree dropped and the rest refined (a leaf that only
+        made up for the others' extents before they were refined), for up to
+        :data:`DROP_ROUNDS` rounds while that lowers the score."""
+        for _ in range(DROP_ROUNDS):
+            start = self.best
+            if start is None or T.size(start.tree) < 2:
+                break
+            for c in T.leaves(start.tree):
+                self.refine(T.remove(start.tree, c))
+            if self.best is start:
+                break
+
+
+#: a callable that gets ``(seconds, stage, ...)`` of each stage of :func:`infer` (for
+#: diagnosis), or None
+TRACE = None
+
+
+def _note(t0: float, *what) -> None:
+    if TRACE is not None:
+        TRACE(time.perf_counter() - t0, *what)
 
 
 def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, viewpoint=None,
           time_limit: float = 30.0, seed: int = 0, *, epsilon: float | None = None,
-          penalty: float | None = None) -> InferResult:
+          penalty: float | None = None, effort: float | None = None) -> InferResult:
     """Infer a CSG tree of csdf primitives, with named parameters, from a point cloud.
 
     Args:
         points: ``(N, 3)`` points on the object's surface (scene units).
-        normals: ``(N, 3)`` normals, or None to estimate them.
+        normals: ``(N, 3)`` outward normals (as :func:`csdf.sample_surface` and
+            :func:`csdf.scan` give), or None to estimate them (turned to the viewpoint
+            when one is given). Normals whose signs are not consistent are used for
+            detection only.
         max_primitives: the most primitives in the tree.
         kinds: the primitive kinds to use (some of ``'box'``, ``'cylinder'``,
             ``'sphere'``, ``'cone'``, ``'torus'``; names or one comma string).
         viewpoint: ``(3,)`` the sensor position of a single-view scan: estimated
             normals face it, and the search penalises material where the sensor saw
-            through.
-        time_limit: seconds; the search stops with the best tree found by then (the
-            detection before it and one refinement after it may add a little).
+            through (towards its points, and past the object's silhouette: the whole
+            object should be in the sensor's view).
+        time_limit: seconds. The search's effort grows with it (beam width, trees
+            refined) and is otherwise fixed, so that a seed gives the same result on
+            any machine; on a machine too slow for that effort the search stops at
+            :data:`SEARCH_UNTIL` of the limit and the final face moves at
+            :data:`FACES_UNTIL`, with the best tree found by then.
         seed: equal seeds give equal results.
         epsilon: the noise level ``tau`` (scene units) of the score; default three
             times the detections' median rmse, at least ``1e-3`` of the cloud's
             diagonal.
-        penalty: the cost of one more primitive; default the share of the points the
-            smallest detection explains, halved, at least 0.002.
+        penalty: the cost of one more primitive, as a share of the points it must
+            explain; default :data:`PENALTY`.
+        effort: the search's effort in seconds of this project's machine (beam width
+            and trees refined, as ``time_limit`` sets them); default ``time_limit``.
+            Give it with a larger ``time_limit`` for a result that no machine's speed
+            or load can cut short (tests, reproducible runs).
 
     Returns:
         :class:`InferResult`.
@@ -317,90 +607,51 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         raise CsdfError(f"max_primitives must be an integer in [1, 32], got {max_primitives!r}")
     if not (isinstance(time_limit, (int, float)) and time_limit > 0):
         raise CsdfError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
-    rng = np.random.default_rng(seed)
-    dets = detect_primitives(P, N, kinds=ks, seed=seed, viewpoint=vp,
-                             max_primitives=max(3 * int(max_primitives), 12))
-    dets = [d for d in dets if d.solid is not None]
-    if not dets:
-        raise CsdfError("infer: no primitive of the kinds "
-                        f"{', '.join(ks)} found in the cloud")
-    leaves = [_Leaf(d.solid[0], np.asarray(d.solid[1], float), np.asarray(d.solid[2], float),
-                    dict(d.solid[3])) for d in dets]
-    # a solid's faces that no point lies on may reach further than its inliers do (a
-    # box cut by an intersection shows only what is inside the other operand): the
-    # candidates also hold each box and cylinder with those faces out to the cloud's
-    # extent
-    through: dict[int, int] = {}
-    for i, (d, lf) in enumerate(zip(dets, list(leaves))):
-        v = _extended(lf, P, P[d.inliers])
-        if v is not None:
-            through[i] = len(leaves)
-            leaves.append(v)
-    leaves = [_snap(lf) for lf in leaves]
-    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
-    if epsilon is None:
-        tau = max(3.0 * float(np.median([d.rmse for d in dets])), 1e-3 * diag)
-    else:
-        if not (isinstance(epsilon, (int, float)) and epsilon > 0):
-            raise CsdfError(f"epsilon must be a positive number, got {epsilon!r}")
-        tau = float(epsilon)
-    if penalty is None:
-        penalty = max(0.5 * min(len(d.inliers) for d in dets) / len(P), 0.002)
-    sample = np.sort(rng.choice(len(P), size=min(SEARCH_POINTS, len(P)), replace=False))
-    S = P[sample]
-    free = _free_points(P, vp, tau, rng, FREE_POINTS) if vp is not None else None
-
-    def table(X: np.ndarray, lvs: list[_Leaf]) -> np.ndarray:
-        return np.stack([solid_values(lf.kind, lf.R, lf.t, lf.vals, X)[0] for lf in lvs])
-
-    tree_kd = cKDTree(P) if vp is None else None
-    reach = 0.0
-    if tree_kd is not None:  # how far a measured point may be from surface it supports
-        d2, _ = tree_kd.query(S[: min(len(S), 2000)], k=2)
-        reach = max(3.0 * tau, 3.0 * float(np.median(d2[:, 1])))
-
-    def scorer_for(lvs: list[_Leaf]) -> Scorer:
-        at_free = None if free is None else table(free, lvs)
-        if tree_kd is None:
-            return Scorer(table(S, lvs), at_free, tau, penalty)
-        Q = np.concatenate([_leaf_surface(lf, SURFACE_SAMPLES, rng) for lf in lvs])
-        far = tree_kd.query(Q, distance_upper_bound=reach)[0] > reach
-        return Scorer(table(S, lvs), at_free, tau, penalty, table(Q, lvs), far)
-
-    scorer = scorer_for(leaves)
-    history: list = []
-    found = beam_search(scorer, len(leaves), int(max_primitives), BEAM,
-                        t0 + float(time_limit), history, t0)
-    # joint refinement of the best few; each scored again with its own leaves, its
-    # structure polished with them (local moves), and refined again if that changed it
-    fit_idx = np.sort(rng.choice(len(P), size=min(FIT_POINTS, len(P)), replace=False))
-    polish_until = t0 + float(time_limit) + POLISH_SECONDS
-    best = None
-    for cand in found[:REFINE_TREES]:
-        lvs = _refined(cand.tree, leaves, P[fit_idx], tau, vp)
-        scorer = scorer_for(lvs)
-        sc = polish(scorer, cand.tree, len(lvs), int(max_primitives), polish_until)
-        if T.canonical(sc.tree) != T.canonical(cand.tree):
-            lvs = _refined(sc.tree, lvs, P[fit_idx], tau, vp)
-            scorer = scorer_for(lvs)
-            sc = scorer.score(sc.tree)
-        if best is None or sc.total < best[0].total:
-            best = (sc, lvs, scorer)
-    assert best is not None
-    sc, lvs, scorer = best
-    # the winner's cuts go through where nothing shows their ends (search.through_cuts)
-    swapped = through_cuts(scorer, sc.tree, through)
-    if T.canonical(swapped.tree) != T.canonical(sc.tree):
-        lvs2 = _refined(swapped.tree, lvs, P[fit_idx], tau, vp)
-        sc2 = scorer_for(lvs2).score(swapped.tree)
-        if sc2.total <= sc.total + 0.01 * penalty:
-            sc, lvs = sc2, lvs2
+    if effort is None:
+        effort = time_limit
+    elif isinstance(effort, bool) or not (isinstance(effort, (int, float)) and effort > 0):
+        raise CsdfError(f"effort must be a positive number of seconds, got {effort!r}")
+    maxp = int(max_primitives)
+    prob = _setup(P, N, vp, ks, maxp, seed, epsilon, penalty)
+    _note(t0, "setup", len(prob.pool.leaves))
+    pool = prob.pool
+    run = _Search(prob, maxp, max(8, int(BEAM_PER_SECOND * effort)),
+                  t0 + SEARCH_UNTIL * float(time_limit), t0)
+    found = run.beam()
+    # the points the best tree leaves unexplained: detected again, and the search
+    # resumed with what they show
+    for _ in range(RESIDUAL_ROUNDS):
+        n0 = len(pool.leaves)
+        pool.add(_residual(prob, found[0].tree))
+        if len(pool.leaves) == n0:
+            break
+        found = run.beam([s.tree for s in found])
+    # joint refinement of the best trees (of the best one's size and one leaf fewer or
+    # more: refinement moves scores by more than a penalty), then of the best with each
+    # leaf dropped
+    for tree in _to_refine(found, max(3, int(REFINE_PER_SECOND * effort))):
+        run.refine(tree)
+    run.drops()
+    assert run.best is not None
+    best = _move_faces(prob, run.best, t0 + FACES_UNTIL * float(time_limit))
+    if best is not run.best:
+        run.history.append((time.perf_counter() - t0, T.size(best.tree), best.total, best.tree))
+    history = run.history
+    _note(t0, "searched", prob, best)
+    # the winner's cuts go through where nothing shows their ends
+    swapped = _through_final(prob, best)
+    if T.normal_form(swapped.tree) != T.normal_form(best.tree):
+        tree = _refined_tree(prob, swapped.tree)
+        sc2 = pool.scorer().score(tree)
+        best = sc2 if sc2.total <= best.total + 0.01 * pool.penalty else swapped
+    sc = best
+    lvs = pool.leaves
     shape, names = _shape(sc.tree, lvs)
     label = names.__getitem__
     if not history or abs(history[-1][2] - sc.total) > 1e-15:
         history.append((time.perf_counter() - t0, T.size(sc.tree), sc.total, sc.tree))
-    f = T.evaluate(sc.tree, table(P, lvs))
-    near = np.abs(f) <= 3 * tau
+    f = prob.tree_values(sc.tree, P)
+    near = np.abs(f) <= 3 * prob.tau
     prims = []
     for i in T.leaves(sc.tree):
         lf = lvs[i]
@@ -412,4 +663,4 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         shape=shape, text=dumps(shape), tree=T.to_text(sc.tree, label), primitives=prims,
         cost=sc.total, rmse=float(np.sqrt(np.mean(f[near] ** 2))) if near.any() else math.inf,
         inlier_fraction=float(near.mean()), seconds=time.perf_counter() - t0,
-        history=hist, candidates=len(leaves))
+        history=hist, candidates=len(pool.leaves))

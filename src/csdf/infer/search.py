@@ -1,27 +1,36 @@
-"""Beam search over CSG trees of candidate primitives, scored on sampled distances.
+"""Search over CSG trees of candidate primitives, scored on sampled distances.
 
 Every candidate's exact signed distance is evaluated once at a sample of the points
-(and, with a viewpoint, at points of the free space the sensor looked through); a
-tree's field at those points is then min/max of its leaves' rows, so scoring a tree
-costs a few array operations, not an evaluation of the tree.
+(with the cosine between its gradient and each point's normal), at points of the free
+space a single-view sensor looked through, and at points on every candidate's own
+surface; a tree's field at those points is then min/max of its leaves' rows, so
+scoring a tree costs a few array operations, not an evaluation of the tree.
 
 Score (lower is better), with ``tau`` a few noise levels:
 
 * data: ``mean(min((f(p) / tau)^2, 1))`` over the points (a truncated quadratic: a
-  point explained within the noise costs ~0, one not explained at all costs 1);
-* free space: the same of ``max(0, -f(q)) / tau`` over the free-space points ``q``
-  (material where the sensor saw through costs); without a viewpoint (a cloud taken
-  all around) instead the share of sample points on the candidates' surfaces that lie
-  on the tree's surface (``|f| <= tau``) with no measured point near them (surface the
-  tree makes up);
-* size: ``penalty`` per primitive (about the share of the points the smallest
-  detection explains, so a primitive must explain more than that to be kept).
+  point explained within the noise costs ~0, one not explained at all costs 1); a point
+  on the tree's surface whose normal points into the tree there is not explained (it
+  costs 1): a bump and a dent through the same points differ in their normals;
+* free space: with a viewpoint, the same of ``max(0, -f(q)) / tau`` over the free-space
+  points ``q`` (material where the sensor saw through, towards measured points or past
+  the object's silhouette); without one (a cloud taken all around), the area of the
+  tree's surface with no measured point near it facing its way (surface the tree
+  makes up), as a share of the measured surface's area;
+* size: ``penalty`` per primitive (a primitive must explain more than that share of
+  the points to be kept).
 
-A step grows a tree by one leaf: any subtree ``S`` becomes ``S | c``, ``S & c``,
-``S - c`` or ``c - S`` for an unused candidate ``c``. The ``beam`` best distinct trees
-(up to the order of commutative operands) of each size go on; the search stops at
-``max_primitives`` leaves, when no tree of a size beats the best smaller one by more
-than the penalty twice running, or at the time limit.
+A tree must agree with its leaves' orientations (:attr:`csdf.infer.candidates.Leaf.sign`):
+a leaf whose points face out of it lies under an even number of right operands of
+differences, one whose points face into it (a cut) under an odd number.
+
+:func:`beam_search` grows trees by one leaf a step: any subtree ``S`` becomes
+``S | c``, ``S & c``, ``S - c`` or ``c - S`` for an unused candidate ``c`` that may
+explain points the tree leaves unexplained (:meth:`Scorer.useful`); the ``beam`` best
+distinct trees of each size go on (distinct sets: :func:`csdf.infer.tree.normal_form`,
+so that ``(a - b) & c`` and ``(a & c) - b`` take one place). :func:`polish` improves one
+tree by local moves (a leaf moved elsewhere, dropped, added, or swapped for another
+candidate of its kind).
 """
 
 from __future__ import annotations
@@ -31,9 +40,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .tree import Tree, canonical, evaluate, leaves, remove, replace, size, subtrees
+from .tree import Tree, field_of, leaves, normal_form, remove, replace, size
 
-__all__ = ["Scorer", "beam_search", "polish", "through_cuts", "Scored"]
+__all__ = ["Scorer", "Scored", "beam_search", "polish", "consistent", "parities", "swap",
+           "evaluate_oriented", "grow"]
 
 
 @dataclass
@@ -46,72 +56,223 @@ class Scored:
     total: float
 
 
-class Scorer:
-    """Scores trees from their leaves' distances at the sample points ``(L, M)`` and the
-    free-space points ``(L, Q)``."""
+def evaluate_oriented(tree: Tree, values: np.ndarray, dots: np.ndarray | None
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The tree's field ``(N,)`` from its leaves' fields ``values`` ``(L, N)``, and the
+    cosine ``(N,)`` between the tree's outward gradient and the points' normals from
+    the leaves' ``dots`` ``(L, N)`` (None without normals): the active leaf's, negated
+    under a difference's right operand."""
+    if dots is None:
+        return field_of(tree, values.__getitem__), None
+    if isinstance(tree, (int, np.integer)):
+        return values[int(tree)], dots[int(tree)]
+    op, a, b = tree
+    fa, da = evaluate_oriented(a, values, dots)
+    fb, db = evaluate_oriented(b, values, dots)
+    if op == "difference":
+        fb = -fb
+        db = -db
+        pick_a = fa >= fb
+    elif op == "union":
+        pick_a = fa <= fb
+    else:
+        pick_a = fa >= fb
+    return np.where(pick_a, fa, fb), np.where(pick_a, da, db)
 
-    def __init__(self, at_points: np.ndarray, at_free: np.ndarray | None, tau: float,
-                 penalty: float, at_surface: np.ndarray | None = None,
-                 unsupported: np.ndarray | None = None):
+
+def parities(tree: Tree, odd: bool = False) -> dict[int, bool]:
+    """``{leaf: under an odd number of right operands of differences}``."""
+    if isinstance(tree, (int, np.integer)):
+        return {int(tree): odd}
+    op, a, b = tree
+    return {**parities(a, odd), **parities(b, odd ^ (op == "difference"))}
+
+
+def consistent(tree: Tree, signs: np.ndarray) -> bool:
+    """Whether every leaf's orientation ``signs[leaf]`` (+1, -1, 0: any) agrees with
+    its place in the tree (module docs)."""
+    for leaf, odd in parities(tree).items():
+        s = signs[leaf]
+        if s and (s < 0) != odd:
+            return False
+    return True
+
+
+class Scorer:
+    """Scores trees from their leaves' values at sampled points.
+
+    Args:
+        at_points: ``(L, M)`` the leaves' signed distances at the sample of the points.
+        dots: ``(L, M)`` cosines between each leaf's gradient and each point's normal,
+            or None (normals of unknown sign).
+        at_free: ``(L, Q)`` the leaves' distances at free-space points, or None.
+        tau: the noise level (scene units).
+        penalty: the cost of one leaf.
+        at_surface: ``(L, S)`` the leaves' distances at points sampled on the leaves'
+            own surfaces (clouds taken all around), or None.
+        owner: ``(S,)`` the leaf each surface point lies on.
+        weight: ``(S,)`` the share of the measured surface's area each surface point
+            stands for.
+        unsupported: ``(2, S)`` which surface points have no measured point near them
+            facing their way: row 0 on a material leaf, row 1 on a cut one.
+        signs: ``(L,)`` the leaves' orientations (+1, -1, 0).
+    """
+
+    def __init__(self, at_points: np.ndarray, dots: np.ndarray | None,
+                 at_free: np.ndarray | None, tau: float, penalty: float,
+                 at_surface: np.ndarray | None = None, owner: np.ndarray | None = None,
+                 weight: np.ndarray | None = None, unsupported: np.ndarray | None = None,
+                 signs: np.ndarray | None = None):
         self.at_points = at_points
+        self.dots = dots
         self.at_free = at_free
         self.tau = float(tau)
         self.penalty = float(penalty)
         self.at_surface = at_surface
+        self.owner = owner
+        self.weight = weight
         self.unsupported = unsupported
+        n = at_points.shape[0]
+        self.signs = np.zeros(n, dtype=int) if signs is None else np.asarray(signs, int)
+        self.count = 0
+        if at_surface is not None:
+            order = np.argsort(owner, kind="stable")
+            self._order = order
+            starts = np.searchsorted(owner[order], np.arange(n + 1))
+            self._slices = [order[starts[i]:starts[i + 1]] for i in range(n)]
+
+    @property
+    def n_leaves(self) -> int:
+        return self.at_points.shape[0]
+
+    def _costs(self, tree: Tree) -> np.ndarray:
+        """``(M,)`` each sample point's data cost under ``tree``."""
+        f, d = evaluate_oriented(tree, self.at_points, self.dots)
+        cost = np.minimum((f / self.tau) ** 2, 1.0)
+        return cost if d is None else np.where(d > 0.0, cost, 1.0)
+
+    def useful(self, tree: Tree, candidates: list[int], free: float, share: float = 0.5
+               ) -> list[int]:
+        """The candidates that may pay for their place in ``tree``: a point the tree
+        does not explain can only come to be explained on a new leaf's surface, so a
+        leaf on whose surface fewer than ``penalty / 2`` of the points lie that the
+        tree leaves unexplained (cost above 1/4) cannot lower the data term by its
+        penalty. Every candidate is useful while the tree's free-space term ``free``
+        exceeds the penalty (a leaf may trim material without explaining points)."""
+        if free > self.penalty:
+            return list(candidates)
+        bad = self._costs(tree) > 0.25
+        if not bad.any():
+            return []
+        on = np.abs(self.at_points[np.asarray(candidates, int)][:, bad]) <= self.tau
+        gain = on.sum(axis=1) / self.at_points.shape[1]
+        return [c for c, g in zip(candidates, gain) if g >= share * self.penalty]
 
     def score(self, tree: Tree) -> Scored:
-        f = evaluate(tree, self.at_points)
-        data = float(np.mean(np.minimum((f / self.tau) ** 2, 1.0)))
+        """The :class:`Scored` tree."""
+        self.count += 1
+        data = float(np.mean(self._costs(tree)))
         free = 0.0
         if self.at_free is not None and self.at_free.shape[1]:
-            g = evaluate(tree, self.at_free)
+            g, _ = evaluate_oriented(tree, self.at_free, None)
             free = float(np.mean(np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0)))
-        if self.at_surface is not None and self.at_surface.shape[1]:
-            # the tree's own surface where no point was measured (a full scan)
-            h = evaluate(tree, self.at_surface)
-            free += float(np.mean((np.abs(h) <= self.tau) & self.unsupported))
+        if self.at_surface is not None:
+            # the share of the tree's own surface where no point was measured
+            par = parities(tree)
+            idx = np.concatenate([self._slices[i] for i in par])
+            bare = np.concatenate([self.unsupported[int(odd), self._slices[i]]
+                                   for i, odd in par.items()])
+            h = field_of(tree, lambda i: self.at_surface[i, idx])
+            on = np.abs(h) <= self.tau
+            free += float(self.weight[idx][on & bare].sum())
         return Scored(tree, data, free, data + free + self.penalty * size(tree))
 
 
-def _grow(tree: Tree, c: int) -> list[Tree]:
-    """Every tree with one more leaf ``c`` (see the module docs)."""
+def _paths(tree: Tree, path: tuple = (), odd: bool = False
+           ) -> list[tuple[tuple, Tree, bool]]:
+    """``(path, subtree, odd)`` of every subtree, ``odd`` its parity (under an odd
+    number of right operands of differences)."""
+    if isinstance(tree, (int, np.integer)):
+        return [(path, tree, odd)]
+    op, a, b = tree
+    left = _paths(a, path + (1,), odd)
+    right = _paths(b, path + (2,), odd ^ (op == "difference"))
+    return [(path, tree, odd)] + left + right
+
+
+def grow(tree: Tree, c: int, signs: np.ndarray) -> list[Tree]:
+    """Every tree with one more leaf ``c`` (see the module docs) that agrees with the
+    leaves' orientations ``signs`` (``tree`` itself is taken to agree)."""
     out = []
-    for path, sub in subtrees(tree):
-        for new in (("union", sub, c), ("intersection", sub, c), ("difference", sub, c),
-                    ("difference", c, sub)):
-            out.append(replace(tree, path, new))
+    sc = signs[c]
+    for path, sub, odd in _paths(tree):
+        # c's parity: that of the subtree's place, flipped as a right operand of "-"
+        c_even_ok = sc >= 0  # c may sit at even parity
+        c_odd_ok = sc <= 0
+        c_ok_here = c_odd_ok if odd else c_even_ok
+        c_ok_flip = c_even_ok if odd else c_odd_ok
+        if c_ok_here:
+            out.append(replace(tree, path, ("union", sub, c)))
+            out.append(replace(tree, path, ("intersection", sub, c)))
+        if c_ok_flip:
+            out.append(replace(tree, path, ("difference", sub, c)))
+        if c_ok_here and _flips(sub, odd, signs):
+            out.append(replace(tree, path, ("difference", c, sub)))
     return out
 
 
-def beam_search(scorer: Scorer, n_leaves: int, max_primitives: int, beam: int,
-                deadline: float, history: list | None = None, t0: float | None = None
-                ) -> list[Scored]:
-    """The best trees found, best first (at most ``beam`` of the last size tried and the
-    best of every smaller size). ``history`` gets ``(seconds, leaves, total, tree)`` of
-    each new best; ``deadline``: a ``time.perf_counter()`` to stop at."""
+def _flips(sub: Tree, odd: bool, signs: np.ndarray) -> bool:
+    """Whether the subtree ``sub`` (at parity ``odd``) may take the opposite parity."""
+    for leaf, o in parities(sub, not odd).items():
+        s = signs[leaf]
+        if s and (s < 0) != o:
+            return False
+    return True
+
+
+def beam_search(scorer: Scorer, candidates: list[int], max_primitives: int, beam: int,
+                deadline: float, history: list | None = None, t0: float | None = None,
+                seeds: list[Tree] | None = None) -> list[Scored]:
+    """The best trees found, best first (the ``beam`` best of every size tried).
+
+    Args:
+        scorer: scores trees over the leaves ``0 .. scorer.n_leaves - 1``.
+        candidates: the leaves the trees may use.
+        max_primitives: the most leaves of a tree.
+        beam: trees kept per size.
+        deadline: a ``time.perf_counter()`` to stop at.
+        history: gets ``(seconds, leaves, total, tree)`` of each new best.
+        t0: the start of the run (for ``history``).
+        seeds: trees that join the beam at their size (a search resumed with more
+            candidates).
+    """
     t0 = time.perf_counter() if t0 is None else t0
-    level = sorted((scorer.score(i) for i in range(n_leaves)), key=lambda s: s.total)
-    level = level[:beam]
+    signs = scorer.signs
+    by_size: dict[int, list[Scored]] = {}
+    for t in seeds or []:
+        by_size.setdefault(size(t), []).append(scorer.score(t))
+    level = [scorer.score(i) for i in candidates if signs[i] >= 0]
+    level = sorted(level + by_size.get(1, []), key=lambda s: s.total)[:beam]
+    if not level:
+        return []
     best = level[0]
-    kept = [best]
+    kept = list(level)
     if history is not None:
         history.append((time.perf_counter() - t0, 1, best.total, best.tree))
     stale = 0
-    for _ in range(2, min(max_primitives, n_leaves) + 1):
+    for k in range(2, max_primitives + 1):
         if time.perf_counter() > deadline:
             break
-        seen: dict[str, Scored] = {}
+        seen: dict[str, Scored] = {normal_form(s.tree): s for s in by_size.get(k, [])}
         for st in level:
             used = set(leaves(st.tree))
-            for c in range(n_leaves):
+            for c in scorer.useful(st.tree, candidates, st.free):
                 if c in used:
                     continue
-                for t in _grow(st.tree, c):
-                    key = canonical(t)
-                    if key in seen:
-                        continue
-                    seen[key] = scorer.score(t)
+                for t in grow(st.tree, c, signs):
+                    key = normal_form(t)
+                    if key not in seen:
+                        seen[key] = scorer.score(t)
                 if time.perf_counter() > deadline:
                     break
             if time.perf_counter() > deadline:
@@ -119,7 +280,7 @@ def beam_search(scorer: Scorer, n_leaves: int, max_primitives: int, beam: int,
         if not seen:
             break
         level = sorted(seen.values(), key=lambda s: s.total)[:beam]
-        kept.append(level[0])
+        kept += level
         if level[0].total < best.total - 1e-12:
             improved = best.total - level[0].total
             best = level[0]
@@ -131,72 +292,64 @@ def beam_search(scorer: Scorer, n_leaves: int, max_primitives: int, beam: int,
             stale += 1
         if stale >= 2:
             break
-    out = sorted(kept + level, key=lambda s: s.total)
     uniq: dict[str, Scored] = {}
-    for s in out:
-        uniq.setdefault(canonical(s.tree), s)
+    for s in sorted(kept, key=lambda s: s.total):
+        uniq.setdefault(normal_form(s.tree), s)
     return list(uniq.values())
 
 
+def swap(tree: Tree, old: int, new: int) -> Tree:
+    """The tree with leaf ``old`` replaced by ``new``."""
+    if isinstance(tree, (int, np.integer)):
+        return new if int(tree) == old else tree
+    return (tree[0], swap(tree[1], old, new), swap(tree[2], old, new))
 
-def _subtrahends(tree: Tree) -> set[int]:
-    """The leaves that are cut away: the right operands of differences (directly, or
-    through unions and intersections under them)."""
-    out: set[int] = set()
-    if not isinstance(tree, (int, np.integer)):
-        op, a, b = tree
-        out |= _subtrahends(a) | _subtrahends(b)
-        if op == "difference":
-            out |= set(leaves(b))
+
+def _moves(tree: Tree, candidates: list[int], useful: list[int], max_primitives: int,
+           signs: np.ndarray, kinds: list[str]) -> list[Tree]:
+    """The local moves from ``tree`` (see :func:`polish`); ``useful``: the candidates
+    worth adding (:meth:`Scorer.useful`)."""
+    out: list[Tree] = []
+    used = leaves(tree)
+    for c in used:
+        rest = remove(tree, c)
+        if rest is None:
+            continue
+        out.append(rest)
+        out += grow(rest, c, signs)
+        for o in candidates:  # the same place, another candidate of the kind
+            if o not in used and kinds[o] == kinds[c]:
+                t = swap(tree, c, o)
+                if consistent(t, signs):
+                    out.append(t)
+    if len(used) < max_primitives:
+        for c in useful:
+            if c not in used:
+                out += grow(tree, c, signs)
     return out
 
 
-def _swap(tree: Tree, old: int, new: int) -> Tree:
-    if isinstance(tree, (int, np.integer)):
-        return new if int(tree) == old else tree
-    return (tree[0], _swap(tree[1], old, new), _swap(tree[2], old, new))
-
-
-def through_cuts(scorer: Scorer, tree: Tree, through: dict[int, int]) -> Scored:
-    """``tree`` with each cut (a leaf cut away) turned into its variant in ``through``
-    (candidate -> the same with its point-less faces moved out) unless that scores
-    worse by more than a hundredth of the penalty: a hole whose bottom no point shows
-    goes through (the points seen on its wall say nothing of its length, and a closed
-    skin over its opening costs only the few free-space samples that fall in it)."""
-    best = scorer.score(tree)
-    for c in sorted(_subtrahends(best.tree)):
-        v = through.get(c)
-        if v is not None and v not in leaves(best.tree):
-            sc = scorer.score(_swap(best.tree, c, v))
-            if sc.total <= best.total + 0.01 * scorer.penalty:
-                best = sc
-    return best
-
-
-def polish(scorer: Scorer, tree: Tree, n_leaves: int, max_primitives: int, deadline: float
-           ) -> Scored:
+def polish(scorer: Scorer, tree: Tree, candidates: list[int], max_primitives: int,
+           deadline: float, kinds: list[str]) -> Scored:
     """Local moves from ``tree`` while one lowers the score: take a leaf out and put it
     back anywhere with any op (the beam grew the tree in one order; an operand may
-    belong elsewhere), drop a leaf, or add an unused candidate anywhere."""
+    belong elsewhere), drop a leaf, swap it for another candidate of its kind, or add
+    an unused candidate anywhere. ``kinds``: each leaf's primitive kind."""
     best = scorer.score(tree)
+    seen = {normal_form(tree)}
     while time.perf_counter() < deadline:
         found = best
-        used = leaves(best.tree)
-        for c in used:
-            rest = remove(best.tree, c)
-            if rest is None:
+        useful = scorer.useful(best.tree, candidates, best.free, 1.0)
+        for t in _moves(best.tree, candidates, useful, max_primitives, scorer.signs, kinds):
+            key = normal_form(t)
+            if key in seen:
                 continue
-            for t in [rest, *_grow(rest, c)]:
-                sc = scorer.score(t)
-                if sc.total < found.total - 1e-12:
-                    found = sc
-        if len(used) < max_primitives:
-            for c in range(n_leaves):
-                if c not in used:
-                    for t in _grow(best.tree, c):
-                        sc = scorer.score(t)
-                        if sc.total < found.total - 1e-12:
-                            found = sc
+            seen.add(key)
+            sc = scorer.score(t)
+            if sc.total < found.total - 1e-12:
+                found = sc
+            if time.perf_counter() > deadline:
+                break
         if found is best:
             break
         best = found

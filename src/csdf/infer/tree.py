@@ -12,8 +12,8 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-__all__ = ["OPS", "Tree", "evaluate", "leaves", "size", "subtrees", "replace", "remove",
-           "canonical", "to_text", "build"]
+__all__ = ["OPS", "Tree", "evaluate", "field_of", "leaves", "size", "subtrees", "replace",
+           "remove", "canonical", "normal_form", "to_text", "from_text", "build"]
 
 Tree = int | tuple
 OPS = ("union", "intersection", "difference")
@@ -21,10 +21,16 @@ OPS = ("union", "intersection", "difference")
 
 def evaluate(tree: Tree, leaf_values: np.ndarray) -> np.ndarray:
     """The tree's field ``(N,)`` from its leaves' fields ``leaf_values (L, N)``."""
+    return field_of(tree, leaf_values.__getitem__)
+
+
+def field_of(tree: Tree, row: Callable[[int], np.ndarray]) -> np.ndarray:
+    """The tree's field from ``row(leaf)``, each leaf's field ``(N,)`` at the same
+    points."""
     if isinstance(tree, (int, np.integer)):
-        return leaf_values[int(tree)]
+        return row(int(tree))
     op, a, b = tree
-    fa, fb = evaluate(a, leaf_values), evaluate(b, leaf_values)
+    fa, fb = field_of(a, row), field_of(b, row)
     if op == "union":
         return np.minimum(fa, fb)
     if op == "intersection":
@@ -115,12 +121,72 @@ def _flat(tree: Tree, op: str, label: Callable[[int], str]) -> str:
     return ("U(" if op == "union" else "I(") + ",".join(sorted(items)) + ")"
 
 
+def normal_form(tree: Tree, label: Callable[[int], str] = str) -> str:
+    """A text that is equal for two trees that are the same set whatever their leaves:
+    :func:`canonical`'s forms, and also a difference's subtrahends moved out of an
+    intersection (``(a - b) & c`` is ``(a & c) - b``). On distances the two are the
+    same field (``max`` is associative and commutative), so trees of one normal form
+    score the same."""
+    return _nf_text(_nf(tree, label))
+
+
+def _nf(tree: Tree, label: Callable[[int], str]) -> tuple[tuple[str, list[str]], list[str]]:
+    """``((kind, items), subtrahends)``: the set ``base - U(subtrahends)`` with ``base``
+    a leaf (kind ``'L'``, one item), a union (``'U'``) or an intersection (``'I'``) of
+    the items (texts, sorted)."""
+    if isinstance(tree, (int, np.integer)):
+        return ("L", [label(int(tree))]), []
+    op, a, b = tree
+    na, nb = _nf(a, label), _nf(b, label)
+    if op == "union":
+        items = [x for n in (na, nb) for x in (n[0][1] if n[0][0] == "U" and not n[1]
+                                               else [_nf_text(n)])]
+        return ("U", sorted(items)), []
+    if op == "intersection":
+        items = [x for n in (na, nb) for x in (n[0][1] if n[0][0] == "I"
+                                               else [_nf_text((n[0], []))])]
+        return ("I", sorted(items)), sorted(na[1] + nb[1])
+    subs = nb[0][1] if nb[0][0] == "U" and not nb[1] else [_nf_text(nb)]
+    return na[0], sorted(na[1] + subs)
+
+
+def _nf_text(n: tuple[tuple[str, list[str]], list[str]]) -> str:
+    (kind, items), subs = n
+    base = items[0] if kind == "L" else f"{kind}(" + ",".join(items) + ")"
+    if not subs:
+        return base
+    return f"D({base}," + (subs[0] if len(subs) == 1 else "U(" + ",".join(subs) + ")") + ")"
+
+
 def to_text(tree: Tree, label: Callable[[int], str] = str) -> str:
     """Infix text: ``(a | b) - c``."""
     if isinstance(tree, (int, np.integer)):
         return label(int(tree))
     sym = {"union": "|", "intersection": "&", "difference": "-"}[tree[0]]
     return f"({to_text(tree[1], label)} {sym} {to_text(tree[2], label)})"
+
+
+def from_text(text: str, index: Callable[[str], int]) -> Tree:
+    """The tree of :func:`to_text`'s infix text (fully parenthesised; leaves numbered by
+    ``index(name)``)."""
+    ops = {"|": "union", "&": "intersection", "-": "difference"}
+    tokens = text.replace("(", " ( ").replace(")", " ) ").split()
+    pos = 0
+
+    def node() -> Tree:
+        nonlocal pos
+        tok = tokens[pos]
+        pos += 1
+        if tok != "(":
+            return index(tok)
+        a = node()
+        op = ops[tokens[pos]]
+        pos += 1
+        b = node()
+        pos += 1  # ')'
+        return (op, a, b)
+
+    return node()
 
 
 def build(tree: Tree, leaf: Callable[[int], object]):

@@ -1,0 +1,263 @@
+"""csdf.infer's parts: tree normal forms, sign-aware growth, candidates from planes,
+surface samples, the free space of a scan, the score's orientation and support terms,
+and the joint refinement."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import csdf
+from csdf.infer import tree as T
+from csdf.infer.candidates import Leaf, leaf_surface, plane_boxes
+from csdf.infer.pool import (
+    Pool,
+    background_points,
+    free_points,
+    oriented_normals,
+    support_scales,
+)
+from csdf.infer.refine import refine_params
+from csdf.infer.search import Scorer, consistent, grow, parities
+
+
+def _random_tree(rng, labels: list[int]):
+    if len(labels) == 1:
+        return int(labels[0])
+    k = int(rng.integers(1, len(labels)))
+    op = ("union", "intersection", "difference")[int(rng.integers(3))]
+    return (op, _random_tree(rng, labels[:k]), _random_tree(rng, labels[k:]))
+
+
+def test_normal_form_merges_only_trees_of_one_field():
+    # (a - b) & c is (a & c) - b, and canonical's identities hold too
+    assert T.normal_form(("intersection", ("difference", 0, 1), 2)) == \
+        T.normal_form(("difference", ("intersection", 2, 0), 1))
+    assert T.normal_form(("difference", ("difference", 0, 1), 2)) == \
+        T.normal_form(("difference", 0, ("union", 2, 1)))
+    assert T.normal_form(("union", ("difference", 0, 1), 2)) != \
+        T.normal_form(("difference", ("union", 0, 2), 1))
+    rng = np.random.default_rng(0)
+    vals = rng.normal(size=(5, 2000))
+    fields: dict[str, np.ndarray] = {}
+    for _ in range(1500):
+        t = _random_tree(rng, list(rng.permutation(5)[: int(rng.integers(1, 6))]))
+        key = T.normal_form(t)
+        f = T.evaluate(t, vals)
+        if key in fields:
+            assert np.array_equal(fields[key], f), t
+        fields[key] = f
+        # trees canonical calls equal have one normal form
+        assert T.normal_form(t) == T.normal_form(_shuffled(t, rng))
+
+
+def _shuffled(t, rng):
+    """The tree with the operands of its unions and intersections swapped at random."""
+    if isinstance(t, int):
+        return t
+    op, a, b = t
+    a, b = _shuffled(a, rng), _shuffled(b, rng)
+    if op != "difference" and rng.random() < 0.5:
+        a, b = b, a
+    return (op, a, b)
+
+
+def test_grow_keeps_every_leaf_on_its_side():
+    """A leaf whose points face into it (-1) only ever lies under an odd number of
+    right operands of differences, one facing out (+1) under an even number; growth
+    offers exactly the trees that keep that."""
+    rng = np.random.default_rng(1)
+    checked = 0
+    for _ in range(600):
+        signs = rng.integers(-1, 2, 7)
+        t = _random_tree(rng, list(rng.permutation(6)[: int(rng.integers(1, 5))]))
+        if not consistent(t, signs):
+            continue
+        want = []
+        for path, sub in T.subtrees(t):
+            for new in (("union", sub, 6), ("intersection", sub, 6), ("difference", sub, 6),
+                        ("difference", 6, sub)):
+                u = T.replace(t, path, new)
+                if consistent(u, signs):
+                    want.append(u)
+        assert sorted(map(str, grow(t, 6, signs))) == sorted(map(str, want))
+        checked += 1
+    assert checked > 100
+    assert parities(("difference", 0, ("difference", 1, 2))) == {0: False, 1: True, 2: False}
+
+
+def _plane(P, N, mask):
+    Q = P[mask]
+    n = N[mask].mean(axis=0)
+    n /= np.linalg.norm(n)
+    return n, float(np.median(Q @ n)), Q
+
+
+def test_plane_boxes_find_the_solid_and_the_cut():
+    """A block with a notch cut from one edge: the candidates from its faces hold the
+    block (material, +1) and the notch's box (a cut, -1, reaching past the block)."""
+    block = csdf.box((2.0, 1.0, 1.0))
+    notch = csdf.box((0.8, 2.0, 0.8)).translate((0.6, 0.0, 0.5))
+    P, N = csdf.sample_surface(block - notch, 30_000, seed=0)
+    faces = []
+    for k in range(3):
+        for side in (-1.0, 1.0):
+            axis = np.eye(3)[k] * side
+            on = N @ axis > 0.99
+            offsets = np.round(P[on] @ axis, 3)
+            for off in np.unique(offsets):
+                m = on.copy()
+                m[on] = offsets == off
+                if m.sum() > 200:
+                    faces.append(_plane(P, N, m))
+    boxes = plane_boxes(faces, P, 0.005, 0.05)
+
+    def has(sign, lo, hi):
+        for b in boxes:
+            if b.sign != sign or not np.allclose(np.abs(b.R), np.eye(3)[np.argmax(np.abs(b.R), 0)]):
+                continue
+            size = np.abs(b.R) @ np.array([b.vals["size_x"], b.vals["size_y"], b.vals["size_z"]])
+            blo, bhi = b.t - size / 2, b.t + size / 2
+            if np.all(np.abs(blo - lo) <= 0.02 + (lo == -9) * 9) and \
+                    np.all(np.abs(bhi - hi) <= 0.02 + (hi == 9) * 9):
+                return True
+        return False
+
+    assert has(1, np.array([-1.0, -0.5, -0.5]), np.array([1.0, 0.5, 0.5]))
+    # the notch: its floor and inner wall are seen; it goes on past the block elsewhere
+    cut = [b for b in boxes if b.sign < 0]
+    assert cut
+    q = np.array([[0.6, 0.0, 0.4], [0.9, 0.45, 0.45], [0.3, -0.45, 0.2]])  # in the notch
+    assert any(np.all(b.values(q)[0] < 0) for b in cut)
+    outside = np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, -0.3]])  # block material left
+    assert any(np.all(b.values(q)[0] < 0) and np.all(b.values(outside)[0] > 0) for b in cut)
+
+
+@pytest.mark.parametrize("kind,vals", [
+    ("sphere", {"radius": 0.7}), ("cylinder", {"radius": 0.3, "height": 1.1}),
+    ("cone", {"r1": 0.5, "r2": 0.1, "height": 0.8}), ("torus", {"major": 0.5, "minor": 0.2}),
+    ("box", {"size_x": 1.0, "size_y": 0.4, "size_z": 0.7})])
+def test_leaf_surface_is_on_the_surface_and_uniform(kind, vals):
+    R = csdf.Pose.from_rotvec(np.array([0.3, -0.5, 0.2])).rotation
+    lf = Leaf(kind, R, np.array([0.1, 0.2, -0.3]), vals)
+    q, nrm, area = leaf_surface(lf, 40_000, np.random.default_rng(0))
+    assert np.abs(lf.values(q)[0]).max() < 1e-9
+    # the normals: the distance's gradient just outside each point
+    f, g = lf.values(q + 1e-6 * nrm)
+    assert np.allclose(f, 1e-6, atol=1e-9) and np.einsum("ij,ij->i", g, nrm).min() > 0.999
+    # the area from the shape's mesh
+    m = csdf.mesh(lf_shape(lf), resolution=120, progress=False, check_thin=False)
+    v, f = m.vertices, m.faces
+    mesh_area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]),
+                                     axis=1).sum()
+    assert area == pytest.approx(mesh_area, rel=0.02)
+    # uniform by area: the share of the points on each half (by a plane through the
+    # centre) matches the share of the area
+    side = (q - lf.t) @ np.array([1.0, 0.0, 0.0]) > 0
+    centres = v[f].mean(axis=1)
+    tri = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    share = tri[(centres - lf.t) @ np.array([1.0, 0.0, 0.0]) > 0].sum() / tri.sum()
+    assert side.mean() == pytest.approx(share, abs=0.02)
+
+
+def lf_shape(lf: Leaf):
+    from csdf.detect.solids import posed
+
+    return posed(lf.kind, lf.R, lf.t, lf.vals)
+
+
+def _scan(shape, eye, target, noise=0.002, seed=0):
+    cam = csdf.Camera.look_at(eye, target, width=320, height=240)
+    pc, _ = csdf.scan(shape, cam, noise=noise, seed=seed)
+    M = cam.pose
+    return pc @ M[:3, :3].T + M[:3, 3], M[:3, 3]
+
+
+def test_free_space_of_a_scan_is_outside_the_object():
+    """Points on the rays to the measured points and past the silhouette lie outside
+    the scanned object; past the silhouette they surround it."""
+    shape = csdf.sphere(0.5) | csdf.box((1.2, 0.3, 0.3))
+    P, vp = _scan(shape, (2.5, -2.0, 1.5), (0, 0, 0))
+    rng = np.random.default_rng(0)
+    f = csdf.as_field(shape)
+    a = free_points(P, vp, 0.004, 1.6, rng, 2000)
+    b = background_points(P, vp, 1.6, rng, 2000)
+    assert len(a) > 1500 and len(b) == 2000
+    assert (f.value(a) > 0).mean() > 0.99
+    assert (f.value(b) > 0).all()
+    # around the silhouette: directions on all sides of the object
+    d = (b - vp) / np.linalg.norm(b - vp, axis=1, keepdims=True)
+    c = (P - vp).mean(axis=0)
+    c /= np.linalg.norm(c)
+    side = np.cross(d, c)
+    assert np.ptp(side[:, 0]) > 0 and (side @ np.array([0.0, 0.0, 1.0]) > 0).any() and \
+        (side @ np.array([0.0, 0.0, 1.0]) < 0).any()
+
+
+def test_oriented_normals():
+    P, N = csdf.sample_surface(csdf.box((1.0, 0.6, 0.4)), 4000, seed=0)
+    assert oriented_normals(P, N) is N
+    assert np.array_equal(oriented_normals(P, -N), N)
+    flip = np.where(np.random.default_rng(0).random(len(N)) < 0.5, -1.0, 1.0)[:, None]
+    assert oriented_normals(P, N * flip) is None
+
+
+def _pool(P, N, leaves, tau=0.01):
+    from scipy.spatial import cKDTree
+
+    kd = cKDTree(P)
+    reach, area = support_scales(kd, P, len(P), tau)
+    pool = Pool(P, N, None, kd, N, reach, area, tau, 0.004, np.random.default_rng(0))
+    pool.add(leaves)
+    return pool
+
+
+def test_normals_tell_a_bump_from_a_dent():
+    """A sphere on a box's face through the same points: added (a bump) or cut (a dent)
+    differ only in which way the points' normals face."""
+    base = csdf.box((2.0, 2.0, 1.0))
+    ball = csdf.sphere(0.4).translate((0.0, 0.0, 0.5))
+    leaves = [Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 1.0}),
+              Leaf("sphere", np.eye(3), np.array([0.0, 0.0, 0.5]), {"radius": 0.4})]
+    for shape, good, bad in ((base | ball, "union", "difference"),
+                             (base - ball, "difference", "union")):
+        P, N = csdf.sample_surface(shape, 8000, seed=1)
+        sc = _pool(P, N, leaves).scorer()
+        assert sc.score((good, 0, 1)).total < sc.score((bad, 0, 1)).total - 0.02
+        blind = Scorer(sc.at_points, None, None, sc.tau, sc.penalty)  # without normals
+        assert abs(blind.score((good, 0, 1)).data - blind.score((bad, 0, 1)).data) < 0.1
+
+
+def test_made_up_surface_needs_points_facing_its_way():
+    """A thin plate's inside: a cut whose face runs just under the top face is near
+    the top face's points but faces the other way, so it is made up."""
+    plate = csdf.box((2.0, 2.0, 0.1))
+    P, N = csdf.sample_surface(plate, 20_000, seed=2)
+    leaves = [Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 0.1}),
+              Leaf("box", np.eye(3), np.array([0.0, 0.0, -0.48]),
+                   {"size_x": 1.0, "size_y": 1.0, "size_z": 1.04})]  # top at z = 0.04
+    sc = _pool(P, N, leaves, tau=0.002).scorer()
+    plain, cut = sc.score(0), sc.score(("difference", 0, 1))
+    assert plain.free < 0.01
+    assert cut.free > 0.1 and cut.total > plain.total + 0.05
+
+
+def test_refinement_recovers_sizes_and_positions():
+    shape = csdf.box((1.2, 0.8, 0.6)) - csdf.cylinder(0.25, 1.0).translate((0.2, 0.0, 0.0))
+    P, N = csdf.sample_surface(shape, 6000, seed=3)
+    from csdf.expr import param
+
+    names = {"bx": 1.1, "by": 0.85, "bz": 0.55, "cr": 0.2, "ch": 1.0, "cx": 0.25,
+             "ox": 0.03, "oy": -0.02, "oz": 0.02}
+    p = {k: param(k, v) for k, v in names.items()}
+    model = csdf.box((p["bx"], p["by"], p["bz"])).translate((p["ox"], p["oy"], p["oz"])) - \
+        csdf.cylinder(p["cr"], p["ch"]).translate((p["cx"], 0.0, 0.0))
+    out = refine_params(model, dict(names), {"bx", "by", "bz", "cr", "ch"}, P, N, None, 0.01,
+                        "interp")
+    want = {"bx": 1.2, "by": 0.8, "bz": 0.6, "cr": 0.25, "cx": 0.2, "ox": 0.0, "oy": 0.0,
+            "oz": 0.0}
+    for k, v in want.items():
+        assert out[k] == pytest.approx(v, abs=0.005), k
+    assert math.isclose(out["ch"], 1.0)  # the hole's length shows in no point

@@ -28,7 +28,8 @@ the result must be closed and keep the signed volume (the removed triangles' sig
 tetrahedra cancel), else the STL is reported as not closed.
 
 Run: ``python benchmarks/openscad_examples.py [--examples DIR] [--resolution 256]
-[--max-resolution 1024] [--max-seconds 600] [--samples 20000] [--method dc]``; needs
+[--max-resolution 1024] [--max-seconds 600] [--samples 20000] [--method dc]
+[--no-fit-bounds]``; needs
 ``openscad`` on PATH (``apt-get install openscad``) and shapely. Prints a Markdown table
 and a summary.
 """
@@ -171,7 +172,7 @@ def _meets(hd: float, dv: float | None) -> bool:
 
 
 def run(path: Path, resolution: int, samples: int, method: str, tmp: Path,
-        max_resolution: int, max_seconds: float) -> dict:
+        max_resolution: int, max_seconds: float, fit_bounds: bool = True) -> dict:
     """One example: its row of the table (strings). Meshed at ``resolution``, and
     again at twice it while the comparison misses a goal, up to ``max_resolution`` and
     while the next mesh is expected to take at most ``max_seconds``."""
@@ -215,7 +216,7 @@ def run(path: Path, resolution: int, samples: int, method: str, tmp: Path,
     while True:
         t0 = time.perf_counter()
         m = csdf.mesh(shape, resolution=res, method=method, progress=False,
-                      check_thin=False)
+                      check_thin=False, fit_bounds=fit_bounds)
         took = time.perf_counter() - t0
         seconds += took
         row["resolution"] = str(res)
@@ -253,6 +254,9 @@ def main() -> None:
     ap.add_argument("--method", choices=("mc", "dc"), default="dc",
                     help="meshing: marching cubes or dual contouring")
     ap.add_argument("--only", default="", help="only examples whose path contains this")
+    ap.add_argument("--fit-bounds", action=argparse.BooleanOptionalAction, default=True,
+                    help="csdf.mesh(fit_bounds=...): sample planes just inside the faces "
+                         "of the bounds (CAD parts' caps carry thin flanges)")
     a = ap.parse_args()
     if shutil.which("openscad") is None:
         sys.exit("openscad is not on PATH (apt-get install openscad)")
@@ -268,7 +272,7 @@ def main() -> None:
         for f in files:
             try:
                 row = run(f, a.resolution, a.samples, a.method, Path(tmp),
-                          a.max_resolution, a.max_seconds)
+                          a.max_resolution, a.max_seconds, a.fit_bounds)
             except subprocess.TimeoutExpired:
                 row = {"example": str(f.relative_to(f.parents[1])),
                        "result": "openscad timed out", "dim": "", "hausdorff": "",

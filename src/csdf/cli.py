@@ -327,6 +327,10 @@ def mesh(
                                            "--workers: voxels along every task's cube (a "
                                            "power of two; default: cubes of similar work, "
                                            "8 tasks per worker thread)."),
+    fit_bounds: bool = typer.Option(False, "--fit-bounds", help="Sample planes a fiftieth "
+                                    "of a voxel inside each face of the bounds, so that "
+                                    "parts thinner than a voxel lying on them (a flange "
+                                    "on a CAD part's cap) are kept."),
 ):
     """Mesh a model to a watertight triangle mesh."""
 
@@ -337,6 +341,9 @@ def mesh(
         m = _param_field(_load(model), param, no_check_ranges)  # with the --param values
         t0 = time.perf_counter()
         if scheduler is not None or workers is not None:
+            if fit_bounds:
+                raise CsdfError("--fit-bounds meshes in this process; leave out "
+                                "--scheduler/--workers")
             _mesh_on_cluster(m, t0)
             return
         with warnings.catch_warnings(record=True) as caught:
@@ -345,7 +352,8 @@ def mesh(
                              method=method,
                              progress=not quiet and err.is_terminal,
                              max_resolution=max_resolution, min_feature=min_feature,
-                             check_thin=check_thin, colors=colors)
+                             check_thin=check_thin, colors=colors,
+                             fit_bounds=fit_bounds)
         dt = time.perf_counter() - t0
         for w in caught:
             if issubclass(w.category, MeshWarning):

@@ -43,6 +43,7 @@ def mesh(
     check_thin: bool = True,
     check_ranges: bool = True,
     colors: bool = False,
+    fit_bounds: bool = False,
 ):
     """Triangle mesh of the surface ``f = 0``.
 
@@ -80,6 +81,16 @@ def mesh(
         colors: give the vertices the shape's colours (:func:`csdf.colors.colors_at`,
             the nearest coloured surface; ``mesh.visual.vertex_colors``, RGBA uint8),
             which PLY and GLB files keep.
+        fit_bounds: stretch the grid along each axis (by under one voxel over the
+            bounds) so that its first and last sample planes lie a fiftieth of a voxel
+            inside each face of the bounds (:data:`FIT_INSET`). A thin part lying on a
+            face of the bounding box (a flange on a CAD part's cap, a raised label) is
+            then sampled instead of falling between two planes. The voxels become boxes
+            whose three edges differ by under ``1/m`` (``m`` voxels along the axis),
+            given in ``mesh.metadata['csdf']['voxel_sizes']``. Needs a shape (not a
+            compiled program) in its own frame; the field is meshed as the shape scaled
+            by those factors (the scale's three factors are parameters, so its kernels
+            compile once for every resolution), and the vertices are scaled back.
 
     Returns:
         ``trimesh.Trimesh``: watertight, 2-manifold, consistently wound (normals point
@@ -100,6 +111,9 @@ def mesh(
                             "coloured by their own meshes")
         if bounds is not None or params:
             raise CsdfError("a scene's instances carry their own parameters and bounds")
+        if fit_bounds:
+            raise CsdfError("fit_bounds=True meshes a shape; a scene's instances are "
+                            "meshed on their own grids")
         return shape.mesh(resolution, voxel_size, method, progress,
                           max_resolution=max_resolution, min_feature=min_feature,
                           check_thin=check_thin, check_ranges=check_ranges)
@@ -115,6 +129,7 @@ def mesh(
     if bounds is not None:
         fld = Field(fld, bounds=check_bounds(bounds))
     max_resolution = _check_max_resolution(max_resolution)
+    fitted = _FittedGrid(fld) if fit_bounds else None
     if min_feature is not None:
         min_feature = _check_min_feature(min_feature)
 
@@ -129,9 +144,13 @@ def mesh(
             resolution = min(_BASE_RESOLUTION, max_resolution)
         thin, agrees = None, True
         while True:
-            origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
-            grid = Grid(origin=origin, h=h, dims=dims)
-            verts, faces, thin = _extract(fld, grid, method, reporter, check_thin,
+            if fitted is None:
+                origin, h, dims = _grid_layout(fld.bounds, resolution, voxel_size)
+                grid, work = Grid(origin=origin, h=h, dims=dims), fld
+            else:
+                grid, work = fitted.layout(resolution, voxel_size)
+                h, dims = grid.h, grid.dims
+            verts, faces, thin = _extract(work, grid, method, reporter, check_thin,
                                           min_feature, auto)
             if thin is None:
                 break
@@ -152,6 +171,8 @@ def mesh(
         # same sharp feature point; a reader that merges close vertices (trimesh does,
         # within 1e-8) would then fuse them and make edges of 4 faces
         separate_close_vertices(verts, faces, min_edge_length(verts, h))
+    if fitted is not None:
+        verts = verts / fitted.factors
     m = trimesh.Trimesh(vertices=verts, faces=faces, process=False, validate=False)
     if colors:
         from ..colors import colors_of
@@ -165,7 +186,64 @@ def mesh(
         "thin_fraction": None if thin is None else thin.fraction,
         "field_volume": None if thin is None else thin.field_volume,
     }
+    if fitted is not None:
+        m.metadata["csdf"]["voxel_sizes"] = (h / fitted.factors).tolist()
+        m.metadata["csdf"]["field_volume"] = None if thin is None else \
+            thin.field_volume / float(np.prod(fitted.factors))
     return m
+
+
+#: with ``fit_bounds``, the first and last sample planes along each axis lie this
+#: share of a voxel inside the low and the high faces of the bounds (two different
+#: irrational fractions, so that a face at a rational fraction of the bounds, its middle
+#: or a third, never lies on a sample plane)
+FIT_INSET = ((math.sqrt(5.0) - 2.0) / 10.0, (3.0 - math.sqrt(5.0)) / 40.0)
+
+
+class _FittedGrid:
+    """The grid of ``fit_bounds``: the shape scaled by ``factors (3,)`` (parameters of
+    one program, set per resolution), meshed on a cubic grid whose planes lie
+    :data:`FIT_INSET` of a voxel inside the scaled bounds' faces."""
+
+    def __init__(self, fld: Field):
+        if fld.shape is None:
+            raise CsdfError("fit_bounds=True needs a csdf.Shape (it scales the shape per "
+                            "axis), not a compiled program")
+        if not fld.pose.is_identity():
+            raise CsdfError("fit_bounds=True meshes a shape in its own frame; give the "
+                            "shape without a pose")
+        from ..expr import param
+
+        taken = set(fld.param_names)
+        base = "fit_bounds_scale"
+        while any(f"{base}_{a}" in taken for a in "xyz"):
+            base += "_"
+        self.names = [f"{base}_{a}" for a in "xyz"]
+        ks = [param(n, 1.0, 1e-3, 1e3) for n in self.names]
+        self.fld = fld
+        self.scaled = fld.shape.scale(ks)
+        self.factors = np.ones(3)
+
+    def layout(self, resolution: Any, voxel_size: Any) -> tuple[Grid, Field]:
+        """The grid and the scaled field at ``resolution`` or ``voxel_size`` (checked as
+        :func:`mesh` checks them); sets :attr:`factors`."""
+        b = np.asarray(self.fld.bounds, dtype=np.float64)
+        _, h, _ = _grid_layout(b, resolution, voxel_size)
+        ext = b[1] - b[0]
+        lo_in, hi_in = FIT_INSET
+        m = np.maximum(1.0, np.round(ext / h))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(ext > 0, h * (m + lo_in + hi_in) / ext, 1.0)
+        self.factors = s
+        # the grid starts (2 + jitter) voxels below its bounds' low corner, so its
+        # first plane inside them lies (1 - jitter) voxels above that corner
+        lo = b[0] * s - (1.0 - _JITTER - lo_in) * h
+        hi = b[1] * s
+        origin, h2, dims = _grid_layout(np.array([lo, hi]), None, h)
+        params = dict(self.fld.params)
+        params.update(zip(self.names, (float(v) for v in s)))
+        work = as_field(self.scaled, params, what="mesh", check_ranges=False)
+        return Grid(origin=origin, h=h2, dims=dims), Field(work, bounds=np.array([lo, hi]))
 
 
 #: the default resolution is doubled while the mesh's volume and the field's differ by

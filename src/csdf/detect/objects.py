@@ -52,6 +52,7 @@ Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
@@ -158,6 +159,29 @@ YAW_SAME = 15.0
 SCAN_POINTS = 1500
 #: the explained mass of a point saturates at this many noise levels from the surface
 GAIN_CAP = 3.0
+#: sensor rays that score the winner's yaws by ray casting at most (a seeded subsample)
+RAY_POINTS = 10**6
+#: yaws (turns about the support's normal) the winner is ray-cast at
+RAY_YAWS = 72
+#: a ray-cast yaw replaces the winner's own when it scores this many explained points'
+#: worth (``GAIN_CAP_LOG`` each) more
+RAY_MARGIN = 2.0
+#: the turned winner's refit: free points of its clusters within this many noise levels
+#: of its surface, at most ``POLISH_POINTS`` of them (a seeded subsample), and its
+#: residual evaluations
+POLISH_BAND = 5.0
+POLISH_POINTS = 1200
+POLISH_ITER = 60
+#: a winner's yaw is in doubt when another turn (not a symmetry of the model) scores
+#: within this fraction of its own ray-cast score
+YAW_DOUBT = 0.1
+#: names of the parameters the upright refit adds: the turn about the model's z axis
+#: and the shift along its x and y axes
+UPRIGHT_PARAMS = ("_upright_yaw", "_upright_dx", "_upright_dy")
+#: other parameter starts a fit that failed verification is fitted again from
+RETRY_STARTS = 2
+#: ... when it explained at least this fraction of the free points it was fitted to
+RETRY_EXPLAINED = 0.5
 
 
 @dataclass
@@ -216,6 +240,7 @@ class _Model:
     starts: list  # parameter sets the hypotheses start from (None: the defaults)
     foot: float  # radius of the footprint (model xy) about the centre, at the defaults
     heights: np.ndarray  # (S,) the model's top (model z) at each of ``starts``
+    upright_shape: Any = None  # built by _Run._upright_shape (False: not possible)
 
 
 def _model(name: str, shape: Any, source: Any) -> _Model:
@@ -769,6 +794,8 @@ class _Run:
                 ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
                     found.append((gain, score, res, inl, checked))
+                elif init is not None and len(inl) >= max(self.mp, RETRY_EXPLAINED * len(idx)):
+                    self._other_params(m, idx, res, init, found)
             done.append((m, init, res, found))
         if self.plane is not None and self.upright:
             # the winner's best other yaws, and those of the placements of models the
@@ -790,12 +817,243 @@ class _Run:
         for m, _, _, found in done:
             if not found:
                 continue
-            gain, score, res, inl, checked = max(found, key=lambda f: f[0])
-            if best is None or gain > best[0]:
-                best = (gain, Detection(model=m.name, pose=Pose(res.rotation, res.translation),
-                                        params=dict(res.params), score=score, inliers=inl,
-                                        shape=m.shape, source=m.source, fit=checked))
-        return None if best is None else best[1]
+            top = max(found, key=lambda f: f[0])
+            if best is None or top[0] > best[1][0]:
+                best = (m, top)
+        if best is None:
+            return None
+        m, top = best
+        if self.plane is not None and self.upright and self.vp is not None:
+            top = self._resolve_yaw(m, idx, top)
+        _, score, res, inl, checked = top
+        return Detection(model=m.name, pose=Pose(res.rotation, res.translation),
+                         params=dict(res.params), score=score, inliers=inl, shape=m.shape,
+                         source=m.source, fit=checked)
+
+    def _upright_shape(self, m: _Model) -> Any:
+        """``m``'s shape turned about its z axis and shifted along its x and y axes by
+        three added parameters (:data:`UPRIGHT_PARAMS`), so that a fit of the
+        parameters alone moves the model only in the ways an object standing on the
+        support can move; None when the model is not a 3D :class:`csdf.Shape` (built
+        once per model)."""
+        if m.upright_shape is None:
+            from ..expr import param
+            from ..shapes import Shape
+
+            aug: Any = False
+            if isinstance(m.shape, Shape) and m.shape.dim == 3:
+                yaw, dx, dy = UPRIGHT_PARAMS
+                r = 2.0 * m.radius
+                try:
+                    aug = m.shape.rotate(param(yaw, 0.0, -2 * math.pi, 2 * math.pi), "z") \
+                        .translate((param(dx, 0.0, -r, r), param(dy, 0.0, -r, r), 0.0))
+                except CsdfError:
+                    aug = False
+            m.upright_shape = aug
+        return m.upright_shape or None
+
+    def _polish(self, m: _Model, idx: np.ndarray, res: FitResult) -> FitResult | None:
+        """``res`` (an upright fit of ``m`` to the points ``idx``) fitted again with the
+        model held upright on the support: its parameters, its turn about the support's
+        normal and its shift along the support, at once (:meth:`_upright_shape`), on the
+        free points off the support within ``POLISH_BAND`` noise levels of its surface.
+        The free fit that :meth:`_upright_fit` stands upright tilts, shifts and turns a
+        tall thin-walled model to fit its noisy points, and the parameters then fitted
+        with the snapped pose held make up for it: a lamp's shade came out 4 cm short,
+        its stem too long, and with them its spokes, the only mark of its turn, in the
+        wrong place. None when it cannot be done."""
+        aug = self._upright_shape(m)
+        if aug is None:
+            return None
+        c = res.pose.apply(m.centre[None])[0]
+        pts = np.flatnonzero(~self.claimed & ~self.support & (
+            np.linalg.norm(self.P - c, axis=1) <= 1.2 * m.radius + 3 * self.sigma))
+        fld = as_field(m.shape, res.params, pose=res.pose, backend=m.backend,
+                       what="detect", check_ranges=False)
+        d = np.abs(np.asarray(fld.value(self.P[pts]), dtype=float))
+        band = pts[d <= POLISH_BAND * self.sigma]
+        if len(band) < self.mp:
+            return None
+        F = band if len(band) <= POLISH_POINTS else np.sort(
+            self.rng.choice(band, POLISH_POINTS, replace=False))
+        pv = {**dict(res.params), **dict.fromkeys(UPRIGHT_PARAMS, 0.0)}
+        try:
+            r = fit(aug, self.P[F], init={"rotation": res.rotation,
+                                          "translation": res.translation, "params": pv},
+                    estimate=("params",), loss="cauchy",
+                    f_scale=max(self.sigma, 0.005 * m.radius), viewpoint=self.vp,
+                    max_iter=POLISH_ITER, escape=False, debias=False, backend=m.backend,
+                    check_ranges=False)
+        except CsdfError:
+            return None
+        yaw, dx, dy = (float(r.params[k]) for k in UPRIGHT_PARAMS)
+        R = np.asarray(res.rotation, dtype=float)
+        rot = R @ _rz(yaw)
+        shift = np.asarray(res.translation, dtype=float) + R @ np.array([dx, dy, 0.0])
+        params = {k: v for k, v in r.params.items() if k not in UPRIGHT_PARAMS}
+        return dataclasses.replace(r, rotation=rot, translation=shift, params=params)
+
+    def _other_params(self, m: _Model, idx: np.ndarray, res: FitResult,
+                      init: FitResult | dict, found: list) -> None:
+        """A fit of ``m`` from the screen's start ``init`` explained most of the points
+        ``idx`` but failed verification: the parameters often trade off along a valley
+        (a lamp's shade grown down over its stem, seen through below). Fits again from
+        ``res``'s pose with the next ``RETRY_STARTS`` parameter sets of the model's bank
+        (those whose height is nearest the cluster's top, the defaults first, skipping
+        ``init``'s) and appends those that pass verification to ``found`` (items as
+        :meth:`_turns`')."""
+        nrm, off = self.plane
+        top = float(np.percentile(self.P[idx] @ nrm - off, 99.0))
+        order = 1 + np.argsort(np.abs(m.heights[1:] - top), kind="stable")
+        used = dict(init.params if isinstance(init, FitResult) else init.get("params") or {})
+        defaults = {p.name: float(p.default) for p in m.fld.program.params}
+        tried = 0
+        for k in [0, *order.tolist()]:
+            pv = m.starts[k]
+            full = {**defaults, **(pv or {})}
+            if all(abs(float(full[n]) - float(used.get(n, defaults[n]))) <= 1e-12
+                   for n in full):
+                continue
+            start = {"rotation": res.rotation, "translation": res.translation,
+                     "params": dict(pv or {})}
+            r = self._candidate(m, idx, start)
+            tried += 1
+            if r is not None:
+                ok, sc, il, ch, gain = self._verify(m, r)
+                if ok:
+                    found.append((gain, sc, r, il, ch))
+            if tried >= RETRY_STARTS:
+                break
+
+    def _ray_set(self, m: _Model, res: FitResult) -> np.ndarray:
+        """Indices of the scan points whose rays score the yaws of the fit ``res`` of
+        ``m`` (:meth:`_ray_scores`): every point (claimed and support points included:
+        they are free space too) whose ray passes within the fitted model's bounding
+        sphere, widened by three noise levels, and that does not lie in front of it (an
+        occluder is no evidence about the model); at most ``RAY_POINTS``, a seeded
+        subsample."""
+        surf, _ = self._surface_at(m, res.params)
+        cw = res.pose.apply(0.5 * (surf.min(axis=0) + surf.max(axis=0))[None])[0]
+        rad = float(np.linalg.norm(surf - surf.mean(axis=0), axis=1).max()
+                    + np.linalg.norm(0.5 * (surf.min(axis=0) + surf.max(axis=0))
+                                     - surf.mean(axis=0))) + 3.0 * self.sigma
+        v = cw - self.vp
+        dist = float(np.linalg.norm(v))
+        if dist <= rad:
+            cone = np.ones(len(self.P), dtype=bool)
+        else:
+            cone = self.dirs @ (v / dist) >= math.cos(math.asin(rad / dist))
+        _, _, rng_scan = self._ray_index()
+        rays = np.flatnonzero(cone & (rng_scan >= dist - rad))
+        if len(rays) > RAY_POINTS:
+            rays = np.sort(self.rng.choice(rays, RAY_POINTS, replace=False))
+        return rays
+
+    def _ray_scores(self, m: _Model, params: dict, poses: list, rays: np.ndarray
+                    ) -> np.ndarray:
+        """``(H,)`` how well each pose ``(R, t)`` of ``m`` at ``params`` predicts the
+        ranges the sensor measured along the rays of the scan points ``rays`` ``(K,)``:
+        the model is ray-cast along each, and a ray scores :func:`_gain` of its range
+        residual where the model's first hit lies within three noise levels of the
+        measured range, ``-GAIN_CAP_LOG`` where the sensor saw farther than it by more
+        (through the model), and nothing where the model is hidden (the sensor saw
+        nearer) or missed. A range sensor's noise lies along its rays, so this sees
+        thin parts (a lamp's spokes) that the points' distances to the surface,
+        blurred by the noise in every direction, do not."""
+        from ..render.trace import sphere_trace, trace_field
+
+        surf, _ = self._surface_at(m, params)
+        lo, hi = surf.min(axis=0), surf.max(axis=0)
+        pad = 0.05 * float(np.linalg.norm(hi - lo)) + 3.0 * self.sigma
+        fld = trace_field(m.shape, params, m.backend, np.array([lo - pad, hi + pad]),
+                          what="detect", check_ranges=False)
+        _, _, rng_scan = self._ray_index()
+        D = self.dirs[rays]
+        O = np.concatenate([np.repeat(((self.vp - t) @ R)[None], len(rays), axis=0)
+                            for R, t in poses])
+        Dm = np.concatenate([D @ R for R, _ in poses])
+        tm = sphere_trace(fld, O, Dm).t.reshape(len(poses), len(rays))
+        r = rng_scan[rays][None, :] - tm
+        hit = np.isfinite(tm)
+        a = np.abs(np.where(hit, r, 0.0))
+        g = np.where(hit & (a <= 3.0 * self.sigma), _gain(a, self.sigma), 0.0)
+        g = np.where(hit & (r > 3.0 * self.sigma), -GAIN_CAP_LOG, g)
+        return g.sum(axis=1)
+
+    def _yaw_scan_rays(self, m: _Model, res: FitResult, rays: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, list]:
+        """The fit ``res`` of ``m`` turned about the vertical through its own origin by
+        each of ``RAY_YAWS`` yaws: ``(angles (Y,) radians, ray-cast scores (Y,)
+        (:meth:`_ray_scores` on the rays of ``rays``), poses)``. (The model's origin is
+        the axis its author built it about, a lamp's or a stool's; the centre of sampled
+        surface points is off it by the samples' scatter, and a turn about that would
+        move the whole model.)"""
+        nrm = self.plane[0]
+        X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
+        angles = 2.0 * math.pi * np.arange(RAY_YAWS) / RAY_YAWS
+        t = np.asarray(res.translation, dtype=float)
+        poses = []
+        for th in angles:
+            Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
+                nrm, nrm)
+            poses.append((Rt @ res.rotation, t))
+        return angles, self._ray_scores(m, dict(res.params), poses, rays), poses
+
+    def _symmetric_yaws(self, m: _Model, params: dict, angles: np.ndarray) -> np.ndarray:
+        """``(Y,)`` bool: which turns ``angles`` (radians) about the model's own z axis
+        map its surface at ``params`` onto itself (its surface samples stay within
+        ``1e-3`` of its diameter of the surface, as :func:`csdf.metrics.symmetries`
+        tests): the same pose, not a competing one."""
+        surf, _ = self._surface_at(m, params)
+        fld = m.fld.replace(params=params, check_ranges=False)
+        q = np.concatenate([surf @ _rz(float(a)) for a in angles])  # rows: R(a)^T x
+        f = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(angles), len(surf))
+        return f.max(axis=1) <= 2e-3 * m.radius
+
+    def _resolve_yaw(self, m: _Model, idx: np.ndarray, top: tuple) -> tuple:
+        """The winner ``top`` (an item of ``found``, as :meth:`_turns`') of model ``m``
+        on the points ``idx``, or the same model better turned. The winner is ray-cast
+        at ``RAY_YAWS`` turns about the vertical through its origin
+        (:meth:`_ray_scores`). When a turn that is not a symmetry of the model scores
+        within ``YAW_DOUBT`` of the winner's own (its turn rests on a few points: a
+        lamp's three spokes under its shade), the winner is refitted held upright
+        (:meth:`_polish`: its parameters, which place the spokes, come out right), the
+        refit is ray-cast again, and if another turn now scores more than
+        ``RAY_MARGIN`` explained points more, that turn, and the model refitted from it,
+        are candidates too. Of the candidates that pass verification, the one scoring
+        most on the same rays replaces the winner when it scores more than
+        ``RAY_MARGIN`` explained points more than the winner does."""
+        res = top[2]
+        rays = self._ray_set(m, res)
+        if len(rays) == 0:
+            return top
+        angles, score, _ = self._yaw_scan_rays(m, res, rays)
+        sym = self._symmetric_yaws(m, dict(res.params), angles)
+        other = ~sym
+        other[0] = False
+        if not other.any() or score[other].max() < score[0] - YAW_DOUBT * abs(score[0]):
+            return top
+        margin = RAY_MARGIN * GAIN_CAP_LOG
+        cands = [(float(score[0]), top)]
+        start = res
+        for _ in range(2):
+            r = self._polish(m, idx, start)
+            if r is None:
+                break
+            ok, sc, il, ch, gain = self._verify(m, r)
+            if not ok:
+                break
+            _, s2, poses = self._yaw_scan_rays(m, r, rays)
+            cands.append((float(s2[0]), (gain, sc, r, il, ch)))
+            i = int(np.argmax(s2))
+            if i == 0 or s2[i] - s2[0] <= margin:
+                break
+            start = dataclasses.replace(r, rotation=poses[i][0])
+            ok, sc, il, ch, gain = self._verify(m, start)
+            if ok:
+                cands.append((float(s2[i]), (gain, sc, start, il, ch)))
+        best = max(cands, key=lambda c: c[0])  # the first of equals
+        return best[1] if best[0] - cands[0][0] > margin else top
 
     def best_in_parts(self, idx: np.ndarray) -> Detection | None:
         """When no model explains the points ``idx`` as one object, the band test

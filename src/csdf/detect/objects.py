@@ -159,22 +159,29 @@ YAW_SAME = 15.0
 SCAN_POINTS = 1500
 #: the explained mass of a point saturates at this many noise levels from the surface
 GAIN_CAP = 3.0
-#: sensor rays that score the winner's yaws by ray casting at most (a seeded subsample)
-RAY_POINTS = 10**6
-#: yaws (turns about the support's normal) the winner is ray-cast at
-RAY_YAWS = 72
-#: a ray-cast yaw replaces the winner's own when it scores this many explained points'
+#: rays whose scan point lies beyond the fitted model's bounding sphere (free space
+#: behind it) that score its turns, at most (a seeded subsample); the rays of the
+#: points within the sphere all score (a lamp's spokes are a few dozen of them)
+RAY_BACKGROUND = 1000
+#: step of the turns the winner is ray-cast at (degrees)
+RAY_STEP = 5.0
+#: a ray-cast turn replaces the winner's own when it scores this many explained points'
 #: worth (``GAIN_CAP_LOG`` each) more
 RAY_MARGIN = 2.0
+#: other parameter starts a fit that failed verification is fitted again from
+RETRY_STARTS = 2
+#: ... when it explained at least this fraction of the free points it was fitted to
+RETRY_EXPLAINED = 0.5
 #: the turned winner's refit: free points of its clusters within this many noise levels
 #: of its surface, at most ``POLISH_POINTS`` of them (a seeded subsample), and its
 #: residual evaluations
 POLISH_BAND = 5.0
 POLISH_POINTS = 1200
 POLISH_ITER = 60
-#: a winner's yaw is in doubt when another turn (not a symmetry of the model) scores
-#: within this fraction of its own ray-cast score
-YAW_DOUBT = 0.1
+#: a winner's turn is in doubt when the model has a turn, not a symmetry, that moves
+#: less than this fraction of its surface samples by more than three noise levels
+#: (the turn rests on a small part of it: a lamp's spokes)
+YAW_DOUBT = 0.03
 #: names of the parameters the upright refit adds: the turn about the model's z axis
 #: and the shift along its x and y axes
 UPRIGHT_PARAMS = ("_upright_yaw", "_upright_dx", "_upright_dy")
@@ -794,7 +801,8 @@ class _Run:
                 ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
                     found.append((gain, score, res, inl, checked))
-                elif init is not None and len(inl) >= max(self.mp, RETRY_EXPLAINED * len(idx)):
+                elif init is not None and RETRY_STARTS > 0 and \
+                        len(inl) >= max(self.mp, RETRY_EXPLAINED * len(idx)):
                     self._other_params(m, idx, res, init, found)
             done.append((m, init, res, found))
         if self.plane is not None and self.upright:
@@ -926,17 +934,16 @@ class _Run:
                 break
 
     def _ray_set(self, m: _Model, res: FitResult) -> np.ndarray:
-        """Indices of the scan points whose rays score the yaws of the fit ``res`` of
+        """Indices of the scan points whose rays score the turns of the fit ``res`` of
         ``m`` (:meth:`_ray_scores`): every point (claimed and support points included:
         they are free space too) whose ray passes within the fitted model's bounding
         sphere, widened by three noise levels, and that does not lie in front of it (an
-        occluder is no evidence about the model); at most ``RAY_POINTS``, a seeded
-        subsample."""
+        occluder is no evidence about the model): all those within the sphere, and at
+        most ``RAY_BACKGROUND`` of those behind it (a seeded subsample)."""
         surf, _ = self._surface_at(m, res.params)
-        cw = res.pose.apply(0.5 * (surf.min(axis=0) + surf.max(axis=0))[None])[0]
-        rad = float(np.linalg.norm(surf - surf.mean(axis=0), axis=1).max()
-                    + np.linalg.norm(0.5 * (surf.min(axis=0) + surf.max(axis=0))
-                                     - surf.mean(axis=0))) + 3.0 * self.sigma
+        mid = 0.5 * (surf.min(axis=0) + surf.max(axis=0))
+        cw = res.pose.apply(mid[None])[0]
+        rad = float(np.linalg.norm(surf - mid, axis=1).max()) + 3.0 * self.sigma
         v = cw - self.vp
         dist = float(np.linalg.norm(v))
         if dist <= rad:
@@ -945,9 +952,11 @@ class _Run:
             cone = self.dirs @ (v / dist) >= math.cos(math.asin(rad / dist))
         _, _, rng_scan = self._ray_index()
         rays = np.flatnonzero(cone & (rng_scan >= dist - rad))
-        if len(rays) > RAY_POINTS:
-            rays = np.sort(self.rng.choice(rays, RAY_POINTS, replace=False))
-        return rays
+        inside = np.linalg.norm(self.P[rays] - cw, axis=1) <= rad
+        behind = rays[~inside]
+        if len(behind) > RAY_BACKGROUND:
+            behind = self.rng.choice(behind, RAY_BACKGROUND, replace=False)
+        return np.sort(np.concatenate([rays[inside], behind]))
 
     def _ray_scores(self, m: _Model, params: dict, poses: list, rays: np.ndarray
                     ) -> np.ndarray:
@@ -980,59 +989,69 @@ class _Run:
         g = np.where(hit & (r > 3.0 * self.sigma), -GAIN_CAP_LOG, g)
         return g.sum(axis=1)
 
-    def _yaw_scan_rays(self, m: _Model, res: FitResult, rays: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, list]:
+    def _yaw_scan_rays(self, m: _Model, res: FitResult, rays: np.ndarray,
+                       angles: np.ndarray) -> tuple[np.ndarray, list]:
         """The fit ``res`` of ``m`` turned about the vertical through its own origin by
-        each of ``RAY_YAWS`` yaws: ``(angles (Y,) radians, ray-cast scores (Y,)
+        each of ``angles`` ``(Y,)`` (radians): ``(ray-cast scores (Y,)
         (:meth:`_ray_scores` on the rays of ``rays``), poses)``. (The model's origin is
         the axis its author built it about, a lamp's or a stool's; the centre of sampled
         surface points is off it by the samples' scatter, and a turn about that would
         move the whole model.)"""
         nrm = self.plane[0]
         X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
-        angles = 2.0 * math.pi * np.arange(RAY_YAWS) / RAY_YAWS
         t = np.asarray(res.translation, dtype=float)
         poses = []
         for th in angles:
             Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
                 nrm, nrm)
             poses.append((Rt @ res.rotation, t))
-        return angles, self._ray_scores(m, dict(res.params), poses, rays), poses
+        return self._ray_scores(m, dict(res.params), poses, rays), poses
 
-    def _symmetric_yaws(self, m: _Model, params: dict, angles: np.ndarray) -> np.ndarray:
-        """``(Y,)`` bool: which turns ``angles`` (radians) about the model's own z axis
-        map its surface at ``params`` onto itself (its surface samples stay within
-        ``1e-3`` of its diameter of the surface, as :func:`csdf.metrics.symmetries`
-        tests): the same pose, not a competing one."""
-        surf, _ = self._surface_at(m, params)
-        fld = m.fld.replace(params=params, check_ranges=False)
-        q = np.concatenate([surf @ _rz(float(a)) for a in angles])  # rows: R(a)^T x
-        f = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(angles), len(surf))
-        return f.max(axis=1) <= 2e-3 * m.radius
+    def _turn_profile(self, m: _Model, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How turns ``angles`` ``(Y,)`` (radians) about the model's own z axis move its
+        surface at its default parameters (whose surface samples lie exactly on it;
+        samples moved onto other parameters can miss a thin part): ``(symmetric (Y,)
+        bool, moved (Y,))``. A turn is a symmetry when the field at its turned surface
+        samples stays within ``1e-3`` of the model's diameter of zero (as
+        :func:`csdf.metrics.symmetries` tests): the same pose, not a competing one;
+        ``moved`` is the fraction of the samples it takes more than three noise levels
+        off the surface."""
+        q = np.concatenate([m.surface @ _rz(float(a)) for a in angles])  # R(a)^T x
+        f = np.abs(np.asarray(m.fld.value(q), dtype=float)).reshape(len(angles), -1)
+        return f.max(axis=1) <= 2e-3 * m.radius, (f > 3.0 * self.sigma).mean(axis=1)
 
     def _resolve_yaw(self, m: _Model, idx: np.ndarray, top: tuple) -> tuple:
         """The winner ``top`` (an item of ``found``, as :meth:`_turns`') of model ``m``
-        on the points ``idx``, or the same model better turned. The winner is ray-cast
-        at ``RAY_YAWS`` turns about the vertical through its origin
-        (:meth:`_ray_scores`). When a turn that is not a symmetry of the model scores
-        within ``YAW_DOUBT`` of the winner's own (its turn rests on a few points: a
-        lamp's three spokes under its shade), the winner is refitted held upright
-        (:meth:`_polish`: its parameters, which place the spokes, come out right), the
-        refit is ray-cast again, and if another turn now scores more than
+        on the points ``idx``, or the same model better turned.
+
+        Only when its turn is in doubt: the model has a turn about its own z axis, not
+        a symmetry, that moves less than ``YAW_DOUBT`` of its surface by more than three
+        noise levels (:meth:`_turn_profile`; a lamp, whose three 5 mm spokes under the
+        shade are its only mark). Then the winner is refitted held upright
+        (:meth:`_polish`: its parameters, which place the spokes, come out right) and
+        ray-cast (:meth:`_ray_scores`) at turns ``RAY_STEP`` degrees apart over one
+        period of its symmetry about that axis; if another turn scores more than
         ``RAY_MARGIN`` explained points more, that turn, and the model refitted from it,
         are candidates too. Of the candidates that pass verification, the one scoring
         most on the same rays replaces the winner when it scores more than
         ``RAY_MARGIN`` explained points more than the winner does."""
         res = top[2]
+        full = np.radians(np.arange(0.0, 360.0, RAY_STEP))
+        sym, moved = self._turn_profile(m, full)
+        sym[0] = True
+        # turns at least YAW_SAME degrees from every symmetry (a small turn moves little
+        # of any model)
+        gap = np.abs(full[:, None] - full[sym][None, :])
+        far = np.min(np.minimum(gap, 2.0 * math.pi - gap), axis=1) >= math.radians(YAW_SAME)
+        if not np.any(far & (moved < YAW_DOUBT)):
+            return top
+        nz = np.flatnonzero(sym[1:])
+        period = float(full[1 + nz[0]]) if len(nz) else 2.0 * math.pi
+        angles = full[full < period - 1e-9]
         rays = self._ray_set(m, res)
         if len(rays) == 0:
             return top
-        angles, score, _ = self._yaw_scan_rays(m, res, rays)
-        sym = self._symmetric_yaws(m, dict(res.params), angles)
-        other = ~sym
-        other[0] = False
-        if not other.any() or score[other].max() < score[0] - YAW_DOUBT * abs(score[0]):
-            return top
+        score, _ = self._yaw_scan_rays(m, res, rays, angles[:1])
         margin = RAY_MARGIN * GAIN_CAP_LOG
         cands = [(float(score[0]), top)]
         start = res
@@ -1043,7 +1062,7 @@ class _Run:
             ok, sc, il, ch, gain = self._verify(m, r)
             if not ok:
                 break
-            _, s2, poses = self._yaw_scan_rays(m, r, rays)
+            s2, poses = self._yaw_scan_rays(m, r, rays, angles)
             cands.append((float(s2[0]), (gain, sc, r, il, ch)))
             i = int(np.argmax(s2))
             if i == 0 or s2[i] - s2[0] <= margin:

@@ -172,6 +172,9 @@ RAY_MARGIN = 2.0
 RETRY_STARTS = 2
 #: ... when it explained at least this fraction of the free points it was fitted to
 RETRY_EXPLAINED = 0.5
+#: the largest fraction of the points inside a fit's box that may lie in its free
+#: space in front of it (:meth:`_Run._intruders`)
+MAX_INTRUDERS = 0.25
 #: the turned winner's refit: free points of its clusters within this many noise levels
 #: of its surface, at most ``POLISH_POINTS`` of them (a seeded subsample), and its
 #: residual evaluations
@@ -776,6 +779,33 @@ class _Run:
         ok = q["visible_see_through"] <= MAX_SEE_THROUGH and unexpl <= MAX_UNEXPLAINED
         return bool(ok), 1.0 - unexpl, inl, checked
 
+    def _intruders(self, m: _Model, res: FitResult, b: np.ndarray) -> float:
+        """The fraction of the scan points off the support inside the fit ``res``'s box
+        (``b`` ``(2, 3)``, model frame, padded by three noise levels) that lie in the
+        model's free space in front of it: the model ray-cast along each point's ray
+        hits nothing, or hits more than three noise levels beyond the point. A model
+        stretched over something else (a squat lamp over a cylinder, whose side the
+        sensor saw where the lamp has only its stem; a stool over a piece of a table)
+        has points floating inside it; a right fit has only its noise's tails and
+        outliers there (0-17 % on the benchmark's 30 scenes, against 20-58 % for the
+        false positives it rejects). 0 without points in the box."""
+        from ..render.trace import sphere_trace, trace_field
+
+        pad = 3.0 * self.sigma
+        q = (self.P - res.translation) @ res.rotation
+        inb = np.flatnonzero(np.all((q >= b[0] - pad) & (q <= b[1] + pad), axis=1)
+                             & ~self.support)
+        if len(inb) == 0:
+            return 0.0
+        fld = trace_field(m.shape, dict(res.params), m.backend,
+                          np.array([b[0] - 2 * pad, b[1] + 2 * pad]), what="detect",
+                          check_ranges=False)
+        _, _, rng_scan = self._ray_index()
+        tm = sphere_trace(fld, (self.vp - res.translation) @ res.rotation,
+                          self.dirs[inb] @ res.rotation).t
+        free = np.where(np.isfinite(tm), rng_scan[inb] < tm - pad, True)
+        return float(free.mean())
+
     def best_for(self, idx: np.ndarray) -> Detection | None:
         """Steps 4-7 for the points ``idx``: the best verified detection, or None."""
         self.band_rejected = False
@@ -834,6 +864,11 @@ class _Run:
         if self.plane is not None and self.upright and self.vp is not None:
             top = self._resolve_yaw(m, idx, top)
         _, score, res, inl, checked = top
+        if self.vp is not None:
+            surf, _ = self._surface_at(m, res.params)
+            if self._intruders(m, res, np.array([surf.min(axis=0), surf.max(axis=0)])
+                               ) > MAX_INTRUDERS:
+                return None
         return Detection(model=m.name, pose=Pose(res.rotation, res.translation),
                          params=dict(res.params), score=score, inliers=inl, shape=m.shape,
                          source=m.source, fit=checked)

@@ -161,8 +161,12 @@ SCAN_POINTS = 1500
 GAIN_CAP = 3.0
 #: rays whose scan point lies beyond the fitted model's bounding sphere (free space
 #: behind it) that score its turns, at most (a seeded subsample); the rays of the
-#: points within the sphere all score (a lamp's spokes are a few dozen of them)
+#: points within the sphere score up to RAY_INSIDE (a lamp's spokes are a few dozen of
+#: them: a subsample of all the rays loses them)
 RAY_BACKGROUND = 1000
+#: rays of the points within the sphere that score its turns, at most (a seeded
+#: subsample: a bookshelf seen whole has 10,000; a lamp 500-2,500)
+RAY_INSIDE = 4000
 #: step of the turns the winner is ray-cast at (degrees)
 RAY_STEP = 5.0
 #: a ray-cast turn replaces the winner's own when it scores this many explained points'
@@ -824,6 +828,7 @@ class _Run:
         else:
             tries = [(m, None) for m in fits]
         done = []  # per model tried: (model, init, base result or None, verified fits)
+        failed = []  # fits that failed verification: (points explained, try, result)
         for m, init in tries:
             found = []
             res = self._candidate(m, idx, init)
@@ -831,10 +836,16 @@ class _Run:
                 ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
                     found.append((gain, score, res, inl, checked))
-                elif init is not None and RETRY_STARTS > 0 and \
-                        len(inl) >= max(self.mp, RETRY_EXPLAINED * len(idx)):
-                    self._other_params(m, idx, res, init, found)
+                else:
+                    failed.append((len(inl), len(done), res))
             done.append((m, init, res, found))
+        if failed and not any(d[3] for d in done):
+            # nothing passed: the fit that explained most points, if most of them, is
+            # fitted again from other parameter starts
+            n_inl, k, res = max(failed, key=lambda f: (f[0], -f[1]))
+            m, init = done[k][0], done[k][1]
+            if init is not None and n_inl >= max(self.mp, RETRY_EXPLAINED * len(idx)):
+                self._other_params(m, idx, res, init, done[k][3])
         if self.plane is not None and self.upright:
             # the winner's best other yaws, and those of the placements of models the
             # screen ranked higher but whose fits failed (at most TURN_MODELS)
@@ -973,8 +984,9 @@ class _Run:
         ``m`` (:meth:`_ray_scores`): every point (claimed and support points included:
         they are free space too) whose ray passes within the fitted model's bounding
         sphere, widened by three noise levels, and that does not lie in front of it (an
-        occluder is no evidence about the model): all those within the sphere, and at
-        most ``RAY_BACKGROUND`` of those behind it (a seeded subsample)."""
+        occluder is no evidence about the model): at most ``RAY_INSIDE`` of those
+        within the sphere and ``RAY_BACKGROUND`` of those behind it (seeded
+        subsamples)."""
         surf, _ = self._surface_at(m, res.params)
         mid = 0.5 * (surf.min(axis=0) + surf.max(axis=0))
         cw = res.pose.apply(mid[None])[0]
@@ -988,10 +1000,12 @@ class _Run:
         _, _, rng_scan = self._ray_index()
         rays = np.flatnonzero(cone & (rng_scan >= dist - rad))
         inside = np.linalg.norm(self.P[rays] - cw, axis=1) <= rad
-        behind = rays[~inside]
+        within, behind = rays[inside], rays[~inside]
+        if len(within) > RAY_INSIDE:
+            within = self.rng.choice(within, RAY_INSIDE, replace=False)
         if len(behind) > RAY_BACKGROUND:
             behind = self.rng.choice(behind, RAY_BACKGROUND, replace=False)
-        return np.sort(np.concatenate([rays[inside], behind]))
+        return np.sort(np.concatenate([within, behind]))
 
     def _ray_scores(self, m: _Model, params: dict, poses: list, rays: np.ndarray
                     ) -> np.ndarray:

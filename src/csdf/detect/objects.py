@@ -828,7 +828,6 @@ class _Run:
         else:
             tries = [(m, None) for m in fits]
         done = []  # per model tried: (model, init, base result or None, verified fits)
-        failed = []  # fits that failed verification: (points explained, try, result)
         for m, init in tries:
             found = []
             res = self._candidate(m, idx, init)
@@ -836,16 +835,11 @@ class _Run:
                 ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
                     found.append((gain, score, res, inl, checked))
-                else:
-                    failed.append((len(inl), len(done), res))
+                elif init is not None and len(inl) >= max(self.mp,
+                                                          RETRY_EXPLAINED * len(idx)):
+                    # explained most of the points but failed: other parameter starts
+                    self._other_params(m, idx, res, init, found)
             done.append((m, init, res, found))
-        if failed and not any(d[3] for d in done):
-            # nothing passed: the fit that explained most points, if most of them, is
-            # fitted again from other parameter starts
-            n_inl, k, res = max(failed, key=lambda f: (f[0], -f[1]))
-            m, init = done[k][0], done[k][1]
-            if init is not None and n_inl >= max(self.mp, RETRY_EXPLAINED * len(idx)):
-                self._other_params(m, idx, res, init, done[k][3])
         if self.plane is not None and self.upright:
             # the winner's best other yaws, and those of the placements of models the
             # screen ranked higher but whose fits failed (at most TURN_MODELS)

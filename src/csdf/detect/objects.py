@@ -45,7 +45,16 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    are mostly claimed are skipped (one object split in two by an occluder), and a
    cluster with enough unclaimed points left is searched again (two objects touching);
    a cluster no model explains as one, after the band test rejected a large fit, is
-   searched by the halves of its footprint (:meth:`_Run.best_in_parts`).
+   searched by the halves of its footprint (:meth:`_Run.best_in_parts`). A model whose
+   fit explained most of the points but failed is fitted again from ``RETRY_STARTS``
+   other parameter starts (:meth:`_Run._other_params`).
+8. **Turns resting on a small part** (:meth:`_Run._resolve_yaw`): when the winner's
+   model has a turn about its axis, not a symmetry, that moves under ``YAW_DOUBT`` of
+   its surface (a lamp's spokes), it is refitted held upright (:meth:`_Run._polish`)
+   and its turn chosen by ray casting the sensor's rays (:meth:`_Run._ray_scores`).
+9. **Points floating inside** (:meth:`_Run._intruders`): a detection with over
+   ``MAX_INTRUDERS`` of the points in its box in its free space in front of it (a
+   model stretched over something else) is dropped.
 
 Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``.
 """
@@ -79,7 +88,8 @@ from .surfaces import frame_z
 
 __all__ = ["Detection", "detect", "detections_to_scene", "YAWS", "REFINE_TOP",
            "SUPPORT_SPAN", "SUPPORT_MIN_FRACTION", "MAX_SEE_THROUGH", "MAX_UNEXPLAINED",
-           "MAX_MODELS", "YAW_STEPS", "YAW_REFITS", "BAND", "MIN_BAND_FRACTION"]
+           "MAX_MODELS", "YAW_STEPS", "YAW_REFITS", "BAND", "MIN_BAND_FRACTION", "YAW_DOUBT",
+           "MAX_INTRUDERS", "RAY_MARGIN"]
 
 #: upright hypotheses: turns about the support's normal
 YAWS = 16

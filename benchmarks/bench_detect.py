@@ -132,7 +132,8 @@ def _cached_scene(seed: int, cache: str | None) -> dict:
             "instance": z["instance"], **json.loads(str(z["extra"]))}
 
 
-def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[str]:
+def objects(n_scenes: int, use_open3d: bool, cache: str | None = None,
+            first_scene: int = 0) -> list[str]:
     rows = {"csdf.detect": [0, 0, 0, 0.0, 0]}
     clouds = {}
     if use_open3d:
@@ -150,15 +151,20 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[s
     # depend on what the process evaluated before (a scene made after some detections
     # had 0.3 % fewer points), so made in between, the scenes would change with the
     # detector's code
-    scenes = [_cached_scene(seed, cache) for seed in range(n_scenes)]
-    for seed, sc in enumerate(scenes):
+    seeds = range(first_scene, first_scene + n_scenes)
+    scenes = [_cached_scene(seed, cache) for seed in seeds]
+    cpu = 0.0
+    for seed, sc in zip(seeds, scenes):
         for tr in sc["truth"]:
             tr["_points"] = _model_points(tr["model"], tr["params"])
-        if seed == 0:  # untimed: loads the models' kernels; compared for determinism
+        if seed == first_scene:  # untimed: loads the models' kernels; compared for determinism
             first, _ = _csdf_objects(sc)
         for name in rows:
+            c0 = time.process_time()
             dets, sec = (_csdf_objects(sc) if name == "csdf.detect"
                          else _open3d_objects(sc, clouds))
+            if name == "csdf.detect":
+                cpu += time.process_time() - c0
             found, fp, _ = _match(dets, sc["truth"])
             r = rows[name]
             r[0] += found
@@ -176,7 +182,7 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[s
                     per_model[tr["model"]][0] += int(ok)
                 print(f"  scene {seed}: {found}/{len(sc['truth'])} found, {fp} false, "
                       f"{sec:.2f} s")
-                if seed == 0:
+                if seed == first_scene:
                     deterministic = len(first) == len(dets) and all(
                         a[0] == b[0] and np.array_equal(a[1].matrix, b[1].matrix)
                         for a, b in zip(first, dets))
@@ -191,7 +197,9 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None) -> list[s
     for m, (f, t) in sorted(per_model.items()):
         out.append(f"| {m} | {f}/{t} |")
     out.append("")
-    out.append(f"Same seed, same output (scene 0 run twice): {deterministic}")
+    total = sum(len(sc["truth"]) for sc in scenes)
+    out.append(f"csdf.detect CPU time (this process, all threads): {cpu / total:.2f} s / object")
+    out.append(f"Same seed, same output (scene {first_scene} run twice): {deterministic}")
     return out
 
 
@@ -352,13 +360,16 @@ def main() -> None:
     ap.add_argument("--skip-primitives", action="store_true")
     ap.add_argument("--scene-cache", default=None, metavar="DIR",
                     help="save the clutter scenes here on the first run, load them after")
+    ap.add_argument("--first-scene", type=int, default=0,
+                    help="seed of the first clutter scene (the scenes are seeds first, ...)")
     a = ap.parse_args()
     lines = []
     if not a.skip_primitives:
         lines += (["## Primitives", ""]
                   + primitives(a.primitive_seeds, not a.no_cgal, a.repeat) + [""])
     if not a.skip_objects:
-        lines += ["## Objects in clutter", ""] + objects(a.scenes, not a.no_open3d, a.scene_cache)
+        lines += ["## Objects in clutter", ""] + objects(a.scenes, not a.no_open3d, a.scene_cache,
+                                                             a.first_scene)
     print("\n".join(lines))
 
 

@@ -206,7 +206,8 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
     jobs = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
 
     def job(r: tuple[int, int]) -> None:
-        knn_cells(S, order, first, cstart, ckey, dims, h, k, r[0], r[1], dist, idx, exact)
+        knn_cells(S, order, first, cstart, ckey, dims, lo, h, k, r[0], r[1], dist, idx,
+                  exact)
 
     if len(jobs) == 1:
         job(jobs[0])

@@ -788,12 +788,15 @@ def _settle(ctx: _Ctx, kind: str, R, t, vals, pts: np.ndarray, cand: np.ndarray,
         use = pts[away_from_edges(kind, R, t, vals, ctx.P[pts])]
         R, t, vals = _fit_solid(ctx, kind, R, t, vals, use if len(use) >= 4 else pts,
                                 limit=None, max_iter=SETTLE_ITER)
-        near, _ = _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)
+        near, dist = _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)
         same = len(near) + len(pts) - 2 * _shared(near, pts) <= 0.01 * len(pts)
         pts = near
         if same or len(pts) < 4:
             break
-    return R, t, vals, _near_solid(ctx, kind, R, t, vals, cand, pts)[0]
+    # the inliers within epsilon connected to ``pts`` are those of ``pts`` (the band's
+    # connected points of this very solid) within epsilon: a point within epsilon next
+    # to one of them would be one of them
+    return R, t, vals, pts[dist <= ctx.eps]
 
 
 def _refine(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray, free: np.ndarray

@@ -12,6 +12,7 @@ from numba import njit
 
 __all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
+           "bounds", "cell_order",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
@@ -277,6 +278,37 @@ def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.nd
                 out_d[i, q] = math.sqrt(bd[q])
                 out_i[i, q] = order[bi[q]]
             exact[i] = m == k and bd[k - 1] <= h2
+
+
+@njit(cache=True, nogil=True)
+def bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least and greatest coordinates ``(3,)`` each of the points ``P`` ``(N, 3)``
+    (``N >= 1``): ``P.min(axis=0)`` and ``P.max(axis=0)`` in one pass (NumPy reduces
+    the short rows of an ``(N, 3)`` array slowly)."""
+    lo = P[0].copy()
+    hi = P[0].copy()
+    for i in range(1, P.shape[0]):
+        for c in range(3):
+            v = P[i, c]
+            if v < lo[c]:
+                lo[c] = v
+            elif v > hi[c]:
+                hi[c] = v
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def cell_order(key: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """The points ``(N,)`` sorted by their cell keys ``key`` ``(N,)``, ties in index
+    order (what ``np.argsort(key, kind='stable')`` gives), by counting: ``first`` holds
+    where each cell's run begins (the cumulative counts of the keys)."""
+    fill = first[:-1].copy()
+    out = np.empty(key.shape[0], dtype=np.int64)
+    for i in range(key.shape[0]):
+        c = key[i]
+        out[fill[c]] = i
+        fill[c] += 1
+    return out
 
 
 @njit(cache=True, nogil=True)

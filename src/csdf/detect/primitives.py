@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 from ..errors import CsdfError
 from ..fit import fit
 from .kernels import (
+    bounds,
     grow_inliers,
     largest_component,
     linked_graph,
@@ -290,7 +291,8 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
         N = nb.normals
     else:
         N = normals_arg(normals, P)
-    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    lo, hi = bounds(P)
+    diag = float(np.linalg.norm(hi - lo))
     eps = (max(3.0 * nb.noise, 1e-4 * diag) if epsilon is None
            else _positive(epsilon, "epsilon"))
     conn = None if cluster_epsilon is None else _positive(cluster_epsilon, "cluster_epsilon")
@@ -897,8 +899,10 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         return found
     link = (2.0 * ctx.conn if ctx.conn is not None
             else 4.0 * float(np.median(ctx.nb.local)))
-    box = {i: (ctx.P[found[i].inliers].min(axis=0) - link,
-               ctx.P[found[i].inliers].max(axis=0) + link) for i in planes}
+    box = {}
+    for i in planes:
+        lo, hi = bounds(ctx.P[found[i].inliers])
+        box[i] = (lo - link, hi + link)
 
     def near_box(i: int, j: int) -> np.ndarray:
         """The points of plane ``i`` in plane ``j``'s box grown by ``link``."""
@@ -967,7 +971,7 @@ def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection], free: np.ndarray
     R = np.stack([e1, e2, np.cross(e1, e2)], axis=1)
     idx = _union(*[f.inliers for f in faces])
     q = ctx.P[idx] @ R
-    lo, hi = q.min(axis=0), q.max(axis=0)
+    lo, hi = bounds(q)
     size = np.maximum(hi - lo, ctx.eps)
     t = R @ (0.5 * (lo + hi))
     vals = {"size_x": float(size[0]), "size_y": float(size[1]), "size_z": float(size[2])}

@@ -325,10 +325,13 @@ def _build_levels(ctx: _Ctx) -> None:
             break
 
 
-def _samples(ctx: _Ctx, free: np.ndarray, count: int) -> np.ndarray:
+def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = None
+             ) -> np.ndarray:
     """``(M, 4)`` point indices: a free seed point and three free neighbours of it at a
-    random pyramid level each; rows without enough free neighbours are dropped."""
-    fidx = np.flatnonzero(free)
+    random pyramid level each; rows without enough free neighbours are dropped.
+    ``fidx``: the free points' indices when known (``np.flatnonzero(free)``)."""
+    if fidx is None:
+        fidx = np.flatnonzero(free)
     seeds = fidx[ctx.rng.integers(0, len(fidx), count)]
     lev = ctx.rng.integers(0, len(ctx.levels), count)
     out = []
@@ -430,8 +433,8 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
     """One round's new candidates: minimal samples, their hypotheses, the best
     ``FULL_SCORES`` by their counts on a random subset, each with its connected inliers
     among the free points (planes refitted by least squares first)."""
-    S = _samples(ctx, free, SAMPLES_PER_ROUND)
     fidx = np.flatnonzero(free)
+    S = _samples(ctx, free, SAMPLES_PER_ROUND, fidx)
     # in random order: the growing prefixes that hypotheses are counted on must be
     # random samples too (a scan's points come in scan order)
     sub = (ctx.rng.permutation(fidx) if len(fidx) <= SUBSET

@@ -115,6 +115,19 @@ def test_knn_on_the_grid_is_the_trees():
     assert np.array_equal(d1, d0[:, 1:]) and np.array_equal(i1, i0[:, 1:])
 
 
+def test_compiled_bounds_and_cell_order_are_numpys():
+    from csdf.detect.kernels import bounds, cell_order
+
+    rng = np.random.default_rng(8)
+    P = rng.normal(size=(1000, 3))
+    lo, hi = bounds(P)
+    assert np.array_equal(lo, P.min(axis=0)) and np.array_equal(hi, P.max(axis=0))
+    key = rng.integers(0, 50, 1000)  # many ties: the order within a cell is kept
+    first = np.zeros(51, dtype=np.int64)
+    np.cumsum(np.bincount(key, minlength=50), out=first[1:])
+    assert np.array_equal(cell_order(key, first), np.argsort(key, kind="stable"))
+
+
 def test_points_near_edges_are_left_out_on_both_sides():
     from csdf.detect.solids import away_from_edges, solid_values
 

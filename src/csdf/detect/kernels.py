@@ -12,6 +12,7 @@ from numba import njit
 
 __all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
+           "bounds", "cell_order",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
@@ -189,54 +190,72 @@ def largest_component(sel: np.ndarray, nbr: np.ndarray, linked: np.ndarray,
 # ------------------------------------------------------------------ nearest neighbours
 @njit(cache=True, nogil=True)
 def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.ndarray,
-              ckey: np.ndarray, dims: np.ndarray, h: float, k: int, c0: int, c1: int,
-              out_d: np.ndarray, out_i: np.ndarray, exact: np.ndarray) -> None:
+              ckey: np.ndarray, dims: np.ndarray, origin: np.ndarray, h: float, k: int,
+              c0: int, c1: int, out_d: np.ndarray, out_i: np.ndarray,
+              exact: np.ndarray) -> None:
     """The ``k`` nearest neighbours (self excluded) of the points of occupied grid
     cells ``c0 .. c1 - 1``, searched in the 3 x 3 x 3 block of cells around each.
 
     ``S`` ``(N, 3)`` the points sorted by the key ``ix + nx (iy + ny iz)`` of their
-    cell (cells of side ``h``; ``dims`` ``(3,)`` = ``(nx, ny, nz)``), ``order``
-    ``(N,)`` their indices in the cloud; ``first`` ``(nx ny nz + 1,)`` where each cell's
-    run of ``S`` begins (every cell, empty ones too); ``cstart`` ``(C + 1,)`` and
-    ``ckey`` ``(C,)`` where each occupied cell's run begins and its key. Writes, at each
-    point's own row (its index in the cloud), the distances ``out_d`` and indices
-    ``out_i`` ``(N, k)`` of its neighbours (nearest first) and ``exact`` ``(N,)``:
-    whether its ``k``-th neighbour lies within ``h`` (only then is the block sure to
-    hold the true neighbours; the others need another search). The block's nine rows
-    of three cells are each one run of ``S``."""
+    cell (cells of side ``h`` from ``origin`` ``(3,)``; ``dims`` ``(3,)`` =
+    ``(nx, ny, nz)``), ``order`` ``(N,)`` their indices in the cloud; ``first``
+    ``(nx ny nz + 1,)`` where each cell's run of ``S`` begins (every cell, empty ones
+    too); ``cstart`` ``(C + 1,)`` and ``ckey`` ``(C,)`` where each occupied cell's run
+    begins and its key. Writes, at each point's own row (its index in the cloud), the
+    distances ``out_d`` and indices ``out_i`` ``(N, k)`` of its neighbours (nearest
+    first) and ``exact`` ``(N,)``: whether its ``k``-th neighbour lies within ``h``
+    (only then is the block sure to hold the true neighbours; the others need another
+    search). The block's nine rows of three cells are each one run of ``S``; a point
+    searches its own row first and then skips every row, and every cell at either end
+    of a row, that lies no nearer than its ``k``-th neighbour so far (the answer is
+    the same, found on fewer candidates)."""
     nx, ny, nz = dims[0], dims[1], dims[2]
     bd = np.empty(k)
     bi = np.empty(k, dtype=np.int64)
-    lo = np.empty(9, dtype=np.int64)
-    hi = np.empty(9, dtype=np.int64)
+    # the block's rows (dy, dz), the point's own first
+    ry = np.array([0, -1, 1, 0, 0, -1, 1, -1, 1], dtype=np.int64)
+    rz = np.array([0, 0, 0, -1, 1, -1, -1, 1, 1], dtype=np.int64)
     h2 = h * h
+    slack = 1e-9 * h  # cell boundaries as computed may be off by rounding
     for c in range(c0, c1):
         key = ckey[c]
         ix = key % nx
         iy = (key // nx) % ny
         iz = key // (nx * ny)
-        x0, x1 = max(ix - 1, 0), min(ix + 1, nx - 1)
-        rows = 0
-        for dz in range(-1, 2):
-            z = iz + dz
-            if z < 0 or z >= nz:
-                continue
-            for dy in range(-1, 2):
-                y = iy + dy
-                if y < 0 or y >= ny:
-                    continue
-                base = nx * (y + ny * z)
-                a0, a1 = first[base + x0], first[base + x1 + 1]
-                if a1 > a0:
-                    lo[rows] = a0
-                    hi[rows] = a1
-                    rows += 1
+        bx = origin[0] + ix * h  # the cell's lower corner
+        by = origin[1] + iy * h
+        bz = origin[2] + iz * h
         for a in range(cstart[c], cstart[c + 1]):
             px, py, pz = S[a, 0], S[a, 1], S[a, 2]
+            # each side's gap: the least distance to the neighbouring cell that way
+            gxl = max(px - bx - slack, 0.0)
+            gxh = max(bx + h - px - slack, 0.0)
+            gyl = max(py - by - slack, 0.0)
+            gyh = max(by + h - py - slack, 0.0)
+            gzl = max(pz - bz - slack, 0.0)
+            gzh = max(bz + h - pz - slack, 0.0)
             m = 0
             worst = np.inf  # the k-th distance so far (squared)
-            for r in range(rows):
-                for b in range(lo[r], hi[r]):
+            for r in range(9):
+                y = iy + ry[r]
+                z = iz + rz[r]
+                if y < 0 or y >= ny or z < 0 or z >= nz:
+                    continue
+                g = 0.0
+                if ry[r] < 0:
+                    g += gyl * gyl
+                elif ry[r] > 0:
+                    g += gyh * gyh
+                if rz[r] < 0:
+                    g += gzl * gzl
+                elif rz[r] > 0:
+                    g += gzh * gzh
+                if g >= worst:
+                    continue
+                x0 = ix - 1 if ix > 0 and g + gxl * gxl < worst else ix
+                x1 = ix + 1 if ix < nx - 1 and g + gxh * gxh < worst else ix
+                base = nx * (y + ny * z)
+                for b in range(first[base + x0], first[base + x1 + 1]):
                     dx = S[b, 0] - px
                     dy = S[b, 1] - py
                     dz = S[b, 2] - pz
@@ -262,6 +281,37 @@ def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.nd
 
 
 @njit(cache=True, nogil=True)
+def bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least and greatest coordinates ``(3,)`` each of the points ``P`` ``(N, 3)``
+    (``N >= 1``): ``P.min(axis=0)`` and ``P.max(axis=0)`` in one pass (NumPy reduces
+    the short rows of an ``(N, 3)`` array slowly)."""
+    lo = P[0].copy()
+    hi = P[0].copy()
+    for i in range(1, P.shape[0]):
+        for c in range(3):
+            v = P[i, c]
+            if v < lo[c]:
+                lo[c] = v
+            elif v > hi[c]:
+                hi[c] = v
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def cell_order(key: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """The points ``(N,)`` sorted by their cell keys ``key`` ``(N,)``, ties in index
+    order (what ``np.argsort(key, kind='stable')`` gives), by counting: ``first`` holds
+    where each cell's run begins (the cumulative counts of the keys)."""
+    fill = first[:-1].copy()
+    out = np.empty(key.shape[0], dtype=np.int64)
+    for i in range(key.shape[0]):
+        c = key[i]
+        out[fill[c]] = i
+        fill[c] += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
 def within_ball(P: np.ndarray, idx: np.ndarray, c: np.ndarray, r: float) -> np.ndarray:
     """``(K,)`` which of the points ``idx`` ``(K,)`` of ``P`` ``(N, 3)`` lie within
     distance ``r`` of ``c`` ``(3,)``."""
@@ -274,6 +324,10 @@ def within_ball(P: np.ndarray, idx: np.ndarray, c: np.ndarray, r: float) -> np.n
     return out
 
 
+#: a set of ``m`` points grown from a cloud of ``N`` is sorted when ``m`` times this
+#: is at most ``N``, else collected in order by one pass over the cloud's states
+#: (cheaper than sorting a large set)
+SORT_COST = 16
 #: the states of points while a set grows (:func:`_spread`)
 UNTESTED, IN, OUT, REACHED, PASS = 0, 1, 2, 3, 4
 
@@ -312,13 +366,24 @@ def _spread(state: np.ndarray, seeds: np.ndarray, start: np.ndarray, adj: np.nda
             m += 1
         elif s == OUT:
             state[j] = OUT
-    out = np.empty(m, dtype=np.int64)
     k = 0
     for a in range(m):
         if state[queue[a]] == REACHED:
-            out[k] = queue[a]
             k += 1
-    return np.sort(out[:k])
+    out = np.empty(k, dtype=np.int64)
+    if k * SORT_COST <= state.shape[0]:  # few: sorted
+        k = 0
+        for a in range(m):
+            if state[queue[a]] == REACHED:
+                out[k] = queue[a]
+                k += 1
+        return np.sort(out)
+    k = 0  # many: in order by one pass over the states (no sort)
+    for i in range(state.shape[0]):
+        if state[i] == REACHED:
+            out[k] = i
+            k += 1
+    return out
 
 
 @njit(cache=True, nogil=True)

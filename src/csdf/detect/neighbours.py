@@ -173,7 +173,7 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
     That block holds every point within ``h``; points whose ``k``-th neighbour found
     there is farther (outliers, sparse parts) are searched again with the tree."""
     from ..parallel import N_THREADS, executor
-    from .kernels import knn_cells
+    from .kernels import bounds, cell_order, knn_cells
 
     n = len(points)
     if n < GRID_MIN_POINTS:
@@ -181,18 +181,18 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
         return d[:, 1:], i[:, 1:]
     ds, _ = tree.query(points[::max(1, n // GRID_SAMPLE)], k=k + 1)
     h = float(np.quantile(ds[:, -1], GRID_QUANTILE))
-    lo = points.min(axis=0)
-    span = points.max(axis=0) - lo
+    lo, hi = bounds(points)
+    span = hi - lo
     if not (h > 0 and np.prod(span / h + 1.0) <= GRID_MAX_CELLS):
         d, i = tree.query(points, k=k + 1, workers=-1)
         return d[:, 1:], i[:, 1:]
     dims = (span // h).astype(np.int64) + 1
     ijk = np.minimum(((points - lo) // h).astype(np.int64), dims - 1)
     key = ijk[:, 0] + dims[0] * (ijk[:, 1] + dims[1] * ijk[:, 2])
-    order = np.argsort(key, kind="stable")
-    skey = key[order]
     first = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
     np.cumsum(np.bincount(key, minlength=len(first) - 1), out=first[1:])
+    order = cell_order(key, first)  # a stable sort by key
+    skey = key[order]
     cstart = np.concatenate([[0], np.flatnonzero(np.diff(skey)) + 1, [n]])
     ckey = skey[cstart[:-1]]
     dist = np.empty((n, k))
@@ -206,7 +206,8 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
     jobs = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
 
     def job(r: tuple[int, int]) -> None:
-        knn_cells(S, order, first, cstart, ckey, dims, h, k, r[0], r[1], dist, idx, exact)
+        knn_cells(S, order, first, cstart, ckey, dims, lo, h, k, r[0], r[1], dist, idx,
+                  exact)
 
     if len(jobs) == 1:
         job(jobs[0])

@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 from ..errors import CsdfError
 from ..fit import fit
 from .kernels import (
+    bounds,
     grow_inliers,
     largest_component,
     linked_graph,
@@ -290,7 +291,8 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
         N = nb.normals
     else:
         N = normals_arg(normals, P)
-    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    lo, hi = bounds(P)
+    diag = float(np.linalg.norm(hi - lo))
     eps = (max(3.0 * nb.noise, 1e-4 * diag) if epsilon is None
            else _positive(epsilon, "epsilon"))
     conn = None if cluster_epsilon is None else _positive(cluster_epsilon, "cluster_epsilon")
@@ -323,10 +325,13 @@ def _build_levels(ctx: _Ctx) -> None:
             break
 
 
-def _samples(ctx: _Ctx, free: np.ndarray, count: int) -> np.ndarray:
+def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = None
+             ) -> np.ndarray:
     """``(M, 4)`` point indices: a free seed point and three free neighbours of it at a
-    random pyramid level each; rows without enough free neighbours are dropped."""
-    fidx = np.flatnonzero(free)
+    random pyramid level each; rows without enough free neighbours are dropped.
+    ``fidx``: the free points' indices when known (``np.flatnonzero(free)``)."""
+    if fidx is None:
+        fidx = np.flatnonzero(free)
     seeds = fidx[ctx.rng.integers(0, len(fidx), count)]
     lev = ctx.rng.integers(0, len(ctx.levels), count)
     out = []
@@ -428,8 +433,8 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
     """One round's new candidates: minimal samples, their hypotheses, the best
     ``FULL_SCORES`` by their counts on a random subset, each with its connected inliers
     among the free points (planes refitted by least squares first)."""
-    S = _samples(ctx, free, SAMPLES_PER_ROUND)
     fidx = np.flatnonzero(free)
+    S = _samples(ctx, free, SAMPLES_PER_ROUND, fidx)
     # in random order: the growing prefixes that hypotheses are counted on must be
     # random samples too (a scan's points come in scan order)
     sub = (ctx.rng.permutation(fidx) if len(fidx) <= SUBSET
@@ -788,12 +793,15 @@ def _settle(ctx: _Ctx, kind: str, R, t, vals, pts: np.ndarray, cand: np.ndarray,
         use = pts[away_from_edges(kind, R, t, vals, ctx.P[pts])]
         R, t, vals = _fit_solid(ctx, kind, R, t, vals, use if len(use) >= 4 else pts,
                                 limit=None, max_iter=SETTLE_ITER)
-        near, _ = _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)
+        near, dist = _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)
         same = len(near) + len(pts) - 2 * _shared(near, pts) <= 0.01 * len(pts)
         pts = near
         if same or len(pts) < 4:
             break
-    return R, t, vals, _near_solid(ctx, kind, R, t, vals, cand, pts)[0]
+    # the inliers within epsilon connected to ``pts`` are those of ``pts`` (the band's
+    # connected points of this very solid) within epsilon: a point within epsilon next
+    # to one of them would be one of them
+    return R, t, vals, pts[dist <= ctx.eps]
 
 
 def _refine(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray, free: np.ndarray
@@ -894,8 +902,10 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         return found
     link = (2.0 * ctx.conn if ctx.conn is not None
             else 4.0 * float(np.median(ctx.nb.local)))
-    box = {i: (ctx.P[found[i].inliers].min(axis=0) - link,
-               ctx.P[found[i].inliers].max(axis=0) + link) for i in planes}
+    box = {}
+    for i in planes:
+        lo, hi = bounds(ctx.P[found[i].inliers])
+        box[i] = (lo - link, hi + link)
 
     def near_box(i: int, j: int) -> np.ndarray:
         """The points of plane ``i`` in plane ``j``'s box grown by ``link``."""
@@ -964,7 +974,7 @@ def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection], free: np.ndarray
     R = np.stack([e1, e2, np.cross(e1, e2)], axis=1)
     idx = _union(*[f.inliers for f in faces])
     q = ctx.P[idx] @ R
-    lo, hi = q.min(axis=0), q.max(axis=0)
+    lo, hi = bounds(q)
     size = np.maximum(hi - lo, ctx.eps)
     t = R @ (0.5 * (lo + hi))
     vals = {"size_x": float(size[0]), "size_y": float(size[1]), "size_z": float(size[2])}

@@ -58,7 +58,15 @@ from .candidates import (
 )
 from .pool import Pool, View, free_points, oriented_normals, support_scales
 from .refine import refine_params
-from .search import Scored, beam_search, evaluate_oriented, parities, polish, swap
+from .search import (
+    Scored,
+    beam_search,
+    consistent,
+    evaluate_oriented,
+    parities,
+    polish,
+    swap,
+)
 
 __all__ = ["infer", "InferResult", "SOLID_KINDS", "SEARCH_POINTS", "FIT_POINTS"]
 
@@ -91,6 +99,9 @@ RESIDUAL_MIN = 30
 DROP_ROUNDS = 1
 #: rounds of moving the best tree's faces (:func:`_move_faces`)
 FACE_ROUNDS = 3
+#: trees whose scores differ by less than this share of the penalty are ones the
+#: points cannot tell apart (:func:`_simplest`): under one point in 4,000
+INDISTINCT = 0.05
 
 
 @dataclass
@@ -112,6 +123,9 @@ class InferResult:
         seconds: wall time.
         history: ``(seconds, primitives, cost, tree text)`` of each better tree found.
         candidates: the number of candidate primitives the search had.
+        searched: the tree as the search wrote it (the primitives' names as in
+            ``tree``), before the simplest of the trees the points cannot tell apart
+            was taken (:func:`_simplest`); often ``tree`` itself.
     """
 
     shape: object
@@ -124,6 +138,7 @@ class InferResult:
     seconds: float
     history: list[tuple] = field(default_factory=list)
     candidates: int = 0
+    searched: str = ""
 
 
 _AXIS_NAMES = {(0, 1): "x", (0, -1): "-x", (1, 1): "y", (1, -1): "-y", (2, 1): "z",
@@ -467,6 +482,32 @@ def _through_final(prob: _Problem, best: Scored) -> Scored:
     return best
 
 
+def _simplest(prob: _Problem, best: Scored) -> Scored:
+    """Of the trees the points cannot tell from ``best`` (the same leaves, a trim or
+    cut moved elsewhere: :func:`.tree.relocations`; a score within :data:`INDISTINCT`
+    of the penalty of ``best``'s), the one whose trims and cuts reach the fewest
+    primitives (:func:`.tree.scope`): a cut that misses a part is not applied to it.
+    The simplest explanation the data allow; the choice is a convention, not a
+    finding (see docs/infer.md). Then written with its cuts after its intersections
+    (:func:`.tree.cuts_last`: the same set)."""
+    scorer = prob.pool.scorer()
+    limit = best.total + INDISTINCT * prob.pool.penalty
+    cur = best
+    while True:
+        win = None
+        for t in T.relocations(cur.tree):
+            if T.scope(t) >= T.scope(cur.tree) or not consistent(t, scorer.signs):
+                continue
+            sc = scorer.score(t)
+            if sc.total <= limit and (win is None or (T.scope(t), sc.total) <
+                                      (T.scope(win.tree), win.total)):
+                win = sc
+        if win is None:
+            break
+        cur = win
+    return scorer.score(T.cuts_last(cur.tree))
+
+
 def _to_refine(found: list[Scored], n: int) -> list:
     """Up to ``n`` trees of ``found`` (best first) to refine: by turns the best not yet
     taken of the best tree's size, of one leaf fewer and of one leaf more."""
@@ -644,6 +685,9 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         tree = _refined_tree(prob, swapped.tree)
         sc2 = pool.scorer().score(tree)
         best = sc2 if sc2.total <= best.total + 0.01 * pool.penalty else swapped
+    # of the trees the points cannot tell apart, the simplest
+    searched = best.tree
+    best = _simplest(prob, best)
     sc = best
     lvs = pool.leaves
     shape, names = _shape(sc.tree, lvs)
@@ -663,4 +707,4 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         shape=shape, text=dumps(shape), tree=T.to_text(sc.tree, label), primitives=prims,
         cost=sc.total, rmse=float(np.sqrt(np.mean(f[near] ** 2))) if near.any() else math.inf,
         inlier_fraction=float(near.mean()), seconds=time.perf_counter() - t0,
-        history=hist, candidates=len(pool.leaves))
+        history=hist, candidates=len(pool.leaves), searched=T.to_text(searched, label))

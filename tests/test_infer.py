@@ -43,10 +43,9 @@ def test_recovers_structure_and_parameters(cloud):
     kinds = sorted(p["kind"] for p in res.primitives)
     assert kinds == ["box", "cylinder", "sphere"]
     # the hole does not reach the sphere: cutting before or after the union is the same
+    # solid, and the simplest explanation applies the cut to the box alone
     assert res.tree.replace(" ", "") in ("((box_1-cylinder_1)|sphere_1)",
-                                         "(sphere_1|(box_1-cylinder_1))",
-                                         "((box_1|sphere_1)-cylinder_1)",
-                                         "((sphere_1|box_1)-cylinder_1)")
+                                         "(sphere_1|(box_1-cylinder_1))"), res.tree
     by = {p["kind"]: p for p in res.primitives}
     assert abs(by["sphere"]["radius"] - 0.5) < 0.01
     assert np.allclose(by["sphere"]["translation"], [-1.0, 0.0, 0.3], atol=0.01)

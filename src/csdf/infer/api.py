@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 
 from ..detect.neighbours import neighbourhood, normals_arg, points_arg, viewpoint_arg
 from ..detect.primitives import detect_primitives
-from ..detect.solids import SOLID_BACKEND, SOLID_PARAMS
+from ..detect.solids import SOLID_PARAMS
 from ..errors import CsdfError
 from ..expr import param
 from ..lang.printer import dumps
@@ -97,6 +97,10 @@ RESIDUAL_ROUNDS = 2
 RESIDUAL_MIN = 30
 #: rounds of dropping each leaf of the best tree and refining the rest
 DROP_ROUNDS = 1
+#: the evaluator of the joint refinement: the interpreter, as every tree refined is a
+#: new program (the compiled evaluator compiles a kernel per tree: seconds each, far
+#: more than the refinement's evaluations cost; 2-3x slower than a cached kernel)
+REFINE_BACKEND = "interp"
 #: rounds of moving the best tree's faces (:func:`_move_faces`)
 FACE_ROUNDS = 3
 #: trees whose scores differ by less than this share of the penalty are ones the
@@ -356,7 +360,7 @@ def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
             values[f"{name}_{a}"] = float(v)
     try:
         res = refine_params(shape, values, sizes, prob.fit_points, prob.fit_normals,
-                            prob.fit_free, prob.tau, SOLID_BACKEND)
+                            prob.fit_free, prob.tau, REFINE_BACKEND)
     except (CsdfError, np.linalg.LinAlgError):
         return {i: leaves[i] for i in names}
     out = {}

@@ -17,7 +17,10 @@ diagonal.
 Measures: **exact structure** (the same kinds and the same tree up to the order of
 commutative operands, leaves matched to the truth's by kind and position), the same
 of the tree **as searched** (``InferResult.searched``: before the simplest of the
-trees the points cannot tell apart is taken),
+trees the points cannot tell apart is taken), of the **widest** of those (each cut
+applied to as much as the points allow: the opposite convention), whether the truth
+is **one of the alternatives** (``InferResult.alternatives``, up to the writings of
+one set: how much a convention can decide),
 **equivalent structure** (exact, or the true tree built of the inferred primitives is
 the inferred solid: a cut applied before or after a union it does not reach, a
 difference moved across an intersection; the points cannot tell these apart),
@@ -179,15 +182,27 @@ def _match(res, leaves) -> dict[int, int] | None:
     return {int(i): int(j) for i, j in zip(r, c)}
 
 
-def exact_structure(res, tree, leaves, text: str | None = None) -> bool:
+def exact_structure(res, tree, leaves, text: str | None = None, form=T.canonical) -> bool:
     """Whether the inferred tree (``text``, default ``res.tree``) is the truth up to
-    the order of commutative operands, leaves matched by kind and position."""
+    the order of commutative operands (``form``: :func:`tree.canonical`; or
+    :func:`tree.normal_form`, up to the writings of one set), leaves matched by kind
+    and position."""
     m = _match(res, leaves)
     if m is None:
         return False
     name_to_index = {p["name"]: i for i, p in enumerate(res.primitives)}
     inferred = T.from_text(text or res.tree, name_to_index.__getitem__)
-    return T.canonical(inferred, lambda i: str(m[i])) == T.canonical(tree)
+    return form(inferred, lambda i: str(m[i])) == form(tree)
+
+
+def widest(res) -> str:
+    """Of the trees the points cannot tell from the inferred one
+    (``res.alternatives``), the one whose trims and cuts reach the most primitives
+    (the opposite convention to ``infer``'s; the best score among equals)."""
+    alts = res.alternatives or [res.tree]
+    names = {p["name"]: i for i, p in enumerate(res.primitives)}
+    scopes = [T.scope(T.from_text(a, names.__getitem__)) for a in alts]
+    return alts[max(range(len(alts)), key=lambda k: (scopes[k], -k))]
 
 
 def equivalent_structure(res, tree, leaves, box: np.ndarray) -> bool:
@@ -352,26 +367,31 @@ def main() -> None:
             dt = time.perf_counter() - t0
             ex = exact_structure(res, tree, leaves)
             ex0 = exact_structure(res, tree, leaves, res.searched)
+            exw = exact_structure(res, tree, leaves, widest(res))
+            exa = any(exact_structure(res, tree, leaves, a, T.normal_form)
+                      for a in res.alternatives or [res.tree])
             row = (ex, ex or equivalent_structure(res, tree, leaves, box),
                    chamfer(res.shape, shape, diag), iou(res.shape, shape, box),
-                   len(res.primitives) / n, dt, ex0)
+                   len(res.primitives) / n, dt, ex0, exw, exa)
             rows.setdefault((view, band), []).append(row)
             if a.verbose:
-                print(f"{view} tree {k} ({n}): exact {row[0]} (as searched {ex0}), "
+                print(f"{view} tree {k} ({n}): exact {row[0]} (as searched {ex0}, widest "
+                      f"{exw}, one of {len(res.alternatives)} alternatives {exa}), "
                       f"equivalent {row[1]}, Chamfer {row[2]:.2%}, IoU {row[3]:.3f}, "
                       f"{dt:.1f} s, {res.tree}", flush=True)
         print(f"\n## {view}\n")
-        print("| primitives | trees | exact structure | exact as searched | equivalent "
-              "structure | Chamfer (median) | IoU (median) | IoU >= 0.97 | count / truth "
-              "(median) | s (median, max) |")
-        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("| primitives | trees | exact structure | as searched | widest cuts | "
+              "one of the alternatives | equivalent structure | Chamfer (median) | "
+              "IoU (median) | IoU >= 0.97 | count / truth (median) | s (median, max) |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for band in ("2-3", "4-5", "2-5", "6-8"):
             r = rows.get((view, band), []) if band != "2-5" else \
                 rows.get((view, "2-3"), []) + rows.get((view, "4-5"), [])
             if not r:
                 continue
-            ex, eq, ch, io, cnt, ts, ex0 = (list(x) for x in zip(*r))
+            ex, eq, ch, io, cnt, ts, ex0, exw, exa = (list(x) for x in zip(*r))
             print(f"| {band} | {len(r)} | {sum(ex) / len(r):.0%} | {sum(ex0) / len(r):.0%} | "
+                  f"{sum(exw) / len(r):.0%} | {sum(exa) / len(r):.0%} | "
                   f"{sum(eq) / len(r):.0%} | "
                   f"{statistics.median(ch):.2%} | {statistics.median(io):.3f} | "
                   f"{sum(v >= 0.97 for v in io) / len(r):.0%} | "

@@ -46,6 +46,11 @@ def test_recovers_structure_and_parameters(cloud):
     # solid, and the simplest explanation applies the cut to the box alone
     assert res.tree.replace(" ", "") in ("((box_1-cylinder_1)|sphere_1)",
                                          "(sphere_1|(box_1-cylinder_1))"), res.tree
+    # ... and the cut applied after the union is among the trees the points cannot tell
+    # apart
+    alts = {a.replace(" ", "") for a in res.alternatives}
+    assert res.tree in res.alternatives and alts & {"((box_1|sphere_1)-cylinder_1)",
+                                                    "((sphere_1|box_1)-cylinder_1)"}, alts
     by = {p["kind"]: p for p in res.primitives}
     assert abs(by["sphere"]["radius"] - 0.5) < 0.01
     assert np.allclose(by["sphere"]["translation"], [-1.0, 0.0, 0.3], atol=0.01)

@@ -78,6 +78,12 @@ SEARCH_POINTS = 4000
 FREE_POINTS = 2000
 #: free-space points on rays past the object's silhouette (with a viewpoint)
 BACKGROUND_POINTS = 2000
+#: points behind the visible surface of a single-view scan (:meth:`.pool.View.behind`)
+HIDDEN_POINTS = 2000
+#: what material behind the visible surface of a scan costs, as a share of the
+#: penalty when it fills every such point: of the completions the free space allows,
+#: the most compact wins (no more than a primitive's worth, so it never pays for a cut)
+HIDDEN_WEIGHT = 0.5
 #: points the joint refinement fits (a seeded subsample)
 FIT_POINTS = 2000
 #: free-space points the joint refinement keeps out of the material (with a viewpoint)
@@ -104,8 +110,10 @@ REFINE_BACKEND = "interp"
 #: rounds of moving the best tree's faces (:func:`_move_faces`)
 FACE_ROUNDS = 3
 #: trees whose scores differ by less than this share of the penalty are ones the
-#: points cannot tell apart (:func:`_simplest`): under one point in 4,000
+#: points cannot tell apart (:func:`_indistinct`): under one point in 4,000
 INDISTINCT = 0.05
+#: the most trees :func:`_indistinct` returns
+ALTERNATIVES = 32
 
 
 @dataclass
@@ -130,6 +138,9 @@ class InferResult:
         searched: the tree as the search wrote it (the primitives' names as in
             ``tree``), before the simplest of the trees the points cannot tell apart
             was taken (:func:`_simplest`); often ``tree`` itself.
+        alternatives: the trees the points cannot tell from ``tree`` (its leaves with
+            trims or cuts applied elsewhere, scoring within :data:`INDISTINCT` of the
+            penalty), ``tree`` among them, best score first.
     """
 
     shape: object
@@ -143,6 +154,7 @@ class InferResult:
     history: list[tuple] = field(default_factory=list)
     candidates: int = 0
     searched: str = ""
+    alternatives: list[str] = field(default_factory=list)
 
 
 _AXIS_NAMES = {(0, 1): "x", (0, -1): "-x", (1, 1): "y", (1, -1): "-y", (2, 1): "z",
@@ -320,14 +332,22 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
     sample = np.sort(rng.choice(len(P), size=min(SEARCH_POINTS, len(P)), replace=False))
     S = P[sample]
     NS = None if N is None else N[sample]
-    free = view = None
+    free = view = scored_free = free_weight = None
     if vp is not None:
         view = View(P, vp, rng)
         free = np.concatenate([free_points(P, vp, tau, diag, rng, FREE_POINTS),
                                view.background(diag, rng, BACKGROUND_POINTS)])
+        # the score also weighs the material behind the visible surface, a little (a
+        # generator of its own, so that the other draws stay as they were)
+        behind = view.behind(P, tau, np.random.default_rng([seed, 1]), HIDDEN_POINTS)
+        scored_free = np.concatenate([free, behind])
+        free_weight = np.concatenate([
+            np.full(len(free), 1.0 / max(len(free), 1)),
+            np.full(len(behind), HIDDEN_WEIGHT * float(penalty) / max(len(behind), 1))])
     kd = cKDTree(P)
     reach, area = support_scales(kd, S, len(P), tau)
-    pool = Pool(S, NS, free, kd, N, reach, area, tau, float(penalty), rng, view)
+    pool = Pool(S, NS, scored_free, kd, N, reach, area, tau, float(penalty), rng, view,
+                free_weight)
     fit_idx = np.sort(rng.choice(len(P), size=min(FIT_POINTS, len(P)), replace=False))
     fit_free = None if free is None else free[np.sort(rng.choice(
         len(free), size=min(FIT_FREE_POINTS, len(free)), replace=False))]
@@ -486,30 +506,39 @@ def _through_final(prob: _Problem, best: Scored) -> Scored:
     return best
 
 
-def _simplest(prob: _Problem, best: Scored) -> Scored:
-    """Of the trees the points cannot tell from ``best`` (the same leaves, a trim or
-    cut moved elsewhere: :func:`.tree.relocations`; a score within :data:`INDISTINCT`
-    of the penalty of ``best``'s), the one whose trims and cuts reach the fewest
-    primitives (:func:`.tree.scope`): a cut that misses a part is not applied to it.
-    The simplest explanation the data allow; the choice is a convention, not a
-    finding (see docs/infer.md). Then written with its cuts after its intersections
-    (:func:`.tree.cuts_last`: the same set)."""
+def _indistinct(prob: _Problem, best: Scored) -> list[Scored]:
+    """The trees the points cannot tell from ``best``: the same leaves with trims or
+    cuts moved elsewhere (:func:`.tree.relocations`, repeatedly), each scoring within
+    :data:`INDISTINCT` of the penalty of ``best``'s score; written with their cuts
+    after their intersections (:func:`.tree.cuts_last`: the same sets), one per set,
+    best score first (``best`` among them), :data:`ALTERNATIVES` at most."""
     scorer = prob.pool.scorer()
     limit = best.total + INDISTINCT * prob.pool.penalty
-    cur = best
-    while True:
-        win = None
-        for t in T.relocations(cur.tree):
-            if T.scope(t) >= T.scope(cur.tree) or not consistent(t, scorer.signs):
+    seen = {T.normal_form(best.tree)}
+    found = [best]
+    todo = [best.tree]
+    scored = 0
+    while todo and len(found) < ALTERNATIVES and scored < 20 * ALTERNATIVES ** 2 // 8:
+        for t in T.relocations(todo.pop(0)):
+            key = T.normal_form(t)
+            if key in seen or not consistent(t, scorer.signs):
                 continue
+            seen.add(key)
+            scored += 1
             sc = scorer.score(t)
-            if sc.total <= limit and (win is None or (T.scope(t), sc.total) <
-                                      (T.scope(win.tree), win.total)):
-                win = sc
-        if win is None:
-            break
-        cur = win
-    return scorer.score(T.cuts_last(cur.tree))
+            if sc.total <= limit:
+                found.append(sc)
+                todo.append(t)
+    found.sort(key=lambda s: s.total)
+    return [scorer.score(T.cuts_last(s.tree)) for s in found[:ALTERNATIVES]]
+
+
+def _simplest(alternatives: list[Scored]) -> Scored:
+    """Of trees the points cannot tell apart (:func:`_indistinct`), the one whose trims
+    and cuts reach the fewest primitives (:func:`.tree.scope`; then the best score):
+    a cut that misses a part is not applied to it. The simplest explanation the data
+    allow; a convention, not a finding (docs/infer.md)."""
+    return min(alternatives, key=lambda s: (T.scope(s.tree), s.total))
 
 
 def _to_refine(found: list[Scored], n: int) -> list:
@@ -691,7 +720,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         best = sc2 if sc2.total <= best.total + 0.01 * pool.penalty else swapped
     # of the trees the points cannot tell apart, the simplest
     searched = best.tree
-    best = _simplest(prob, best)
+    alternatives = _indistinct(prob, best)
+    best = _simplest(alternatives)
     sc = best
     lvs = pool.leaves
     shape, names = _shape(sc.tree, lvs)
@@ -711,4 +741,5 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         shape=shape, text=dumps(shape), tree=T.to_text(sc.tree, label), primitives=prims,
         cost=sc.total, rmse=float(np.sqrt(np.mean(f[near] ** 2))) if near.any() else math.inf,
         inlier_fraction=float(near.mean()), seconds=time.perf_counter() - t0,
-        history=hist, candidates=len(pool.leaves), searched=T.to_text(searched, label))
+        history=hist, candidates=len(pool.leaves), searched=T.to_text(searched, label),
+        alternatives=[T.to_text(a.tree, label) for a in alternatives])

@@ -78,6 +78,11 @@ SEARCH_POINTS = 4000
 FREE_POINTS = 2000
 #: free-space points on rays past the object's silhouette (with a viewpoint)
 BACKGROUND_POINTS = 2000
+#: curved detections of at most this many points are also tried as planes meeting at a
+#: corner (:func:`_corner_planes`)
+CORNER_MAX = 3000
+#: the share of such a detection's points the planes must explain
+CORNER_SHARE = 0.8
 #: points behind the visible surface of a single-view scan (:meth:`.pool.View.behind`)
 HIDDEN_POINTS = 2000
 #: what material behind the visible surface of a scan costs, as a share of the
@@ -287,6 +292,9 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list
             if c is not None and c.kind in prob.ks:
                 out.append((snap(c), _snapped(extended(c, P, P[inl]))))
     if "box" in prob.ks:
+        for d in dets:
+            if d.kind in ("sphere", "cylinder", "cone", "torus"):
+                planes += _corner_planes(prob, sub[d.inliers], d.rmse, eps)
         out += [(snap(b), None) for b in plane_boxes(planes, P, eps, 4.0 * prob.spacing)]
     leaves: list[Leaf] = []
     for lf, v in out:
@@ -294,6 +302,32 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list
         if v is not None:
             leaves.append(v)
     return leaves
+
+
+def _corner_planes(prob: _Problem, idx: np.ndarray, rmse: float, eps: float) -> list:
+    """Planes ``[(normal (3,), offset, inliers (K, 3))]`` that explain the points
+    ``P[idx]`` of a curved detection better than it does: a small notch shows as two
+    or three faces at right angles, which a cylinder (or a cone, a sphere) fitted to
+    them follows within a few noise levels, so detection may take it for one. Kept
+    when at least two planes explain :data:`CORNER_SHARE` of the points with a
+    smaller rmse than the curved fit's ``rmse`` (scene units; ``eps`` the inlier
+    distance). Only for detections of at most :data:`CORNER_MAX` points and outward
+    normals."""
+    if prob.N is None or not 2 * RESIDUAL_MIN <= len(idx) <= CORNER_MAX:
+        return []
+    Q, NQ = prob.P[idx], prob.N[idx]
+    try:
+        found = detect_primitives(Q, NQ, kinds=("plane",), epsilon=eps,
+                                  min_points=max(RESIDUAL_MIN, len(idx) // 10),
+                                  seed=prob.seed, viewpoint=prob.vp, max_primitives=3)
+    except CsdfError:
+        return []
+    found = [d for d in found if d.kind == "plane"]
+    if len(found) < 2 or sum(len(d.inliers) for d in found) < CORNER_SHARE * len(idx) or \
+            max(d.rmse for d in found) >= rmse:
+        return []
+    return [(np.asarray(d.params["normal"], float), float(d.params["offset"]), Q[d.inliers])
+            for d in found]
 
 
 def _snapped(lf: Leaf | None) -> Leaf | None:

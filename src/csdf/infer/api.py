@@ -4,15 +4,17 @@
    cylinders, cones, tori, boxes and planes; boxes are also assembled from the planes
    (a box cut or hidden in part shows as a few faces), a cylinder is also offered as a
    cone and a cone as a cylinder when that fits their points better, and boxes and
-   cylinders also with their faces that hold no points moved out beyond the cloud.
+   cylinders also with their faces that hold no points moved out beyond the cloud; a
+   small curved detection is also tried as planes (:func:`_corner_planes`).
    Each candidate knows from the points' normals whether it is material or a cut.
 2. **Structure** (:mod:`.search`): a beam search over union / intersection /
    difference trees of the candidates, scored on the candidates' exact distances at a
    sample of the points: a truncated quadratic of the residuals (a point whose normal
    disagrees with the tree's is not explained), a size penalty, and the free space:
    with a viewpoint, material where the sensor saw through (towards its points and past
-   the object's silhouette), without one the share of the tree's surface where no
-   point was measured.
+   the object's silhouette) and, a little, behind what it measured (the most compact
+   completion), without one the share of the tree's surface where no point was
+   measured.
 3. **Residuals**: the points the best tree leaves unexplained are searched for
    primitives again (a small feature the first detection missed, or took for part of
    another surface); the beam search resumes with those candidates too.
@@ -22,6 +24,10 @@
    tree, Huber loss at the noise level); each refined tree is polished by local moves
    over all candidates and its own refined primitives, and refined again when that
    changed it; the lowest score wins.
+5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
+   cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
+   ``InferResult.alternatives``; a convention picks the one whose trims and cuts
+   reach the fewest primitives (:func:`_simplest`), cuts written after intersections.
 
 The effort (beam width, trees refined) is fixed for a given ``time_limit``, so that a
 seed gives the same result on any machine; the time limit stops the search early only

@@ -14,9 +14,11 @@ Score (lower is better), with ``tau`` a few noise levels:
   costs 1): a bump and a dent through the same points differ in their normals;
 * free space: with a viewpoint, the same of ``max(0, -f(q)) / tau`` over the free-space
   points ``q`` (material where the sensor saw through, towards measured points or past
-  the object's silhouette); without one (a cloud taken all around), the area of the
-  tree's surface with no measured point near it facing its way (surface the tree
-  makes up), as a share of the measured surface's area;
+  the object's silhouette; points behind the measured surface weigh a little, so that
+  the most compact completion wins: ``Scorer.free_weight``); without one (a cloud
+  taken all around), the area of the tree's surface with no measured point near it
+  facing its way (surface the tree makes up), as a share of the measured surface's
+  area;
 * size: ``penalty`` per primitive (a primitive must explain more than that share of
   the points to be kept).
 

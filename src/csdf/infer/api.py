@@ -12,9 +12,8 @@
    sample of the points: a truncated quadratic of the residuals (a point whose normal
    disagrees with the tree's is not explained), a size penalty, and the free space:
    with a viewpoint, material where the sensor saw through (towards its points and past
-   the object's silhouette) and, a little, behind what it measured (the most compact
-   completion), without one the share of the tree's surface where no point was
-   measured.
+   the object's silhouette), without one the share of the tree's surface where no
+   point was measured.
 3. **Residuals**: the points the best tree leaves unexplained are searched for
    primitives again (a small feature the first detection missed, or took for part of
    another surface); the beam search resumes with those candidates too.
@@ -89,12 +88,6 @@ BACKGROUND_POINTS = 2000
 CORNER_MAX = 3000
 #: the share of such a detection's points the planes must explain
 CORNER_SHARE = 0.8
-#: points behind the visible surface of a single-view scan (:meth:`.pool.View.behind`)
-HIDDEN_POINTS = 2000
-#: what material behind the visible surface of a scan costs, as a share of the
-#: penalty when it fills every such point: of the completions the free space allows,
-#: the most compact wins (no more than a primitive's worth, so it never pays for a cut)
-HIDDEN_WEIGHT = 0.5
 #: points the joint refinement fits (a seeded subsample)
 FIT_POINTS = 2000
 #: free-space points the joint refinement keeps out of the material (with a viewpoint)
@@ -372,22 +365,14 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
     sample = np.sort(rng.choice(len(P), size=min(SEARCH_POINTS, len(P)), replace=False))
     S = P[sample]
     NS = None if N is None else N[sample]
-    free = view = scored_free = free_weight = None
+    free = view = None
     if vp is not None:
         view = View(P, vp, rng)
         free = np.concatenate([free_points(P, vp, tau, diag, rng, FREE_POINTS),
                                view.background(diag, rng, BACKGROUND_POINTS)])
-        # the score also weighs the material behind the visible surface, a little (a
-        # generator of its own, so that the other draws stay as they were)
-        behind = view.behind(P, tau, np.random.default_rng([seed, 1]), HIDDEN_POINTS)
-        scored_free = np.concatenate([free, behind])
-        free_weight = np.concatenate([
-            np.full(len(free), 1.0 / max(len(free), 1)),
-            np.full(len(behind), HIDDEN_WEIGHT * float(penalty) / max(len(behind), 1))])
     kd = cKDTree(P)
     reach, area = support_scales(kd, S, len(P), tau)
-    pool = Pool(S, NS, scored_free, kd, N, reach, area, tau, float(penalty), rng, view,
-                free_weight)
+    pool = Pool(S, NS, free, kd, N, reach, area, tau, float(penalty), rng, view)
     fit_idx = np.sort(rng.choice(len(P), size=min(FIT_POINTS, len(P)), replace=False))
     fit_free = None if free is None else free[np.sort(rng.choice(
         len(free), size=min(FIT_FREE_POINTS, len(free)), replace=False))]

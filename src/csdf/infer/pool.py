@@ -114,16 +114,6 @@ class View:
         depth = rng.uniform(max(self.r_lo - 0.25 * diag, 0.0), self.r_hi + 0.25 * diag, n)
         return self.vp + depth[:, None] * rays
 
-    def behind(self, P: np.ndarray, tau: float, rng, n: int) -> np.ndarray:
-        """``(<= n, 3)`` points the sensor could not see: uniform in the box of the
-        cloud ``P`` ``(N, 3)`` grown by half its extent on every side, behind what it
-        measured in their cell (:meth:`hidden`, by more than ``3 tau``; scene units).
-        What lies there is a guess; the score prefers the least material there."""
-        lo, hi = P.min(axis=0), P.max(axis=0)
-        pad = 0.5 * (hi - lo)
-        X = rng.uniform(lo - pad, hi + pad, (8 * n, 3))
-        return X[self.hidden(X, 3.0 * tau)][:n]
-
     def hidden(self, X: np.ndarray, tol: float) -> np.ndarray:
         """``(M,)`` which points ``X`` ``(M, 3)`` lie behind what the sensor measured in
         their cell (farther than the cell's farthest point by more than ``tol``): the
@@ -187,15 +177,11 @@ class Pool:
         rng: draws the points on the candidates' surfaces.
         view: what a single-view sensor saw (:class:`View`), or None (a cloud taken
             all around).
-        free_weight: ``(Q,)`` what each free-space point's cost weighs in the score
-            (:class:`Scorer`), or None (the mean).
     """
 
     def __init__(self, S, NS, free, kd, N, reach: float, area: float, tau: float,
-                 penalty: float, rng, view: View | None = None,
-                 free_weight: np.ndarray | None = None):
+                 penalty: float, rng, view: View | None = None):
         self.S, self.NS, self.free, self.kd, self.N, self.view = S, NS, free, kd, N, view
-        self.free_weight = free_weight
         self.reach, self.area, self.tau, self.penalty, self.rng = reach, area, tau, penalty, rng
         self.leaves: list[Leaf] = []
         self.at_points = np.zeros((0, len(S)))
@@ -318,13 +304,11 @@ class Pool:
             signs = np.array([lf.sign for lf in self.leaves], dtype=int)
             if self.kd is None:
                 self._scorer = Scorer(self.at_points, self.dots, self.at_free, self.tau,
-                                      self.penalty, signs=signs,
-                                      free_weight=self.free_weight)
+                                      self.penalty, signs=signs)
             else:
                 self._scorer = Scorer(self.at_points, self.dots, self.at_free, self.tau,
                                       self.penalty, self.at_surface, self.owner,
-                                      self.weight / self.area, self.unsupported, signs,
-                                      self.free_weight)
+                                      self.weight / self.area, self.unsupported, signs)
         return self._scorer
 
     @property

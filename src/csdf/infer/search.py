@@ -14,11 +14,9 @@ Score (lower is better), with ``tau`` a few noise levels:
   costs 1): a bump and a dent through the same points differ in their normals;
 * free space: with a viewpoint, the same of ``max(0, -f(q)) / tau`` over the free-space
   points ``q`` (material where the sensor saw through, towards measured points or past
-  the object's silhouette; points behind the measured surface weigh a little, so that
-  the most compact completion wins: ``Scorer.free_weight``); without one (a cloud
-  taken all around), the area of the tree's surface with no measured point near it
-  facing its way (surface the tree makes up), as a share of the measured surface's
-  area;
+  the object's silhouette); without one (a cloud taken all around), the area of the
+  tree's surface with no measured point near it facing its way (surface the tree
+  makes up), as a share of the measured surface's area;
 * size: ``penalty`` per primitive (a primitive must explain more than that share of
   the points to be kept).
 
@@ -118,19 +116,16 @@ class Scorer:
         unsupported: ``(2, S)`` which surface points have no measured point near them
             facing their way: row 0 on a material leaf, row 1 on a cut one.
         signs: ``(L,)`` the leaves' orientations (+1, -1, 0).
-        free_weight: ``(Q,)`` what each free-space point's cost weighs (summed), or
-            None: ``1 / Q`` each (the mean).
     """
 
     def __init__(self, at_points: np.ndarray, dots: np.ndarray | None,
                  at_free: np.ndarray | None, tau: float, penalty: float,
                  at_surface: np.ndarray | None = None, owner: np.ndarray | None = None,
                  weight: np.ndarray | None = None, unsupported: np.ndarray | None = None,
-                 signs: np.ndarray | None = None, free_weight: np.ndarray | None = None):
+                 signs: np.ndarray | None = None):
         self.at_points = at_points
         self.dots = dots
         self.at_free = at_free
-        self.free_weight = free_weight
         self.tau = float(tau)
         self.penalty = float(penalty)
         self.at_surface = at_surface
@@ -180,9 +175,7 @@ class Scorer:
         free = 0.0
         if self.at_free is not None and self.at_free.shape[1]:
             g, _ = evaluate_oriented(tree, self.at_free, None)
-            inside = np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0)
-            free = float(np.mean(inside)) if self.free_weight is None else \
-                float(inside @ self.free_weight)
+            free = float(np.mean(np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0)))
         if self.at_surface is not None:
             # the share of the tree's own surface where no point was measured
             par = parities(tree)

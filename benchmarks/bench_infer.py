@@ -16,11 +16,11 @@ diagonal.
 
 Measures: **exact structure** (the same kinds and the same tree up to the order of
 commutative operands, leaves matched to the truth's by kind and position), the same
-of the tree **as searched** (``InferResult.searched``: before the simplest of the
-trees the points cannot tell apart is taken), of the **widest** of those (each cut
-applied to as much as the points allow: the opposite convention), whether the truth
-is **one of the alternatives** (``InferResult.alternatives``, up to the writings of
-one set: how much a convention can decide),
+of the trees ``infer(prefer='local')`` and ``prefer='global'`` return (chosen here
+from ``InferResult.alternatives``, the trees the points cannot tell apart: the trims
+and cuts reaching the fewest or the most primitives), whether the truth is **one of
+the alternatives** (up to the writings of one set: how much a convention can
+decide),
 **equivalent structure** (exact, or the true tree built of the inferred primitives is
 the inferred solid: a cut applied before or after a union it does not reach, a
 difference moved across an intersection; the points cannot tell these apart),
@@ -195,14 +195,19 @@ def exact_structure(res, tree, leaves, text: str | None = None, form=T.canonical
     return form(inferred, lambda i: str(m[i])) == form(tree)
 
 
-def widest(res) -> str:
+def preferred(res, prefer: str) -> str:
     """Of the trees the points cannot tell from the inferred one
-    (``res.alternatives``), the one whose trims and cuts reach the most primitives
-    (the opposite convention to ``infer``'s; the best score among equals)."""
+    (``res.alternatives``), the one ``infer(prefer=prefer)`` returns: whose trims and
+    cuts reach the fewest (``'local'``) or the most (``'global'``) primitives, then
+    the best score, written with its cuts after its intersections."""
     alts = res.alternatives or [res.tree]
     names = {p["name"]: i for i, p in enumerate(res.primitives)}
-    scopes = [T.scope(T.from_text(a, names.__getitem__)) for a in alts]
-    return alts[max(range(len(alts)), key=lambda k: (scopes[k], -k))]
+    trees = [T.from_text(a, names.__getitem__) for a in alts]
+    sign = 1 if prefer == "local" else -1
+    # (the alternatives after the first are in score order; the first is the search's)
+    order = sorted(range(len(trees)), key=lambda k: (sign * T.scope(trees[k]), k))
+    inv = {i: n for n, i in names.items()}
+    return T.to_text(T.cuts_last(trees[order[0]]), inv.__getitem__)
 
 
 def equivalent_structure(res, tree, leaves, box: np.ndarray) -> bool:
@@ -366,8 +371,8 @@ def main() -> None:
                 continue
             dt = time.perf_counter() - t0
             ex = exact_structure(res, tree, leaves)
-            ex0 = exact_structure(res, tree, leaves, res.searched)
-            exw = exact_structure(res, tree, leaves, widest(res))
+            ex0 = exact_structure(res, tree, leaves, preferred(res, "local"))
+            exw = exact_structure(res, tree, leaves, preferred(res, "global"))
             exa = any(exact_structure(res, tree, leaves, a, T.normal_form)
                       for a in res.alternatives or [res.tree])
             row = (ex, ex or equivalent_structure(res, tree, leaves, box),
@@ -375,12 +380,12 @@ def main() -> None:
                    len(res.primitives) / n, dt, ex0, exw, exa)
             rows.setdefault((view, band), []).append(row)
             if a.verbose:
-                print(f"{view} tree {k} ({n}): exact {row[0]} (as searched {ex0}, widest "
+                print(f"{view} tree {k} ({n}): exact {row[0]} (local {ex0}, global "
                       f"{exw}, one of {len(res.alternatives)} alternatives {exa}), "
                       f"equivalent {row[1]}, Chamfer {row[2]:.2%}, IoU {row[3]:.3f}, "
                       f"{dt:.1f} s, {res.tree}", flush=True)
         print(f"\n## {view}\n")
-        print("| primitives | trees | exact structure | as searched | widest cuts | "
+        print("| primitives | trees | exact structure | prefer local | prefer global | "
               "one of the alternatives | equivalent structure | Chamfer (median) | "
               "IoU (median) | IoU >= 0.97 | count / truth (median) | s (median, max) |")
         print("|---|---|---|---|---|---|---|---|---|---|---|---|")

@@ -43,14 +43,13 @@ def test_recovers_structure_and_parameters(cloud):
     kinds = sorted(p["kind"] for p in res.primitives)
     assert kinds == ["box", "cylinder", "sphere"]
     # the hole does not reach the sphere: cutting before or after the union is the same
-    # solid, and the simplest explanation applies the cut to the box alone
-    assert res.tree.replace(" ", "") in ("((box_1-cylinder_1)|sphere_1)",
-                                         "(sphere_1|(box_1-cylinder_1))"), res.tree
-    # ... and the cut applied after the union is among the trees the points cannot tell
-    # apart
+    # solid; both writings are among the trees the points cannot tell apart
+    local = {"((box_1-cylinder_1)|sphere_1)", "(sphere_1|(box_1-cylinder_1))"}
+    wide = {"((box_1|sphere_1)-cylinder_1)", "((sphere_1|box_1)-cylinder_1)"}
+    assert res.tree.replace(" ", "") in local | wide, res.tree
     alts = {a.replace(" ", "") for a in res.alternatives}
-    assert res.tree in res.alternatives and alts & {"((box_1|sphere_1)-cylinder_1)",
-                                                    "((sphere_1|box_1)-cylinder_1)"}, alts
+    assert res.alternatives[0] == res.tree == res.searched
+    assert alts & local and alts & wide, alts
     by = {p["kind"]: p for p in res.primitives}
     assert abs(by["sphere"]["radius"] - 0.5) < 0.01
     assert np.allclose(by["sphere"]["translation"], [-1.0, 0.0, 0.3], atol=0.01)
@@ -80,6 +79,20 @@ def test_single_view_scan_with_viewpoint():
     assert "|" in res.tree and res.inlier_fraction > 0.9
 
 
+def test_prefer_picks_by_scope():
+    """Of trees the points cannot tell apart, 'local' takes the one whose cut reaches
+    the fewest primitives, 'global' the most; cuts are written after intersections."""
+    from csdf.infer.api import _preferred
+    from csdf.infer.search import Scored
+
+    wide = Scored(("difference", ("union", 0, 2), 1), 0.1, 0.0, 0.5)
+    near = Scored(("union", ("difference", 0, 1), 2), 0.1, 0.0, 0.5001)
+    trim = Scored(("intersection", ("difference", 0, 1), 2), 0.1, 0.0, 0.5002)
+    assert _preferred([wide, near], "local").tree == near.tree
+    assert _preferred([near, wide], "global").tree == wide.tree
+    assert _preferred([trim], "local").tree == ("difference", ("intersection", 0, 2), 1)
+
+
 def test_bad_input(cloud):
     pts, nrm = cloud
     with pytest.raises(CsdfError, match="at least 50"):
@@ -92,6 +105,8 @@ def test_bad_input(cloud):
         infer(pts, time_limit=-1)
     with pytest.raises(CsdfError, match="effort"):
         infer(pts, effort=0)
+    with pytest.raises(CsdfError, match="prefer"):
+        infer(pts, prefer="smallest")
     with pytest.raises(CsdfError, match="normals"):
         infer(pts, nrm[:5])
     with pytest.raises(CsdfError, match="no primitive"):

@@ -25,8 +25,8 @@
    changed it; the lowest score wins.
 5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
    cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
-   ``InferResult.alternatives``; a convention picks the one whose trims and cuts
-   reach the fewest primitives (:func:`_simplest`), cuts written after intersections.
+   ``InferResult.alternatives``; ``prefer='local'`` or ``'global'`` returns the one
+   whose trims and cuts reach the fewest or the most primitives (:func:`_preferred`).
 
 The effort (beam width, trees refined) is fixed for a given ``time_limit``, so that a
 seed gives the same result on any machine; the time limit stops the search early only
@@ -139,12 +139,11 @@ class InferResult:
         seconds: wall time.
         history: ``(seconds, primitives, cost, tree text)`` of each better tree found.
         candidates: the number of candidate primitives the search had.
-        searched: the tree as the search wrote it (the primitives' names as in
-            ``tree``), before the simplest of the trees the points cannot tell apart
-            was taken (:func:`_simplest`); often ``tree`` itself.
-        alternatives: the trees the points cannot tell from ``tree`` (its leaves with
-            trims or cuts applied elsewhere, scoring within :data:`INDISTINCT` of the
-            penalty), ``tree`` among them, best score first.
+        searched: the tree as the search found it (the primitives' names as in
+            ``tree``): ``tree`` itself unless ``prefer`` chose another.
+        alternatives: the trees the points cannot tell from ``searched`` (its leaves
+            with trims or cuts applied elsewhere, scoring within :data:`INDISTINCT` of
+            the penalty), ``searched`` first, then best score first.
     """
 
     shape: object
@@ -534,9 +533,8 @@ def _through_final(prob: _Problem, best: Scored) -> Scored:
 def _indistinct(prob: _Problem, best: Scored) -> list[Scored]:
     """The trees the points cannot tell from ``best``: the same leaves with trims or
     cuts moved elsewhere (:func:`.tree.relocations`, repeatedly), each scoring within
-    :data:`INDISTINCT` of the penalty of ``best``'s score; written with their cuts
-    after their intersections (:func:`.tree.cuts_last`: the same sets), one per set,
-    best score first (``best`` among them), :data:`ALTERNATIVES` at most."""
+    :data:`INDISTINCT` of the penalty of ``best``'s score; one per set, ``best`` first,
+    then best score first, :data:`ALTERNATIVES` at most."""
     scorer = prob.pool.scorer()
     limit = best.total + INDISTINCT * prob.pool.penalty
     seen = {T.normal_form(best.tree)}
@@ -554,16 +552,24 @@ def _indistinct(prob: _Problem, best: Scored) -> list[Scored]:
             if sc.total <= limit:
                 found.append(sc)
                 todo.append(t)
-    found.sort(key=lambda s: s.total)
-    return [scorer.score(T.cuts_last(s.tree)) for s in found[:ALTERNATIVES]]
+    return [best] + sorted(found[1:], key=lambda s: s.total)[:ALTERNATIVES - 1]
 
 
-def _simplest(alternatives: list[Scored]) -> Scored:
+#: the conventions ``infer(prefer=...)`` knows
+PREFER = ("local", "global")
+
+
+def _preferred(alternatives: list[Scored], prefer: str) -> Scored:
     """Of trees the points cannot tell apart (:func:`_indistinct`), the one whose trims
-    and cuts reach the fewest primitives (:func:`.tree.scope`; then the best score):
-    a cut that misses a part is not applied to it. The simplest explanation the data
-    allow; a convention, not a finding (docs/infer.md)."""
-    return min(alternatives, key=lambda s: (T.scope(s.tree), s.total))
+    and cuts reach the fewest primitives (``'local'``: a cut that misses a part is not
+    applied to it) or the most (``'global'``: cuts and trims applied to all that was
+    built before them, as a feature tree applies them), by :func:`.tree.scope`, then
+    the best score; written with its cuts after its intersections
+    (:func:`.tree.cuts_last`: the same set). A convention, not a finding
+    (docs/infer.md)."""
+    sign = 1 if prefer == "local" else -1
+    win = min(alternatives, key=lambda s: (sign * T.scope(s.tree), s.total))
+    return Scored(T.cuts_last(win.tree), win.data, win.free, win.total)
 
 
 def _to_refine(found: list[Scored], n: int) -> list:
@@ -656,7 +662,8 @@ def _note(t0: float, *what) -> None:
 
 def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, viewpoint=None,
           time_limit: float = 30.0, seed: int = 0, *, epsilon: float | None = None,
-          penalty: float | None = None, effort: float | None = None) -> InferResult:
+          penalty: float | None = None, effort: float | None = None,
+          prefer: str | None = None) -> InferResult:
     """Infer a CSG tree of csdf primitives, with named parameters, from a point cloud.
 
     Args:
@@ -706,6 +713,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         raise CsdfError(f"max_primitives must be an integer in [1, 32], got {max_primitives!r}")
     if not (isinstance(time_limit, (int, float)) and time_limit > 0):
         raise CsdfError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
+    if prefer is not None and prefer not in PREFER:
+        raise CsdfError(f"prefer must be None or one of {', '.join(PREFER)}; got {prefer!r}")
     if effort is None:
         effort = time_limit
     elif isinstance(effort, bool) or not (isinstance(effort, (int, float)) and effort > 0):
@@ -746,7 +755,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     # of the trees the points cannot tell apart, the simplest
     searched = best.tree
     alternatives = _indistinct(prob, best)
-    best = _simplest(alternatives)
+    if prefer is not None:
+        best = _preferred(alternatives, prefer)
     sc = best
     lvs = pool.leaves
     shape, names = _shape(sc.tree, lvs)

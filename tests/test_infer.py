@@ -120,10 +120,15 @@ def test_cli(tmp_path, cloud):
     csdf.io.write_points(tmp_path / "part.ply", pts, nrm)
     runner = CliRunner()
     r = runner.invoke(app, ["infer", str(tmp_path / "part.ply"), "-o",
-                            str(tmp_path / "part.csdf"), "--time-limit", "10"])
+                            str(tmp_path / "part.csdf"), "--time-limit", "10",
+                            "--prefer", "local"])
     assert r.exit_code == 0, r.output
     text = (tmp_path / "part.csdf").read_text()
     assert text.startswith("# inferred by csdf infer") and "sphere_1_radius" in text
+    # the hole cut from the box alone; the cut after the union listed as an alternative
+    assert "(box_1 - cylinder_1)" in text.splitlines()[1], text[:300]
+    assert "# or, the points cannot tell: ((box_1 | sphere_1) - cylinder_1)" in text or \
+        "# or, the points cannot tell: ((sphere_1 | box_1) - cylinder_1)" in text, text[:300]
     r = runner.invoke(app, ["info", str(tmp_path / "part.csdf")])
     assert r.exit_code == 0 and "parameter" in r.output
     r = runner.invoke(app, ["infer", str(tmp_path / "part.ply"), "-o", str(tmp_path / "x.stl")])

@@ -116,8 +116,8 @@ FACE_ROUNDS = 3
 #: trees whose scores differ by less than this share of the penalty are ones the
 #: points cannot tell apart (:func:`_indistinct`): under one point in 4,000
 INDISTINCT = 0.05
-#: the most trees :func:`_indistinct` returns
-ALTERNATIVES = 32
+#: the most trees :func:`_indistinct` returns, and the most it scores (a second or so)
+ALTERNATIVES, ALTERNATIVE_SCORES = 32, 2500
 
 
 @dataclass
@@ -534,14 +534,15 @@ def _indistinct(prob: _Problem, best: Scored) -> list[Scored]:
     """The trees the points cannot tell from ``best``: the same leaves with trims or
     cuts moved elsewhere (:func:`.tree.relocations`, repeatedly), each scoring within
     :data:`INDISTINCT` of the penalty of ``best``'s score; one per set, ``best`` first,
-    then best score first, :data:`ALTERNATIVES` at most."""
+    then best score first, :data:`ALTERNATIVES` at most (after
+    :data:`ALTERNATIVE_SCORES` trees scored, those found so far)."""
     scorer = prob.pool.scorer()
     limit = best.total + INDISTINCT * prob.pool.penalty
     seen = {T.normal_form(best.tree)}
     found = [best]
     todo = [best.tree]
     scored = 0
-    while todo and len(found) < ALTERNATIVES and scored < 20 * ALTERNATIVES ** 2 // 8:
+    while todo and len(found) < ALTERNATIVES and scored < ALTERNATIVE_SCORES:
         for t in T.relocations(todo.pop(0)):
             key = T.normal_form(t)
             if key in seen or not consistent(t, scorer.signs):
@@ -752,7 +753,7 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         tree = _refined_tree(prob, swapped.tree)
         sc2 = pool.scorer().score(tree)
         best = sc2 if sc2.total <= best.total + 0.01 * pool.penalty else swapped
-    # of the trees the points cannot tell apart, the simplest
+    # the trees the points cannot tell apart; a convention picks one only when asked
     searched = best.tree
     alternatives = _indistinct(prob, best)
     if prefer is not None:

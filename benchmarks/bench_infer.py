@@ -15,7 +15,12 @@ estimates them, turned to the viewpoint), Gaussian noise of 0.2 % of the boundin
 diagonal.
 
 Measures: **exact structure** (the same kinds and the same tree up to the order of
-commutative operands, leaves matched to the truth's by kind and position),
+commutative operands, leaves matched to the truth's by kind and position), the same
+of the trees ``infer(prefer='local')`` and ``prefer='global'`` return (chosen here
+from ``InferResult.alternatives``, the trees the points cannot tell apart: the trims
+and cuts reaching the fewest or the most primitives), whether the truth is **one of
+the alternatives** (up to the writings of one set: how much a convention can
+decide),
 **equivalent structure** (exact, or the true tree built of the inferred primitives is
 the inferred solid: a cut applied before or after a union it does not reach, a
 difference moved across an intersection; the points cannot tell these apart),
@@ -24,8 +29,10 @@ the other's mesh, marching cubes at 160, as a fraction of the truth's bounding
 diagonal), **IoU** of the signs on a 64^3 grid over the truth's box padded by 10 %, the
 **primitive count** against the truth's, and **seconds** per shape.
 
-Run: ``python benchmarks/bench_infer.py [--trees 100] [--time-limit 30] [--seed 0]
-[--views full,scan] [--verbose]``; ``--zoo [--out DIR]`` for the zoo parts.
+Run: ``python benchmarks/bench_infer.py [--trees 100] [--time-limit 30] [--effort S]
+[--seed 0] [--views full,scan] [--bands 2-3,4-5] [--verbose]``; ``--zoo [--out DIR]``
+for the zoo parts. ``--effort 30 --time-limit 300`` gives the effort of a 30 s limit
+with results that do not depend on the machine's load (its seconds do).
 """
 
 from __future__ import annotations
@@ -175,13 +182,32 @@ def _match(res, leaves) -> dict[int, int] | None:
     return {int(i): int(j) for i, j in zip(r, c)}
 
 
-def exact_structure(res, tree, leaves) -> bool:
+def exact_structure(res, tree, leaves, text: str | None = None, form=T.canonical) -> bool:
+    """Whether the inferred tree (``text``, default ``res.tree``) is the truth up to
+    the order of commutative operands (``form``: :func:`tree.canonical`; or
+    :func:`tree.normal_form`, up to the writings of one set), leaves matched by kind
+    and position."""
     m = _match(res, leaves)
     if m is None:
         return False
     name_to_index = {p["name"]: i for i, p in enumerate(res.primitives)}
-    inferred = T.from_text(res.tree, name_to_index.__getitem__)
-    return T.canonical(inferred, lambda i: str(m[i])) == T.canonical(tree)
+    inferred = T.from_text(text or res.tree, name_to_index.__getitem__)
+    return form(inferred, lambda i: str(m[i])) == form(tree)
+
+
+def preferred(res, prefer: str) -> str:
+    """Of the trees the points cannot tell from the inferred one
+    (``res.alternatives``), the one ``infer(prefer=prefer)`` returns: whose trims and
+    cuts reach the fewest (``'local'``) or the most (``'global'``) primitives, then
+    the best score, written with its cuts after its intersections."""
+    alts = res.alternatives or [res.tree]
+    names = {p["name"]: i for i, p in enumerate(res.primitives)}
+    trees = [T.from_text(a, names.__getitem__) for a in alts]
+    sign = 1 if prefer == "local" else -1
+    # (the alternatives after the first are in score order; the first is the search's)
+    order = sorted(range(len(trees)), key=lambda k: (sign * T.scope(trees[k]), k))
+    inv = {i: n for n, i in names.items()}
+    return T.to_text(T.cuts_last(trees[order[0]]), inv.__getitem__)
 
 
 def equivalent_structure(res, tree, leaves, box: np.ndarray) -> bool:
@@ -276,7 +302,8 @@ def four_views(shape, sigma: float, rng) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(pts), np.concatenate(nrm)
 
 
-def bench_zoo(time_limit: float, seed: int, out_dir: str | None) -> None:
+def bench_zoo(time_limit: float, seed: int, out_dir: str | None,
+              effort: float | None = None) -> None:
     """The zoo parts scanned from four views: structure, IoU and Chamfer."""
     rng = np.random.default_rng(seed)
     print("\n## Zoo parts, four views merged\n")
@@ -288,7 +315,7 @@ def bench_zoo(time_limit: float, seed: int, out_dir: str | None) -> None:
         box = csdf.as_field(shape, backend=BACKEND).bounds
         diag = float(np.linalg.norm(box[1] - box[0]))
         pts, nrm = four_views(shape, 0.002 * diag, rng)
-        res = infer(pts, nrm, time_limit=time_limit, seed=seed)
+        res = infer(pts, nrm, time_limit=time_limit, seed=seed, effort=effort)
         n_hand = sum(1 for c in csdf.as_field(shape).program.calls)
         print(f"| {name} | {len(pts):,} | {len(res.primitives)} / {n_hand} | "
               f"{iou(res.shape, shape, box):.3f} | {chamfer(res.shape, shape, diag):.2%} | "
@@ -303,19 +330,26 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--trees", type=int, default=100)
     ap.add_argument("--time-limit", type=float, default=30.0)
+    ap.add_argument("--effort", type=float, default=None,
+                    help="infer's effort (default: the time limit); with a larger time "
+                    "limit the results do not depend on the machine's load")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--views", default="full,scan")
+    ap.add_argument("--bands", default="2-3,4-5,6-8", help="only trees of these sizes "
+                    "(the others' clouds are drawn all the same, so a tree's cloud does "
+                    "not depend on this)")
     ap.add_argument("--zoo", action="store_true", help="only the zoo parts")
     ap.add_argument("--out", default=None, help="a folder for the zoo parts' inferred "
                     ".csdf models")
     ap.add_argument("--verbose", action="store_true", help="a line for every tree")
     a = ap.parse_args()
     if a.zoo:
-        bench_zoo(a.time_limit, a.seed, a.out)
+        bench_zoo(a.time_limit, a.seed, a.out, a.effort)
         return
     rng = np.random.default_rng(a.seed)
     print(f"machine: {platform.processor() or platform.machine()}, "
-          f"{csdf.parallel.N_THREADS} cores; {a.trees} trees, time limit {a.time_limit} s")
+          f"{csdf.parallel.N_THREADS} cores; {a.trees} trees, time limit {a.time_limit} s, "
+          f"effort {a.effort or a.time_limit}")
     truths = [random_tree(rng, int(rng.integers(2, 9))) for _ in range(a.trees)]
     shapes = [_shape_of(tree, leaves) for tree, leaves in truths]
     rows: dict[tuple[str, str], list] = {}
@@ -324,35 +358,46 @@ def main() -> None:
             box = csdf.as_field(shape).bounds
             diag = float(np.linalg.norm(box[1] - box[0]))
             pts, nrm, eye = cloud(shape, view, 0.002 * diag, rng, box)
+            n = len(leaves)
+            band = "2-3" if n <= 3 else ("4-5" if n <= 5 else "6-8")
+            if band not in a.bands.split(","):
+                continue
             t0 = time.perf_counter()
             try:
-                res = infer(pts, nrm, viewpoint=eye, time_limit=a.time_limit, seed=a.seed)
+                res = infer(pts, nrm, viewpoint=eye, time_limit=a.time_limit, seed=a.seed,
+                            effort=a.effort)
             except csdf.CsdfError as exc:
                 print(f"{view} tree {k}: {exc}")
                 continue
             dt = time.perf_counter() - t0
-            n = len(leaves)
-            band = "2-3" if n <= 3 else ("4-5" if n <= 5 else "6-8")
             ex = exact_structure(res, tree, leaves)
+            ex0 = exact_structure(res, tree, leaves, preferred(res, "local"))
+            exw = exact_structure(res, tree, leaves, preferred(res, "global"))
+            exa = any(exact_structure(res, tree, leaves, a, T.normal_form)
+                      for a in res.alternatives or [res.tree])
             row = (ex, ex or equivalent_structure(res, tree, leaves, box),
                    chamfer(res.shape, shape, diag), iou(res.shape, shape, box),
-                   len(res.primitives) / n, dt)
+                   len(res.primitives) / n, dt, ex0, exw, exa)
             rows.setdefault((view, band), []).append(row)
             if a.verbose:
-                print(f"{view} tree {k} ({n}): exact {row[0]}, equivalent {row[1]}, Chamfer "
-                      f"{row[2]:.2%}, IoU {row[3]:.3f}, {dt:.1f} s, {res.tree}", flush=True)
+                print(f"{view} tree {k} ({n}): exact {row[0]} (local {ex0}, global "
+                      f"{exw}, one of {len(res.alternatives)} alternatives {exa}), "
+                      f"equivalent {row[1]}, Chamfer {row[2]:.2%}, IoU {row[3]:.3f}, "
+                      f"{dt:.1f} s, {res.tree}", flush=True)
         print(f"\n## {view}\n")
-        print("| primitives | trees | exact structure | equivalent structure | "
-              "Chamfer (median) | IoU (median) | IoU >= 0.97 | count / truth (median) | "
-              "s (median, max) |")
-        print("|---|---|---|---|---|---|---|---|---|")
+        print("| primitives | trees | exact structure | prefer local | prefer global | "
+              "one of the alternatives | equivalent structure | Chamfer (median) | "
+              "IoU (median) | IoU >= 0.97 | count / truth (median) | s (median, max) |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for band in ("2-3", "4-5", "2-5", "6-8"):
             r = rows.get((view, band), []) if band != "2-5" else \
                 rows.get((view, "2-3"), []) + rows.get((view, "4-5"), [])
             if not r:
                 continue
-            ex, eq, ch, io, cnt, ts = (list(x) for x in zip(*r))
-            print(f"| {band} | {len(r)} | {sum(ex) / len(r):.0%} | {sum(eq) / len(r):.0%} | "
+            ex, eq, ch, io, cnt, ts, ex0, exw, exa = (list(x) for x in zip(*r))
+            print(f"| {band} | {len(r)} | {sum(ex) / len(r):.0%} | {sum(ex0) / len(r):.0%} | "
+                  f"{sum(exw) / len(r):.0%} | {sum(exa) / len(r):.0%} | "
+                  f"{sum(eq) / len(r):.0%} | "
                   f"{statistics.median(ch):.2%} | {statistics.median(io):.3f} | "
                   f"{sum(v >= 0.97 for v in io) / len(r):.0%} | "
                   f"{statistics.median(cnt):.2f} | {statistics.median(ts):.1f}, "

@@ -19,7 +19,7 @@ order) this runs ``infer`` and, when the structure is not exact, reports:
 The truth is used only to *report*; nothing here feeds back into ``infer``.
 
 Run: ``python benchmarks/infer_diagnose.py [--trees 50] [--views full] [--bands 4-5]
-[--time-limit 30]``.
+[--only 3,17] [--time-limit 30] [--effort S]``.
 """
 
 from __future__ import annotations
@@ -76,10 +76,11 @@ def _relabel(tree, m: dict[int, int]):
 
 
 def diagnose(k: int, tree, leaves, shape, view: str, pts, nrm, eye, time_limit: float,
-             seed: int, rng) -> str:
+             seed: int, rng, effort: float | None = None) -> str:
     """Lines of findings for tree ``k``."""
     t0 = time.perf_counter()
-    res = A.infer(pts, nrm, viewpoint=eye, time_limit=time_limit, seed=seed)
+    res = A.infer(pts, nrm, viewpoint=eye, time_limit=time_limit, seed=seed,
+                  effort=effort)
     dt = time.perf_counter() - t0
     box = csdf.as_field(shape).bounds
     same = iou(res.shape, shape, box)
@@ -127,21 +128,24 @@ def main() -> None:
     ap.add_argument("--views", default="full")
     ap.add_argument("--bands", default="2-3,4-5,6-8")
     ap.add_argument("--first", type=int, default=0, help="skip trees before this one")
+    ap.add_argument("--only", default="", help="only these trees (comma-separated)")
+    ap.add_argument("--effort", type=float, default=None, help="infer's effort")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
     truths = [random_tree(rng, int(rng.integers(2, 9))) for _ in range(a.trees)]
     shapes = [_shape_of(tree, leaves) for tree, leaves in truths]
     bands = set(a.bands.split(","))
+    only = {int(k) for k in a.only.split(",") if k.strip()}
     diag_rng = np.random.default_rng(12345)
     for view in a.views.split(","):
         for k, ((tree, leaves), shape) in enumerate(zip(truths, shapes)):
             box = csdf.as_field(shape).bounds
             diag = float(np.linalg.norm(box[1] - box[0]))
             pts, nrm, eye = cloud(shape, view, 0.002 * diag, rng, box)  # (same draws)
-            if k < a.first or _band(len(leaves)) not in bands:
+            if k < a.first or _band(len(leaves)) not in bands or (only and k not in only):
                 continue
             print(diagnose(k, tree, leaves, shape, view, pts, nrm, eye, a.time_limit, a.seed,
-                           diag_rng), flush=True)
+                           diag_rng, a.effort), flush=True)
 
 
 if __name__ == "__main__":

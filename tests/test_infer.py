@@ -43,10 +43,13 @@ def test_recovers_structure_and_parameters(cloud):
     kinds = sorted(p["kind"] for p in res.primitives)
     assert kinds == ["box", "cylinder", "sphere"]
     # the hole does not reach the sphere: cutting before or after the union is the same
-    assert res.tree.replace(" ", "") in ("((box_1-cylinder_1)|sphere_1)",
-                                         "(sphere_1|(box_1-cylinder_1))",
-                                         "((box_1|sphere_1)-cylinder_1)",
-                                         "((sphere_1|box_1)-cylinder_1)")
+    # solid; both writings are among the trees the points cannot tell apart
+    local = {"((box_1-cylinder_1)|sphere_1)", "(sphere_1|(box_1-cylinder_1))"}
+    wide = {"((box_1|sphere_1)-cylinder_1)", "((sphere_1|box_1)-cylinder_1)"}
+    assert res.tree.replace(" ", "") in local | wide, res.tree
+    alts = {a.replace(" ", "") for a in res.alternatives}
+    assert res.alternatives[0] == res.tree == res.searched
+    assert alts & local and alts & wide, alts
     by = {p["kind"]: p for p in res.primitives}
     assert abs(by["sphere"]["radius"] - 0.5) < 0.01
     assert np.allclose(by["sphere"]["translation"], [-1.0, 0.0, 0.3], atol=0.01)
@@ -76,6 +79,20 @@ def test_single_view_scan_with_viewpoint():
     assert "|" in res.tree and res.inlier_fraction > 0.9
 
 
+def test_prefer_picks_by_scope():
+    """Of trees the points cannot tell apart, 'local' takes the one whose cut reaches
+    the fewest primitives, 'global' the most; cuts are written after intersections."""
+    from csdf.infer.api import _preferred
+    from csdf.infer.search import Scored
+
+    wide = Scored(("difference", ("union", 0, 2), 1), 0.1, 0.0, 0.5)
+    near = Scored(("union", ("difference", 0, 1), 2), 0.1, 0.0, 0.5001)
+    trim = Scored(("intersection", ("difference", 0, 1), 2), 0.1, 0.0, 0.5002)
+    assert _preferred([wide, near], "local").tree == near.tree
+    assert _preferred([near, wide], "global").tree == wide.tree
+    assert _preferred([trim], "local").tree == ("difference", ("intersection", 0, 2), 1)
+
+
 def test_bad_input(cloud):
     pts, nrm = cloud
     with pytest.raises(CsdfError, match="at least 50"):
@@ -88,6 +105,8 @@ def test_bad_input(cloud):
         infer(pts, time_limit=-1)
     with pytest.raises(CsdfError, match="effort"):
         infer(pts, effort=0)
+    with pytest.raises(CsdfError, match="prefer"):
+        infer(pts, prefer="smallest")
     with pytest.raises(CsdfError, match="normals"):
         infer(pts, nrm[:5])
     with pytest.raises(CsdfError, match="no primitive"):
@@ -101,10 +120,15 @@ def test_cli(tmp_path, cloud):
     csdf.io.write_points(tmp_path / "part.ply", pts, nrm)
     runner = CliRunner()
     r = runner.invoke(app, ["infer", str(tmp_path / "part.ply"), "-o",
-                            str(tmp_path / "part.csdf"), "--time-limit", "10"])
+                            str(tmp_path / "part.csdf"), "--time-limit", "10",
+                            "--prefer", "local"])
     assert r.exit_code == 0, r.output
     text = (tmp_path / "part.csdf").read_text()
     assert text.startswith("# inferred by csdf infer") and "sphere_1_radius" in text
+    # the hole cut from the box alone; the cut after the union listed as an alternative
+    assert "(box_1 - cylinder_1)" in text.splitlines()[1], text[:300]
+    assert "# or, the points cannot tell: ((box_1 | sphere_1) - cylinder_1)" in text or \
+        "# or, the points cannot tell: ((sphere_1 | box_1) - cylinder_1)" in text, text[:300]
     r = runner.invoke(app, ["info", str(tmp_path / "part.csdf")])
     assert r.exit_code == 0 and "parameter" in r.output
     r = runner.invoke(app, ["infer", str(tmp_path / "part.ply"), "-o", str(tmp_path / "x.stl")])

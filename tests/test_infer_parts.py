@@ -64,6 +64,48 @@ def _shuffled(t, rng):
     return (op, a, b)
 
 
+def test_relocations_scope_and_cuts_last():
+    """A cut moved to another subtree keeps the leaves and their sides; of two
+    writings the one whose cut reaches fewer parts has the smaller scope; cuts_last
+    writes the same set (the same field everywhere) with no difference under an
+    intersection."""
+    t = ("difference", ("union", 0, 2), 1)  # (a | c) - b
+    moved = {T.canonical(r) for r in T.relocations(t)}
+    local = ("union", ("difference", 0, 1), 2)  # (a - b) | c
+    assert T.canonical(local) in moved and T.canonical(t) not in moved
+    assert T.scope(local) < T.scope(t)
+    assert T.scope(("union", 0, 1)) == 0
+    # (a | b) & c against a | (b & c): the trim of fewer parts has the smaller scope
+    assert T.scope(("union", 0, ("intersection", 1, 2))) < \
+        T.scope(("intersection", ("union", 0, 1), 2))
+    rng = np.random.default_rng(3)
+    vals = rng.normal(size=(6, 500))
+    signs = rng.integers(-1, 2, 6)
+    for _ in range(300):
+        t = _random_tree(rng, list(rng.permutation(6)[: int(rng.integers(2, 7))]))
+        for r in T.relocations(t):
+            assert sorted(T.leaves(r)) == sorted(T.leaves(t))
+            if consistent(t, signs) and parities(r) == parities(t):
+                assert consistent(r, signs)
+        c = T.cuts_last(t)
+        assert np.array_equal(T.evaluate(c, vals), T.evaluate(t, vals))
+        assert T.normal_form(c) == T.normal_form(t)
+        assert not _cut_in_intersection(c), c
+    assert T.cuts_last(("intersection", ("difference", 0, 1), 2)) == \
+        ("difference", ("intersection", 0, 2), 1)
+
+
+def _cut_in_intersection(t) -> bool:
+    """Whether an operand of an intersection is a difference."""
+    if isinstance(t, int):
+        return False
+    op, a, b = t
+    if op == "intersection" and any(not isinstance(x, int) and x[0] == "difference"
+                                    for x in (a, b)):
+        return True
+    return _cut_in_intersection(a) or _cut_in_intersection(b)
+
+
 def test_grow_keeps_every_leaf_on_its_side():
     """A leaf whose points face into it (-1) only ever lies under an odd number of
     right operands of differences, one facing out (+1) under an even number; growth
@@ -261,3 +303,26 @@ def test_refinement_recovers_sizes_and_positions():
     for k, v in want.items():
         assert out[k] == pytest.approx(v, abs=0.005), k
     assert math.isclose(out["ch"], 1.0)  # the hole's length shows in no point
+
+
+def test_a_notch_taken_for_a_cylinder_gives_its_planes():
+    """Two faces at right angles (a notch's floor and wall), which a cylinder follows
+    within a few noise levels, are found as two planes when they fit better."""
+    from types import SimpleNamespace
+
+    from csdf.infer import api as A
+
+    rng = np.random.default_rng(4)
+    floor = np.column_stack([rng.uniform(0, 0.3, 300), rng.uniform(-0.2, 0.2, 300),
+                             np.zeros(300)])
+    wall = np.column_stack([np.zeros(300), rng.uniform(-0.2, 0.2, 300),
+                            rng.uniform(0, 0.3, 300)])
+    Q = np.vstack([floor, wall]) + rng.normal(0, 0.001, (600, 3))
+    NQ = np.vstack([np.tile([0.0, 0.0, 1.0], (300, 1)), np.tile([1.0, 0.0, 0.0], (300, 1))])
+    prob = SimpleNamespace(P=Q, N=NQ, seed=0, vp=None)
+    planes = A._corner_planes(prob, np.arange(600), rmse=0.02, eps=0.004)
+    assert len(planes) == 2
+    normals = sorted(tuple(np.round(np.abs(n), 2)) for n, _, _ in planes)
+    assert normals == [(0.0, 0.0, 1.0), (1.0, 0.0, 0.0)]
+    # a fit as good as the planes' keeps the curved detection alone
+    assert A._corner_planes(prob, np.arange(600), rmse=0.0005, eps=0.004) == []

@@ -1018,6 +1018,10 @@ def infer(
                                          "header's record (csdf scan writes it); 'none' "
                                          "ignores it."),
     seed: int = typer.Option(0, "--seed", help="Seed of every random choice."),
+    prefer: str | None = typer.Option(None, "--prefer", help="Of the trees the points "
+                                      "cannot tell apart: 'local' (trims and cuts reach "
+                                      "the fewest primitives) or 'global' (the most). "
+                                      "Default: the search's own."),
 ):
     """Infer a CSG model of csdf primitives (csdf.infer) from a point cloud and write it
     as a .csdf model with named parameters."""
@@ -1031,10 +1035,13 @@ def infer(
         cloud = read_point_cloud(scan)
         vp, source = _cloud_viewpoint(viewpoint, cloud, scan)
         res = infer_fn(cloud.points, cloud.normals, max_primitives=max_primitives,
-                       kinds=kinds, viewpoint=vp, time_limit=time_limit, seed=seed)
+                       kinds=kinds, viewpoint=vp, time_limit=time_limit, seed=seed,
+                       prefer=prefer)
+        others = [a for a in res.alternatives if a != res.tree]
         header = (f"# inferred by csdf infer from {scan.name}: {len(res.primitives)} "
                   f"primitives, rmse {res.rmse:.4g}, {res.inlier_fraction:.1%} of the "
-                  f"points within the noise\n# structure: {res.tree}\n")
+                  f"points within the noise\n# structure: {res.tree}\n" +
+                  "".join(f"# or, the points cannot tell: {a}\n" for a in others))
         with atomic_path(output) as tmp:
             tmp.write_text(header + res.text)
         out.print(f"{output}: {res.tree}", soft_wrap=True, markup=False)

@@ -4,7 +4,8 @@
    cylinders, cones, tori, boxes and planes; boxes are also assembled from the planes
    (a box cut or hidden in part shows as a few faces), a cylinder is also offered as a
    cone and a cone as a cylinder when that fits their points better, and boxes and
-   cylinders also with their faces that hold no points moved out beyond the cloud.
+   cylinders also with their faces that hold no points moved out beyond the cloud; a
+   small curved detection is also tried as planes (:func:`_corner_planes`).
    Each candidate knows from the points' normals whether it is material or a cut.
 2. **Structure** (:mod:`.search`): a beam search over union / intersection /
    difference trees of the candidates, scored on the candidates' exact distances at a
@@ -22,6 +23,10 @@
    tree, Huber loss at the noise level); each refined tree is polished by local moves
    over all candidates and its own refined primitives, and refined again when that
    changed it; the lowest score wins.
+5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
+   cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
+   ``InferResult.alternatives``; ``prefer='local'`` or ``'global'`` returns the one
+   whose trims and cuts reach the fewest or the most primitives (:func:`_preferred`).
 
 The effort (beam width, trees refined) is fixed for a given ``time_limit``, so that a
 seed gives the same result on any machine; the time limit stops the search early only
@@ -40,7 +45,7 @@ from scipy.spatial import cKDTree
 
 from ..detect.neighbours import neighbourhood, normals_arg, points_arg, viewpoint_arg
 from ..detect.primitives import detect_primitives
-from ..detect.solids import SOLID_BACKEND, SOLID_PARAMS
+from ..detect.solids import SOLID_PARAMS
 from ..errors import CsdfError
 from ..expr import param
 from ..lang.printer import dumps
@@ -58,7 +63,15 @@ from .candidates import (
 )
 from .pool import Pool, View, free_points, oriented_normals, support_scales
 from .refine import refine_params
-from .search import Scored, beam_search, evaluate_oriented, parities, polish, swap
+from .search import (
+    Scored,
+    beam_search,
+    consistent,
+    evaluate_oriented,
+    parities,
+    polish,
+    swap,
+)
 
 __all__ = ["infer", "InferResult", "SOLID_KINDS", "SEARCH_POINTS", "FIT_POINTS"]
 
@@ -70,6 +83,11 @@ SEARCH_POINTS = 4000
 FREE_POINTS = 2000
 #: free-space points on rays past the object's silhouette (with a viewpoint)
 BACKGROUND_POINTS = 2000
+#: curved detections of at most this many points are also tried as planes meeting at a
+#: corner (:func:`_corner_planes`)
+CORNER_MAX = 3000
+#: the share of such a detection's points the planes must explain
+CORNER_SHARE = 0.8
 #: points the joint refinement fits (a seeded subsample)
 FIT_POINTS = 2000
 #: free-space points the joint refinement keeps out of the material (with a viewpoint)
@@ -89,8 +107,17 @@ RESIDUAL_ROUNDS = 2
 RESIDUAL_MIN = 30
 #: rounds of dropping each leaf of the best tree and refining the rest
 DROP_ROUNDS = 1
+#: the evaluator of the joint refinement: the interpreter, as every tree refined is a
+#: new program (the compiled evaluator compiles a kernel per tree: seconds each, far
+#: more than the refinement's evaluations cost; 2-3x slower than a cached kernel)
+REFINE_BACKEND = "interp"
 #: rounds of moving the best tree's faces (:func:`_move_faces`)
 FACE_ROUNDS = 3
+#: trees whose scores differ by less than this share of the penalty are ones the
+#: points cannot tell apart (:func:`_indistinct`): under one point in 4,000
+INDISTINCT = 0.05
+#: the most trees :func:`_indistinct` returns, and the most it scores (a second or so)
+ALTERNATIVES, ALTERNATIVE_SCORES = 32, 2500
 
 
 @dataclass
@@ -112,6 +139,11 @@ class InferResult:
         seconds: wall time.
         history: ``(seconds, primitives, cost, tree text)`` of each better tree found.
         candidates: the number of candidate primitives the search had.
+        searched: the tree as the search found it (the primitives' names as in
+            ``tree``): ``tree`` itself unless ``prefer`` chose another.
+        alternatives: the trees the points cannot tell from ``searched`` (its leaves
+            with trims or cuts applied elsewhere, scoring within :data:`INDISTINCT` of
+            the penalty), ``searched`` first, then best score first.
     """
 
     shape: object
@@ -124,6 +156,8 @@ class InferResult:
     seconds: float
     history: list[tuple] = field(default_factory=list)
     candidates: int = 0
+    searched: str = ""
+    alternatives: list[str] = field(default_factory=list)
 
 
 _AXIS_NAMES = {(0, 1): "x", (0, -1): "-x", (1, 1): "y", (1, -1): "-y", (2, 1): "z",
@@ -256,6 +290,9 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list
             if c is not None and c.kind in prob.ks:
                 out.append((snap(c), _snapped(extended(c, P, P[inl]))))
     if "box" in prob.ks:
+        for d in dets:
+            if d.kind in ("sphere", "cylinder", "cone", "torus"):
+                planes += _corner_planes(prob, sub[d.inliers], d.rmse, eps)
         out += [(snap(b), None) for b in plane_boxes(planes, P, eps, 4.0 * prob.spacing)]
     leaves: list[Leaf] = []
     for lf, v in out:
@@ -263,6 +300,32 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list
         if v is not None:
             leaves.append(v)
     return leaves
+
+
+def _corner_planes(prob: _Problem, idx: np.ndarray, rmse: float, eps: float) -> list:
+    """Planes ``[(normal (3,), offset, inliers (K, 3))]`` that explain the points
+    ``P[idx]`` of a curved detection better than it does: a small notch shows as two
+    or three faces at right angles, which a cylinder (or a cone, a sphere) fitted to
+    them follows within a few noise levels, so detection may take it for one. Kept
+    when at least two planes explain :data:`CORNER_SHARE` of the points with a
+    smaller rmse than the curved fit's ``rmse`` (scene units; ``eps`` the inlier
+    distance). Only for detections of at most :data:`CORNER_MAX` points and outward
+    normals."""
+    if prob.N is None or not 2 * RESIDUAL_MIN <= len(idx) <= CORNER_MAX:
+        return []
+    Q, NQ = prob.P[idx], prob.N[idx]
+    try:
+        found = detect_primitives(Q, NQ, kinds=("plane",), epsilon=eps,
+                                  min_points=max(RESIDUAL_MIN, len(idx) // 10),
+                                  seed=prob.seed, viewpoint=prob.vp, max_primitives=3)
+    except CsdfError:
+        return []
+    found = [d for d in found if d.kind == "plane"]
+    if len(found) < 2 or sum(len(d.inliers) for d in found) < CORNER_SHARE * len(idx) or \
+            max(d.rmse for d in found) >= rmse:
+        return []
+    return [(np.asarray(d.params["normal"], float), float(d.params["offset"]), Q[d.inliers])
+            for d in found]
 
 
 def _snapped(lf: Leaf | None) -> Leaf | None:
@@ -341,7 +404,7 @@ def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
             values[f"{name}_{a}"] = float(v)
     try:
         res = refine_params(shape, values, sizes, prob.fit_points, prob.fit_normals,
-                            prob.fit_free, prob.tau, SOLID_BACKEND)
+                            prob.fit_free, prob.tau, REFINE_BACKEND)
     except (CsdfError, np.linalg.LinAlgError):
         return {i: leaves[i] for i in names}
     out = {}
@@ -467,6 +530,49 @@ def _through_final(prob: _Problem, best: Scored) -> Scored:
     return best
 
 
+def _indistinct(prob: _Problem, best: Scored) -> list[Scored]:
+    """The trees the points cannot tell from ``best``: the same leaves with trims or
+    cuts moved elsewhere (:func:`.tree.relocations`, repeatedly), each scoring within
+    :data:`INDISTINCT` of the penalty of ``best``'s score; one per set, ``best`` first,
+    then best score first, :data:`ALTERNATIVES` at most (after
+    :data:`ALTERNATIVE_SCORES` trees scored, those found so far)."""
+    scorer = prob.pool.scorer()
+    limit = best.total + INDISTINCT * prob.pool.penalty
+    seen = {T.normal_form(best.tree)}
+    found = [best]
+    todo = [best.tree]
+    scored = 0
+    while todo and len(found) < ALTERNATIVES and scored < ALTERNATIVE_SCORES:
+        for t in T.relocations(todo.pop(0)):
+            key = T.normal_form(t)
+            if key in seen or not consistent(t, scorer.signs):
+                continue
+            seen.add(key)
+            scored += 1
+            sc = scorer.score(t)
+            if sc.total <= limit:
+                found.append(sc)
+                todo.append(t)
+    return [best] + sorted(found[1:], key=lambda s: s.total)[:ALTERNATIVES - 1]
+
+
+#: the conventions ``infer(prefer=...)`` knows
+PREFER = ("local", "global")
+
+
+def _preferred(alternatives: list[Scored], prefer: str) -> Scored:
+    """Of trees the points cannot tell apart (:func:`_indistinct`), the one whose trims
+    and cuts reach the fewest primitives (``'local'``: a cut that misses a part is not
+    applied to it) or the most (``'global'``: cuts and trims applied to all that was
+    built before them, as a feature tree applies them), by :func:`.tree.scope`, then
+    the best score; written with its cuts after its intersections
+    (:func:`.tree.cuts_last`: the same set). A convention, not a finding
+    (docs/infer.md)."""
+    sign = 1 if prefer == "local" else -1
+    win = min(alternatives, key=lambda s: (sign * T.scope(s.tree), s.total))
+    return Scored(T.cuts_last(win.tree), win.data, win.free, win.total)
+
+
 def _to_refine(found: list[Scored], n: int) -> list:
     """Up to ``n`` trees of ``found`` (best first) to refine: by turns the best not yet
     taken of the best tree's size, of one leaf fewer and of one leaf more."""
@@ -557,7 +663,8 @@ def _note(t0: float, *what) -> None:
 
 def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, viewpoint=None,
           time_limit: float = 30.0, seed: int = 0, *, epsilon: float | None = None,
-          penalty: float | None = None, effort: float | None = None) -> InferResult:
+          penalty: float | None = None, effort: float | None = None,
+          prefer: str | None = None) -> InferResult:
     """Infer a CSG tree of csdf primitives, with named parameters, from a point cloud.
 
     Args:
@@ -607,6 +714,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         raise CsdfError(f"max_primitives must be an integer in [1, 32], got {max_primitives!r}")
     if not (isinstance(time_limit, (int, float)) and time_limit > 0):
         raise CsdfError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
+    if prefer is not None and prefer not in PREFER:
+        raise CsdfError(f"prefer must be None or one of {', '.join(PREFER)}; got {prefer!r}")
     if effort is None:
         effort = time_limit
     elif isinstance(effort, bool) or not (isinstance(effort, (int, float)) and effort > 0):
@@ -644,6 +753,11 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         tree = _refined_tree(prob, swapped.tree)
         sc2 = pool.scorer().score(tree)
         best = sc2 if sc2.total <= best.total + 0.01 * pool.penalty else swapped
+    # the trees the points cannot tell apart; a convention picks one only when asked
+    searched = best.tree
+    alternatives = _indistinct(prob, best)
+    if prefer is not None:
+        best = _preferred(alternatives, prefer)
     sc = best
     lvs = pool.leaves
     shape, names = _shape(sc.tree, lvs)
@@ -663,4 +777,5 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         shape=shape, text=dumps(shape), tree=T.to_text(sc.tree, label), primitives=prims,
         cost=sc.total, rmse=float(np.sqrt(np.mean(f[near] ** 2))) if near.any() else math.inf,
         inlier_fraction=float(near.mean()), seconds=time.perf_counter() - t0,
-        history=hist, candidates=len(pool.leaves))
+        history=hist, candidates=len(pool.leaves), searched=T.to_text(searched, label),
+        alternatives=[T.to_text(a.tree, label) for a in alternatives])

@@ -13,7 +13,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 __all__ = ["OPS", "Tree", "evaluate", "field_of", "leaves", "size", "subtrees", "replace",
-           "remove", "canonical", "normal_form", "to_text", "from_text", "build"]
+           "remove", "canonical", "normal_form", "to_text", "from_text", "build", "scope",
+           "relocations", "cuts_last"]
 
 Tree = int | tuple
 OPS = ("union", "intersection", "difference")
@@ -200,3 +201,72 @@ def build(tree: Tree, leaf: Callable[[int], object]):
     if op == "intersection":
         return sa & sb
     return sa - sb
+
+
+def scope(tree: Tree) -> int:
+    """The number of leaves each intersection and difference applies to, summed: how
+    many primitives the trims and cuts reach in the tree's writing. Of two trees the
+    points cannot tell apart, the one of smaller scope applies each trim or cut to
+    fewer parts (``(a - b) | c`` rather than ``(a | c) - b`` when ``b`` misses ``c``)."""
+    if isinstance(tree, (int, np.integer)):
+        return 0
+    op, a, b = tree
+    own = 0 if op == "union" else size(tree)
+    return own + scope(a) + scope(b)
+
+
+def _detach(tree: Tree, path: tuple) -> Tree:
+    """The tree without the subtree at ``path`` (not the root): its parent replaced by
+    its sibling."""
+    parent = _at(tree, path[:-1])
+    sibling = parent[2] if path[-1] == 1 else parent[1]
+    return replace(tree, path[:-1], sibling)
+
+
+def _at(tree: Tree, path: tuple) -> Tree:
+    for k in path:
+        tree = tree[k]
+    return tree
+
+
+def relocations(tree: Tree) -> list[Tree]:
+    """Every tree with one trim or cut moved: a subtree ``S`` that is an operand of an
+    intersection or the right operand of a difference, taken out (its parent replaced
+    by its sibling) and applied by the same operation to another subtree of the rest
+    (``(a | c) - b`` gives ``(a - b) | c``, ``(a | c) - b`` back, ``(c - b) | a``...).
+    The same leaves; the sets may differ (the caller scores them)."""
+    out: list[Tree] = []
+    seen: set[str] = {canonical(tree)}
+    for path, _ in subtrees(tree):
+        if not path:
+            continue
+        parent = _at(tree, path[:-1])
+        op = parent[0]
+        if op == "union" or (op == "difference" and path[-1] == 1):
+            continue
+        moved = _at(tree, path)
+        rest = _detach(tree, path)
+        for where, sub in subtrees(rest):
+            t = replace(rest, where, (op, sub, moved))
+            key = canonical(t)
+            if key not in seen:
+                seen.add(key)
+                out.append(t)
+    return out
+
+
+def cuts_last(tree: Tree) -> Tree:
+    """The same set with every difference taken out of the intersections it lies in:
+    ``(a - b) & c`` written ``(a & c) - b`` (on distances both are ``max(a, -b, c)``),
+    so that a tree reads as :func:`normal_form` does: the material (unions and
+    intersections), then the cuts."""
+    if isinstance(tree, (int, np.integer)):
+        return tree
+    op, a, b = tree
+    a, b = cuts_last(a), cuts_last(b)
+    if op == "intersection":
+        if not isinstance(a, (int, np.integer)) and a[0] == "difference":
+            return ("difference", cuts_last(("intersection", a[1], b)), a[2])
+        if not isinstance(b, (int, np.integer)) and b[0] == "difference":
+            return ("difference", cuts_last(("intersection", a, b[1])), b[2])
+    return (op, a, b)

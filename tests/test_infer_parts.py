@@ -326,3 +326,20 @@ def test_a_notch_taken_for_a_cylinder_gives_its_planes():
     assert normals == [(0.0, 0.0, 1.0), (1.0, 0.0, 0.0)]
     # a fit as good as the planes' keeps the curved detection alone
     assert A._corner_planes(prob, np.arange(600), rmse=0.0005, eps=0.004) == []
+
+
+def test_a_cone_with_equal_radii_is_reported_as_its_cylinder():
+    from scipy.spatial.transform import Rotation
+
+    from csdf.infer.api import _straight_cones
+
+    R = Rotation.from_euler("xyz", [0.3, -0.2, 0.5]).as_matrix()
+    straight = Leaf("cone", R, np.array([0.1, 0.2, -0.3]),
+                    {"r1": 0.3, "r2": 0.3 * (1 + 1e-9), "height": 1.7})
+    tapered = Leaf("cone", R, np.array([0.1, 0.2, -0.3]),
+                   {"r1": 0.3, "r2": 0.25, "height": 1.7})
+    out = _straight_cones([straight, tapered, straight], [0, 1])
+    assert [lf.kind for lf in out] == ["cylinder", "cone", "cone"]  # only those used
+    X = np.random.default_rng(0).uniform(-2, 2, (2000, 3))
+    assert np.abs(straight.values(X)[0] - out[0].values(X)[0]).max() < 1e-8
+    assert out[1] is tapered

@@ -186,6 +186,28 @@ def _names(tree, leaves: list[Leaf]) -> dict[int, str]:
     return out
 
 
+#: a cone whose two radii differ by less than this share of the larger is written as
+#: the cylinder it is (the same solid)
+STRAIGHT_CONE = 1e-6
+
+
+def _straight_cones(leaves: list[Leaf], used) -> list[Leaf]:
+    """``leaves`` with each cone of ``used`` (indices) whose radii are equal (to
+    :data:`STRAIGHT_CONE`) replaced by the same solid as a cylinder, so that a straight
+    hole is reported as ``cylinder_1``, not as ``cone_1`` with ``r1 = r2``. The cone's
+    frame starts at its base; the cylinder's is centred."""
+    out = list(leaves)
+    for i in used:
+        lf = out[i]
+        if lf.kind != "cone":
+            continue
+        r1, r2, h = lf.vals["r1"], lf.vals["r2"], lf.vals["height"]
+        if abs(r1 - r2) <= STRAIGHT_CONE * max(r1, r2):
+            out[i] = lf.moved(kind="cylinder", t=lf.t + lf.R[:, 2] * (0.5 * h),
+                              vals={"radius": 0.5 * (r1 + r2), "height": h})
+    return out
+
+
 def _leaf_shape(lf: Leaf, name: str):
     """A leaf as a csdf shape: sizes and position as parameters named after ``name``."""
     p = {k: param(f"{name}_{k}", float(v), 0.0, math.inf) for k, v in lf.vals.items()}
@@ -759,7 +781,7 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     if prefer is not None:
         best = _preferred(alternatives, prefer)
     sc = best
-    lvs = pool.leaves
+    lvs = _straight_cones(pool.leaves, T.leaves(sc.tree))
     shape, names = _shape(sc.tree, lvs)
     label = names.__getitem__
     if not history or abs(history[-1][2] - sc.total) > 1e-15:

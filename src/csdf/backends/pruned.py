@@ -30,6 +30,7 @@ import threading
 import numpy as np
 
 from ..cache import memo
+from ..cellsort import group_by_cell
 from ..layout import N_COORDS
 from ..ops import OPS_BY_CODE, tie_strict
 from ..parallel import N_THREADS, executor
@@ -458,7 +459,7 @@ class CellTapes:
             cell_tape = np.empty(k + 1, np.int64)
             cell_tape[:k] = self._tapes(self.depth, occupied[:k])
         cell_tape[k] = 0  # points outside the region: the whole tape
-        order, bounds = K.group_by_cell(group, k + 1)
+        order, bounds = group_by_cell(group, k + 1)
         out = np.empty(N)
         g = np.empty((N, 3)) if grad else np.empty((1, 3))
         pool = self.pool

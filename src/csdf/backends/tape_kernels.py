@@ -681,24 +681,6 @@ def eval_cells(code, imm, t_start, t_len, t_out, t_regs, cell_tape, order, bound
 
 
 @njit(**_OPTS)
-def group_by_cell(cell, n_cells):
-    """Counting sort: ``(order (N,), bounds (n_cells + 1,))`` with the points of cell
-    ``c`` at ``order[bounds[c]:bounds[c+1]]``."""
-    counts = np.zeros(n_cells + 1, dtype=np.int64)
-    for i in range(cell.shape[0]):
-        counts[cell[i] + 1] += 1
-    for c in range(n_cells):
-        counts[c + 1] += counts[c]
-    pos = counts[:-1].copy()
-    order = np.empty(cell.shape[0], dtype=np.int64)
-    for i in range(cell.shape[0]):
-        c = cell[i]
-        order[pos[c]] = i
-        pos[c] += 1
-    return order, counts
-
-
-@njit(**_OPTS)
 def compact_cells(ids, stamp, slot, epoch, occupied):
     """Number the distinct cells of ``ids`` (``(N,)``, -1 outside) in order of first
     appearance, touching only the cells that occur: ``stamp``/``slot`` (one entry per

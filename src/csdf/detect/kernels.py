@@ -12,7 +12,7 @@ from numba import njit
 
 __all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
-           "bounds", "cell_order",
+           "bounds",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
@@ -295,20 +295,6 @@ def bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             elif v > hi[c]:
                 hi[c] = v
     return lo, hi
-
-
-@njit(cache=True, nogil=True)
-def cell_order(key: np.ndarray, first: np.ndarray) -> np.ndarray:
-    """The points ``(N,)`` sorted by their cell keys ``key`` ``(N,)``, ties in index
-    order (what ``np.argsort(key, kind='stable')`` gives), by counting: ``first`` holds
-    where each cell's run begins (the cumulative counts of the keys)."""
-    fill = first[:-1].copy()
-    out = np.empty(key.shape[0], dtype=np.int64)
-    for i in range(key.shape[0]):
-        c = key[i]
-        out[fill[c]] = i
-        fill[c] += 1
-    return out
 
 
 @njit(cache=True, nogil=True)

@@ -172,8 +172,9 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
     each point searches the 3 x 3 x 3 cells around its own (compiled, on every core).
     That block holds every point within ``h``; points whose ``k``-th neighbour found
     there is farther (outliers, sparse parts) are searched again with the tree."""
+    from ..cellsort import group_by_cell
     from ..parallel import N_THREADS, executor
-    from .kernels import bounds, cell_order, knn_cells
+    from .kernels import bounds, knn_cells
 
     n = len(points)
     if n < GRID_MIN_POINTS:
@@ -189,9 +190,7 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
     dims = (span // h).astype(np.int64) + 1
     ijk = np.minimum(((points - lo) // h).astype(np.int64), dims - 1)
     key = ijk[:, 0] + dims[0] * (ijk[:, 1] + dims[1] * ijk[:, 2])
-    first = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(key, minlength=len(first) - 1), out=first[1:])
-    order = cell_order(key, first)  # a stable sort by key
+    order, first = group_by_cell(key, int(np.prod(dims)))  # a stable sort by key
     skey = key[order]
     cstart = np.concatenate([[0], np.flatnonzero(np.diff(skey)) + 1, [n]])
     ckey = skey[cstart[:-1]]

@@ -221,7 +221,7 @@ class _FittedGrid:
         self.names = [f"{base}_{a}" for a in "xyz"]
         ks = [param(n, 1.0, 1e-3, 1e3) for n in self.names]
         self.fld = fld
-        self.scaled = fld.shape.scale(ks)
+        self.program = fld.shape.scale(ks).compile()  # once, for every resolution
         self.factors = np.ones(3)
 
     def layout(self, resolution: Any, voxel_size: Any) -> tuple[Grid, Field]:
@@ -242,8 +242,9 @@ class _FittedGrid:
         origin, h2, dims = _grid_layout(np.array([lo, hi]), None, h)
         params = dict(self.fld.params)
         params.update(zip(self.names, (float(v) for v in s)))
-        work = as_field(self.scaled, params, what="mesh", check_ranges=False)
-        return Grid(origin=origin, h=h2, dims=dims), Field(work, bounds=np.array([lo, hi]))
+        work = as_field(self.program, params, bounds=np.array([lo, hi]), what="mesh",
+                        check_ranges=False)
+        return Grid(origin=origin, h=h2, dims=dims), work
 
 
 #: the default resolution is doubled while the mesh's volume and the field's differ by

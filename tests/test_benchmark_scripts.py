@@ -56,3 +56,43 @@ def test_openscad_examples_drops_only_zero_thickness_sheets():
             assert out.area == pytest.approx(10.0, abs=1e-12)
         else:
             assert out is both
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_infer_structure_counts_only_rewritings_of_the_true_solid():
+    """``bench_infer.structure``: a cut moved across a union it does not reach is the
+    true structure (the same solid for the true primitives); moved across one it does
+    reach, or with a kind changed, it is not."""
+    bi = _load("bench_infer")
+    eye = np.eye(3)
+    leaves = [("box", eye, np.zeros(3), {"size_x": 1.0, "size_y": 1.0, "size_z": 1.0}),
+              ("sphere", eye, np.array([0.0, 0.0, 0.8]), {"radius": 0.4}),
+              ("cylinder", eye, np.array([0.55, 0.0, 0.0]), {"radius": 0.12, "height": 2.0}),
+              ("sphere", eye, np.array([-0.5, 0.0, 0.0]), {"radius": 0.2})]
+    truth = ("difference", ("union", 0, 1), 2)  # the cut misses the sphere on top
+
+    class Res:
+        primitives = [{"name": n, "kind": k, "translation": list(t)} for n, (k, _, t, _)
+                      in zip(("box_1", "sphere_1", "cylinder_1"), leaves[:3])]
+
+    box = bi.csdf.as_field(bi._shape_of(truth, leaves)).bounds
+    res = Res()
+    for text, same in (("((box_1 | sphere_1) - cylinder_1)", True),
+                       ("((box_1 - cylinder_1) | sphere_1)", True),
+                       ("((box_1 | cylinder_1) | sphere_1)", False),
+                       ("(box_1 | sphere_1)", False)):
+        assert bi.structure(res, truth, leaves[:3], box, text) is same, text
+    # the cut reaches the second part: moving it across the union changes the solid
+    leaves2 = [leaves[0], leaves[3], ("cylinder", eye, np.array([-0.5, 0.0, 0.0]),
+                                      {"radius": 0.15, "height": 2.0})]
+    res.primitives = [{"name": n, "kind": k, "translation": list(t)} for n, (k, _, t, _)
+                      in zip(("box_1", "sphere_1", "cylinder_1"), leaves2)]
+    truth2 = ("difference", ("union", 0, 1), 2)
+    assert bi.structure(res, truth2, leaves2, box, "((box_1 | sphere_1) - cylinder_1)")
+    assert not bi.structure(res, truth2, leaves2, box, "((box_1 - cylinder_1) | sphere_1)")

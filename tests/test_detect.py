@@ -742,3 +742,19 @@ def test_front_fraction_rejects_a_lamp_laid_over_a_ball(lamp_scan):
     box = np.array([surf.min(axis=0), surf.max(axis=0)])
     assert ball._intruders(m, over, box) <= MAX_INTRUDERS  # the intruder test too
     assert ball._front_fraction(m, over, inl) > MAX_FRONT
+
+
+def test_span_is_the_clusters_diameter_whatever_its_turn():
+    """A cluster's size is its diameter, not the diagonal of its box along the
+    sensor's axes (larger for a turned object), and a few outliers linked to it do
+    not make it larger."""
+    from csdf.detect.objects import _span
+
+    rng = np.random.default_rng(0)
+    size = np.array([2.0, 1.0, 0.9])
+    Q = (rng.uniform(-0.5, 0.5, (3000, 3)) * size) @ _rz(math.radians(30.0)).T
+    diam = float(np.linalg.norm(size))
+    assert np.linalg.norm(Q.max(axis=0) - Q.min(axis=0)) > 1.1 * diam  # the box's
+    with_outliers = np.vstack([Q, [[2.0, 2.0, 0.0], [-2.0, 1.5, 0.5], [0.0, -2.2, 1.0]]])
+    assert 0.9 * diam < _span(with_outliers) <= diam
+    assert _span(Q[:1]) == 0.0

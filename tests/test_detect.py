@@ -713,3 +713,48 @@ def test_lamp_symmetries_are_its_three_turns_only():
     for deg, lo, hi in ((120, 0.0, 1e-6), (60, 0.03, 1.0), (15, 0.01, 1.0)):
         f = np.abs(fld.value(x @ _rz(math.radians(deg))))
         assert lo <= f.max() <= hi, deg
+
+
+def test_front_fraction_rejects_a_lamp_laid_over_a_ball(lamp_scan):
+    """A squat lamp laid over a ball explains the ball's points with its shade and
+    base, but the ball's side bulges out between them: points of the lamp's own
+    cluster float in front of its visible surface along the sensor's rays. The real
+    lamp has few there (noise tails)."""
+    from csdf.detect.objects import MAX_FRONT
+
+    _, _, run, m, _, truth = lamp_scan
+    inl = run._verify(m, truth)[2]
+    assert run._front_fraction(m, truth, inl) < 0.5 * MAX_FRONT
+    scene = _floor_scene()
+    scene.add(csdf.sphere(0.12), pose=csdf.Pose(translation=(0.0, 0.3, 0.12)), name="ball")
+    cam = csdf.Camera.look_at(eye=(0.0, -1.4, 1.5), target=(0.0, 0.3, 0.3), fov=40,
+                              width=200, height=150)
+    P, _, _ = csdf.scan(scene, cam, noise=0.012, outliers=0.0, seed=3)
+    ball = _prepared(P, ["lamp"])
+    gt = _camera_pose(cam, _yawed(0.0, (0.0, 0.3, 0.0)))
+    squat = dict(truth.params, base_radius=0.13, shade_bottom=0.13, shade_height=0.147,
+                 shade_top=0.05, stem_height=0.15, wall=0.006)
+    over = dataclasses.replace(truth, rotation=gt.rotation, translation=gt.translation,
+                               params=squat)
+    ok, _, inl, _, _ = ball._verify(m, over)
+    assert ok  # the other tests pass it
+    surf, _ = ball._surface_at(m, squat)
+    box = np.array([surf.min(axis=0), surf.max(axis=0)])
+    assert ball._intruders(m, over, box) <= MAX_INTRUDERS  # the intruder test too
+    assert ball._front_fraction(m, over, inl) > MAX_FRONT
+
+
+def test_span_is_the_clusters_diameter_whatever_its_turn():
+    """A cluster's size is its diameter, not the diagonal of its box along the
+    sensor's axes (larger for a turned object), and a few outliers linked to it do
+    not make it larger."""
+    from csdf.detect.objects import _span
+
+    rng = np.random.default_rng(0)
+    size = np.array([2.0, 1.0, 0.9])
+    Q = (rng.uniform(-0.5, 0.5, (3000, 3)) * size) @ _rz(math.radians(30.0)).T
+    diam = float(np.linalg.norm(size))
+    assert np.linalg.norm(Q.max(axis=0) - Q.min(axis=0)) > 1.1 * diam  # the box's
+    with_outliers = np.vstack([Q, [[2.0, 2.0, 0.0], [-2.0, 1.5, 0.5], [0.0, -2.2, 1.0]]])
+    assert 0.9 * diam < _span(with_outliers) <= diam
+    assert _span(Q[:1]) == 0.0

@@ -42,6 +42,11 @@ import numpy as np
 
 from .tree import Tree, field_of, leaves, normal_form, remove, replace, size
 
+#: a point sampled on a leaf's surface lies on the tree's surface when the tree's field
+#: there is within this share of ``tau`` of 0 (the leaf's own value there, up to
+#: round-off): the leaf is the tree's active operand at it
+ON_SURFACE = 1e-6
+
 __all__ = ["Scorer", "Scored", "beam_search", "polish", "consistent", "parities", "swap",
            "evaluate_oriented", "grow"]
 
@@ -182,8 +187,12 @@ class Scorer:
             idx = np.concatenate([self._slices[i] for i in par])
             bare = np.concatenate([self.unsupported[int(odd), self._slices[i]]
                                    for i, odd in par.items()])
+            # a leaf's surface point is the tree's surface where that leaf is the
+            # active operand (the tree's field is the leaf's own, 0 there): one inside
+            # another operand near its surface is not (that operand's own points
+            # stand for the surface there, facing its way)
             h = field_of(tree, lambda i: self.at_surface[i, idx])
-            on = np.abs(h) <= self.tau
+            on = np.abs(h) <= ON_SURFACE * self.tau
             free += float(self.weight[idx][on & bare].sum())
         return Scored(tree, data, free, data + free + self.penalty * size(tree))
 

@@ -16,13 +16,16 @@
    point was measured.
 3. **Residuals**: the points the best tree leaves unexplained are searched for
    primitives again (a small feature the first detection missed, or took for part of
-   another surface); the beam search resumes with those candidates too.
+   another surface), all kinds together and each curved kind on its own with every
+   curved detection kept (:func:`_residual`); the beam search resumes with those
+   candidates too.
 4. **Parameters**: the best trees' continuous parameters (every primitive's sizes and
    position, named ``cylinder_1_radius``, ``cylinder_1_x``, ...) refined jointly by
    :func:`csdf.fit` (Levenberg-Marquardt on the exact parameter Jacobian of the whole
    tree, Huber loss at the noise level); each refined tree is polished by local moves
    over all candidates and its own refined primitives, and refined again when that
-   changed it; the lowest score wins.
+   changed it; the lowest score wins. A cone whose taper is within the noise is
+   written as its cylinder (:func:`_straighten`).
 5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
    cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
    ``InferResult.alternatives``; ``prefer='local'`` or ``'global'`` returns the one
@@ -512,7 +515,10 @@ def _refined_tree(prob: _Problem, tree):
 
 def _residual(prob: _Problem, tree) -> list[Leaf]:
     """Candidates detected among the points ``tree`` leaves unexplained (farther than
-    ``2 tau`` from its surface, or on it with the normal the other way)."""
+    ``2 tau`` from its surface, or on it with the normal the other way): by one
+    detection of all kinds, and by one of each curved kind alone (at most
+    :data:`RESIDUAL_PER_KIND` detections each) that keeps every curved detection
+    (``flat_share=1``)."""
     P, N = prob.P, prob.N
     used = sorted(set(T.leaves(tree)))
     vals = np.zeros((len(prob.pool.leaves), len(P)))

@@ -345,7 +345,7 @@ def test_a_cone_with_equal_radii_is_reported_as_its_cylinder():
     assert out[1] is tapered
 
 
-def test_a_face_inside_another_operand_is_not_made_up_surface():
+def test_a_face_inside_another_operand_is_not_made_up_surface(monkeypatch):
     """A box inside a cube, its top on the cube's: the strips of its sides within
     ``tau`` below the cube's top are near the tree's surface but are not it (the
     cube's top is, and points face its way there), so the union makes up no
@@ -354,7 +354,11 @@ def test_a_face_inside_another_operand_is_not_made_up_surface():
     leaves = [Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 2.0}),
               Leaf("box", np.eye(3), np.array([0.0, 0.0, 0.05]),
                    {"size_x": 1.0, "size_y": 1.0, "size_z": 1.9})]
+    from csdf.infer import search
+
     sc = _pool(P, N, leaves, tau=0.05).scorer()
+    assert sc.score(("union", 0, 1)).free > 0.005  # the default counts them
+    monkeypatch.setattr(search, "ON_SURFACE", 1e-6)  # only the active operand's
     assert sc.score(0).free == 0.0
     assert sc.score(("union", 0, 1)).free == 0.0
     # surface that is the tree's and unmeasured still counts: the inner box cut out

@@ -365,6 +365,25 @@ def test_detected_cone_radius_is_unbiased():
     assert p["frustum_height"] < p["height"]
 
 
+def test_flat_share_keeps_a_shallow_cap():
+    """A spherical cap whose bulge is about three noise levels: one plane explains more
+    than half of it, so detection drops the sphere as a flat patch by default, and
+    keeps it with ``flat_share=1`` (csdf.infer's search among unexplained points)."""
+    rng = np.random.default_rng(0)
+    z = rng.uniform(math.cos(0.27), 1.0, 400)  # uniform by area on the cap
+    a = rng.uniform(0.0, 2 * math.pi, 400)
+    N = np.column_stack([np.sqrt(1 - z * z) * np.cos(a), np.sqrt(1 - z * z) * np.sin(a), z])
+    P = 0.5 * N + rng.normal(0.0, 0.002, (400, 3))
+    assert csdf.detect_primitives(P, N, kinds=("sphere",), seed=0, min_points=30) == []
+    dets = csdf.detect_primitives(P, N, kinds=("sphere",), seed=0, min_points=30,
+                                  flat_share=1.0)
+    assert [d.kind for d in dets] == ["sphere"]
+    assert abs(dets[0].params["radius"] - 0.5) < 0.02
+    for bad in (0.0, 1.5):
+        with pytest.raises(csdf.CsdfError, match="flat_share"):
+            csdf.detect_primitives(P, N, flat_share=bad)
+
+
 @pytest.mark.parametrize("kw, match", [
     ({"points": np.zeros((5, 2))}, "shape"),
     ({"points": np.array([[0, 0, np.nan]] * 5)}, "row 0"),

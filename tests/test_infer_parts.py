@@ -343,3 +343,49 @@ def test_a_cone_with_equal_radii_is_reported_as_its_cylinder():
     X = np.random.default_rng(0).uniform(-2, 2, (2000, 3))
     assert np.abs(straight.values(X)[0] - out[0].values(X)[0]).max() < 1e-8
     assert out[1] is tapered
+
+
+def test_a_face_inside_another_operand_is_not_made_up_surface(monkeypatch):
+    """A box inside a cube, its top on the cube's: the strips of its sides within
+    ``tau`` below the cube's top are near the tree's surface but are not it (the
+    cube's top is, and points face its way there), so the union makes up no
+    surface."""
+    P, N = csdf.sample_surface(csdf.box((2.0, 2.0, 2.0)), 20_000, seed=5)
+    leaves = [Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 2.0}),
+              Leaf("box", np.eye(3), np.array([0.0, 0.0, 0.05]),
+                   {"size_x": 1.0, "size_y": 1.0, "size_z": 1.9})]
+    from csdf.infer import search
+
+    sc = _pool(P, N, leaves, tau=0.05).scorer()
+    assert sc.score(("union", 0, 1)).free > 0.005  # the default counts them
+    monkeypatch.setattr(search, "ON_SURFACE", 1e-6)  # only the active operand's
+    assert sc.score(0).free == 0.0
+    assert sc.score(("union", 0, 1)).free == 0.0
+    # surface that is the tree's and unmeasured still counts: the inner box cut out
+    assert sc.score(("difference", 0, 1)).free > 0.3
+
+
+def test_a_cone_whose_taper_is_within_the_noise_is_its_cylinder():
+    """A cone fitted to a cylinder's points with a taper far below the noise is written
+    as the cylinder; a cone whose taper the points show stays a cone."""
+    from types import SimpleNamespace
+
+    from csdf.infer.api import SOLID_KINDS, _straighten
+    from csdf.infer.search import Scored
+
+    tau = 0.01
+    for r1, r2, want in ((0.402, 0.398, "cylinder"), (0.45, 0.3, "cone")):
+        shape = csdf.capped_cone(r1, r2, 1.0).translate((0.0, 0.0, -0.5))
+        P, N = csdf.sample_surface(shape, 6000, seed=6)
+        P = P + np.random.default_rng(7).normal(0.0, tau / 3, P.shape)
+        cone = Leaf("cone", np.eye(3), np.array([0.0, 0.0, -0.5]),
+                    {"r1": r1, "r2": r2, "height": 1.0}, sign=1)
+        pool = _pool(P, N, [cone], tau=tau)
+        prob = SimpleNamespace(pool=pool, ks=SOLID_KINDS, tau=tau)
+        sc = pool.scorer().score(0)
+        out = _straighten(prob, Scored(0, sc.data, sc.free, sc.total))
+        lf = pool.leaves[out.tree]
+        assert lf.kind == want
+        if want == "cylinder":
+            assert lf.vals["radius"] == pytest.approx(0.4)
+            assert np.allclose(lf.t, 0.0)

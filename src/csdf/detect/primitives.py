@@ -212,6 +212,7 @@ class _Ctx:
     rng: np.random.Generator
     kinds: tuple[str, ...]
     viewpoint: np.ndarray | None
+    flat_share: float = FLAT_SHARE
     levels: list[tuple[np.ndarray, cKDTree]] = field(default_factory=list)
     graph: tuple[np.ndarray, np.ndarray] | None = None  # linked_graph(nbr, linked)
 
@@ -242,8 +243,8 @@ def _positive(v, what: str) -> float:
 
 def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
                       min_points=None, seed=0, *, viewpoint=None, normal_tolerance=25.0,
-                      cluster_epsilon=None, max_primitives=MAX_PRIMITIVES
-                      ) -> list[PrimitiveDetection]:
+                      cluster_epsilon=None, max_primitives=MAX_PRIMITIVES,
+                      flat_share: float | None = None) -> list[PrimitiveDetection]:
     """Find planes, spheres, cylinders, cones, tori and boxes in a point cloud.
 
     Args:
@@ -267,6 +268,12 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
             nearest neighbour) of either end, so that sparse and dense parts of one scan
             both hold together.
         max_primitives: stop after this many detections.
+        flat_share: a curved detection of which one plane explains more than this
+            share (in ``(0, 1]``) is dropped as a flat patch (:func:`_flat_share`);
+            default :data:`FLAT_SHARE`. ``1`` keeps every curved detection: a small
+            curved patch whose bulge is within a few ``epsilon`` (a shallow notch)
+            is then reported too, and so may a flat face as a large sphere or
+            cylinder when no plane explains it first.
 
     Returns:
         :class:`PrimitiveDetection` list, largest first (boxes and solids that absorbed
@@ -296,11 +303,14 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
     eps = (max(3.0 * nb.noise, 1e-4 * diag) if epsilon is None
            else _positive(epsilon, "epsilon"))
     conn = None if cluster_epsilon is None else _positive(cluster_epsilon, "cluster_epsilon")
+    flat = FLAT_SHARE if flat_share is None else _positive(flat_share, "flat_share")
+    if flat > 1.0:
+        raise CsdfError(f"flat_share must be in (0, 1]; got {flat_share!r}")
     mp = max(30, n // 200) if min_points is None else int(_positive(min_points, "min_points"))
     ctx = _Ctx(P=P, N=N, nb=nb, eps=eps, cos_tol=math.cos(math.radians(tol)),
                conn=conn, linked=linked_edges(nb, conn), min_points=max(mp, 4),
                max_radius=max(diag, eps),
-               rng=np.random.default_rng(seed), kinds=ks, viewpoint=vp)
+               rng=np.random.default_rng(seed), kinds=ks, viewpoint=vp, flat_share=flat)
     ctx.graph = linked_graph(nb.nbr, ctx.linked)
     _build_levels(ctx)
     found = _extract(ctx, int(max_primitives))
@@ -527,7 +537,8 @@ def _extract(ctx: _Ctx, max_primitives: int) -> list[PrimitiveDetection]:
                 if other is not None and (det is None or _replaces(other, det, rank)):
                     best, det = rival, other
             if det is not None and det.kind != "plane" and (
-                    _flat_share(ctx, det) > FLAT_SHARE or _repeats(ctx, det, found)):
+                    (ctx.flat_share < 1.0 and _flat_share(ctx, det) > ctx.flat_share)
+                    or _repeats(ctx, det, found)):
                 det = None  # a patch of a plane (a box's face), or what an accepted solid
                 # left of its own surface
         pool = sorted((c for c in cands if c is not best), key=lambda c: -len(c.inl))[:POOL]

@@ -16,13 +16,16 @@
    point was measured.
 3. **Residuals**: the points the best tree leaves unexplained are searched for
    primitives again (a small feature the first detection missed, or took for part of
-   another surface); the beam search resumes with those candidates too.
+   another surface), all kinds together and each curved kind on its own with every
+   curved detection kept (:func:`_residual`); the beam search resumes with those
+   candidates too.
 4. **Parameters**: the best trees' continuous parameters (every primitive's sizes and
    position, named ``cylinder_1_radius``, ``cylinder_1_x``, ...) refined jointly by
    :func:`csdf.fit` (Levenberg-Marquardt on the exact parameter Jacobian of the whole
    tree, Huber loss at the noise level); each refined tree is polished by local moves
    over all candidates and its own refined primitives, and refined again when that
-   changed it; the lowest score wins.
+   changed it; the lowest score wins. A cone whose taper is within the noise is
+   written as its cylinder (:func:`_straighten`).
 5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
    cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
    ``InferResult.alternatives``; ``prefer='local'`` or ``'global'`` returns the one
@@ -105,6 +108,9 @@ REFINE_PER_SECOND = 0.3
 RESIDUAL_ROUNDS = 2
 #: the fewest unexplained points a residual detection looks at
 RESIDUAL_MIN = 30
+#: the most detections of one curved kind on the unexplained points
+#: (:func:`_residual`: each kind on its own, besides all kinds together)
+RESIDUAL_PER_KIND = 3
 #: rounds of dropping each leaf of the best tree and refining the rest
 DROP_ROUNDS = 1
 #: the evaluator of the joint refinement: the interpreter, as every tree refined is a
@@ -201,11 +207,47 @@ def _straight_cones(leaves: list[Leaf], used) -> list[Leaf]:
         lf = out[i]
         if lf.kind != "cone":
             continue
-        r1, r2, h = lf.vals["r1"], lf.vals["r2"], lf.vals["height"]
+        r1, r2 = lf.vals["r1"], lf.vals["r2"]
         if abs(r1 - r2) <= STRAIGHT_CONE * max(r1, r2):
-            out[i] = lf.moved(kind="cylinder", t=lf.t + lf.R[:, 2] * (0.5 * h),
-                              vals={"radius": 0.5 * (r1 + r2), "height": h})
+            out[i] = _cylinder_of(lf).moved(origin=lf.origin)
     return out
+
+
+def _cylinder_of(lf: Leaf) -> Leaf:
+    """The cylinder of a cone ``lf``'s axis, height and mean radius (the cone's frame
+    starts at its base; the cylinder's is centred): within ``|r1 - r2| / 2`` of the
+    cone everywhere."""
+    r1, r2, h = lf.vals["r1"], lf.vals["r2"], lf.vals["height"]
+    return lf.moved(kind="cylinder", t=lf.t + lf.R[:, 2] * (0.5 * h),
+                    vals={"radius": 0.5 * (r1 + r2), "height": h},
+                    origin=lf.origin + "+straight")
+
+
+#: a cone whose surface lies within this share of ``tau`` of its cylinder's
+#: (:func:`_straighten`): about one standard deviation of the points' noise, as
+#: ``tau`` is three times the detections' rmse
+TAPER_NOISE = 1.0 / 3.0
+
+
+def _straighten(prob: _Problem, best: Scored) -> Scored:
+    """``best`` with each cone replaced by its cylinder (:func:`_cylinder_of`, one size
+    fewer) when the taper is not a finding: the cone's surface lies within the noise
+    of the cylinder's (``|r1 - r2| / 2`` at most :data:`TAPER_NOISE` ``tau``: no
+    point can show it, and a fit on thousands of points finds such a taper in any
+    slight bias of the noise), or the tree with the cylinder scores within
+    :data:`INDISTINCT` of the penalty of ``best``'s score (the points cannot tell the
+    two apart). Tried cone by cone, each against the tree as it stands."""
+    pool = prob.pool
+    for c in sorted(set(T.leaves(best.tree))):
+        lf = pool.leaves[c]
+        if lf.kind != "cone" or "cylinder" not in prob.ks:
+            continue
+        v = pool.add([_cylinder_of(lf)])[0]
+        sc = pool.scorer().score(swap(best.tree, c, v))
+        flat = 0.5 * abs(lf.vals["r1"] - lf.vals["r2"]) <= TAPER_NOISE * prob.tau
+        if flat or sc.total <= best.total + INDISTINCT * pool.penalty:
+            best = sc
+    return best
 
 
 def _leaf_shape(lf: Leaf, name: str):
@@ -284,11 +326,13 @@ class _Problem:
         return T.evaluate(tree, vals)
 
 
-def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list[Leaf]:
+def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
+                corners: bool = True) -> list[Leaf]:
     """Candidate leaves from detections ``dets`` made on the points ``P[sub]``: the solids
     (and a cylinder's cone, a cone's cylinder), boxes from the planes, each box and
     cylinder also with its point-less faces moved out. ``eps``: the detections' inlier
-    distance."""
+    distance; ``corners``: whether small curved detections are also tried as planes
+    (:func:`_corner_planes`)."""
     P, N = prob.P, prob.N
     out: list[tuple[Leaf, Leaf | None]] = []  # (leaf, its variant moved out)
 
@@ -312,7 +356,7 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float) -> list
             if c is not None and c.kind in prob.ks:
                 out.append((snap(c), _snapped(extended(c, P, P[inl]))))
     if "box" in prob.ks:
-        for d in dets:
+        for d in dets if corners else ():
             if d.kind in ("sphere", "cylinder", "cone", "torus"):
                 planes += _corner_planes(prob, sub[d.inliers], d.rmse, eps)
         out += [(snap(b), None) for b in plane_boxes(planes, P, eps, 4.0 * prob.spacing)]
@@ -471,7 +515,10 @@ def _refined_tree(prob: _Problem, tree):
 
 def _residual(prob: _Problem, tree) -> list[Leaf]:
     """Candidates detected among the points ``tree`` leaves unexplained (farther than
-    ``2 tau`` from its surface, or on it with the normal the other way)."""
+    ``2 tau`` from its surface, or on it with the normal the other way): by one
+    detection of all kinds, and by one of each curved kind alone (at most
+    :data:`RESIDUAL_PER_KIND` detections each) that keeps every curved detection
+    (``flat_share=1``)."""
     P, N = prob.P, prob.N
     used = sorted(set(T.leaves(tree)))
     vals = np.zeros((len(prob.pool.leaves), len(P)))
@@ -489,13 +536,29 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
     if len(sub) < RESIDUAL_MIN:
         return []
     det_kinds = tuple(prob.ks) + (("plane",) if "box" in prob.ks else ())
+    NS = None if N is None else N[sub]
     try:
-        dets = detect_primitives(P[sub], None if N is None else N[sub], kinds=det_kinds,
-                                 seed=prob.seed, viewpoint=prob.vp,
-                                 min_points=RESIDUAL_MIN, max_primitives=12)
+        dets = detect_primitives(P[sub], NS, kinds=det_kinds, seed=prob.seed,
+                                 viewpoint=prob.vp, min_points=RESIDUAL_MIN,
+                                 max_primitives=12)
     except CsdfError:
-        return []
-    return _candidates(prob, dets, sub, prob.tau)
+        dets = []
+    out = _candidates(prob, dets, sub, prob.tau)
+    # each curved kind on its own, every curved detection kept: detection prefers the
+    # simpler kind (two cylinders along a torus's groove) and drops a curved patch that
+    # one plane explains more than half of (a shallow spherical or conical notch);
+    # the score decides between them
+    for kind in ("sphere", "cylinder", "cone", "torus"):
+        if kind not in prob.ks:
+            continue
+        try:
+            dets = detect_primitives(P[sub], NS, kinds=(kind,), seed=prob.seed,
+                                     viewpoint=prob.vp, min_points=RESIDUAL_MIN,
+                                     max_primitives=RESIDUAL_PER_KIND, flat_share=1.0)
+        except CsdfError:
+            continue
+        out += _candidates(prob, dets, sub, prob.tau, corners=False)
+    return out
 
 
 def _move_faces(prob: _Problem, best: Scored, deadline: float, rounds: int = FACE_ROUNDS
@@ -775,6 +838,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         tree = _refined_tree(prob, swapped.tree)
         sc2 = pool.scorer().score(tree)
         best = sc2 if sc2.total <= best.total + 0.01 * pool.penalty else swapped
+    # a cone whose taper the points do not show is the cylinder it is
+    best = _straighten(prob, best)
     # the trees the points cannot tell apart; a convention picks one only when asked
     searched = best.tree
     alternatives = _indistinct(prob, best)

@@ -42,6 +42,16 @@ import numpy as np
 
 from .tree import Tree, field_of, leaves, normal_form, remove, replace, size
 
+#: a point sampled on a leaf's surface counts as the tree's surface when the tree's
+#: field there is within this share of ``tau`` of 0. ``1`` (the default) also counts
+#: the samples of a leaf just inside another operand, within ``tau`` of its surface,
+#: though that operand's surface is the tree's there: unmeasured surface where there is
+#: none, which penalises larger trees. ``1e-6`` counts only where the leaf is the
+#: active operand (its own value is 0 there, to round-off): the made-up surface as
+#: defined, but the search then finds some larger trees that the size penalty alone
+#: does not stop (benchmarks/INFER_S16_NOTES.md)
+ON_SURFACE = 1.0
+
 __all__ = ["Scorer", "Scored", "beam_search", "polish", "consistent", "parities", "swap",
            "evaluate_oriented", "grow"]
 
@@ -182,8 +192,10 @@ class Scorer:
             idx = np.concatenate([self._slices[i] for i in par])
             bare = np.concatenate([self.unsupported[int(odd), self._slices[i]]
                                    for i, odd in par.items()])
+            # a leaf's surface point counts where the tree's field is near 0 there
+            # (ON_SURFACE)
             h = field_of(tree, lambda i: self.at_surface[i, idx])
-            on = np.abs(h) <= self.tau
+            on = np.abs(h) <= ON_SURFACE * self.tau
             free += float(self.weight[idx][on & bare].sum())
         return Scored(tree, data, free, data + free + self.penalty * size(tree))
 

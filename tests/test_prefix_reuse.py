@@ -60,3 +60,25 @@ def test_fast_backend_values_follow_parameter_changes() -> None:
             fr, gr, Jr = prog.value_grad_param_jacobian(pts, pv, backend="numpy")
             np.testing.assert_allclose(f, fr, atol=1e-9)
             np.testing.assert_allclose(J, Jr, atol=1e-7)
+
+
+def test_param_values_of_a_solver_state_match_the_checked_path() -> None:
+    """A dict of every parameter in order, as floats (the fit's state) takes a short
+    path in :meth:`csdf.Program.param_values`: same vector as the checked one (given in
+    another order), and what the checks refuse is still refused."""
+    import pytest
+
+    from csdf.errors import ParamError
+
+    prog = csdf.zoo.load("chair").compile()
+    names = prog.param_names
+    vals = {n: np.float64(p.default) * 1.01 + i for i, (n, p) in
+            enumerate(zip(names, prog.params))}
+    fast = prog.param_values(vals, check_ranges=False)
+    slow = prog.param_values(dict(reversed(list(vals.items()))), check_ranges=False)
+    assert fast.tobytes() == slow.tobytes()
+    assert fast.tobytes() == np.array([float(v) for v in vals.values()]).tobytes()
+    with pytest.raises(ParamError):
+        prog.param_values(dict(vals, **{names[0]: True}), check_ranges=False)
+    with pytest.raises(ParamError):  # out of range: the fast path is unchecked only
+        prog.param_values(dict(vals, **{names[0]: 1e9}))

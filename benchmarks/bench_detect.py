@@ -103,9 +103,12 @@ def _open3d_objects(sc: dict, clouds: dict) -> tuple[list, float]:
 def _cached_scene(seed: int, cache: str | None) -> dict:
     """``clutter_scene(seed)``, or with ``cache`` (a folder) the copy saved there by an
     earlier run (points, noise and the truth: model, pose, parameters, diameter,
-    symmetries), made and saved when missing. csdf.scan's output has been seen to
-    differ between runs (a scene of 49,054 points in one run had 48,919 in another),
-    so comparisons between versions of the detector use one saved copy."""
+    symmetries), made and saved when missing. csdf.scan's output used to differ
+    between runs (a scene of 49,054 points in one run had 48,919 in another): a scene
+    holding a model twice could be scanned with one instance's parameters for the
+    other (``csdf.fieldset``'s shared tapes, fixed in session 16; caches made before
+    then hold such scans, see ``detect_truth_check.py``). Comparisons between
+    versions of the detector use one saved copy."""
     if cache is None:
         return clutter_scene(seed)
     path = Path(cache) / f"clutter_{seed}.npz"
@@ -149,8 +152,9 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None,
     per_model: dict[str, list[int]] = {}
     # every scene is made before any detection runs: csdf.scan's output was seen to
     # depend on what the process evaluated before (a scene made after some detections
-    # had 0.3 % fewer points), so made in between, the scenes would change with the
-    # detector's code
+    # had 0.3 % fewer points; the cause, fixed in session 16, was a scene's instances
+    # of one model sharing a freed tape's id), and made in between, the scenes could
+    # change with the detector's code
     seeds = range(first_scene, first_scene + n_scenes)
     scenes = [_cached_scene(seed, cache) for seed in seeds]
     cpu = 0.0

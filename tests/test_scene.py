@@ -384,3 +384,20 @@ def test_sphere_queries_refuse_centres_they_cannot_place():
         sc.sphere_distance([[np.inf, 0, 0]], 0.1)
     with pytest.raises(CsdfError, match="max_distance must be >= 0"):
         sc.distance([[0, 0, 0]], max_distance=-1)
+
+
+def test_instances_of_one_program_keep_their_own_parameters() -> None:
+    """Eight instances of one parametrised sphere, each with its own radius: the scene's
+    distance and first hits are each instance's own. The field set used to key shared
+    tapes by ``id(tape)`` without holding the tapes; ``reg_tape``'s cache keeps four per
+    program, so a dropped tape's id was reused by a later instance's tape, which then
+    got the dropped tape's parameters (instances 4-6 had radius 0.18, 0.16, 0.14)."""
+    s = csdf.sphere(csdf.param("r", 0.1, 0.01, 1.0))
+    sc = csdf.Scene()
+    radii = 0.1 + 0.02 * np.arange(8)
+    for i, r in enumerate(radii):
+        sc.add(s, csdf.Pose(translation=(float(i), 0.0, 0.0)), params={"r": float(r)})
+    above = np.array([[float(i), 0.0, 0.5] for i in range(8)])
+    np.testing.assert_allclose(sc.distance(above), 0.5 - radii, atol=1e-9)
+    hits = sc.raycast(above + [0.0, 0.0, 1.0], np.tile([0.0, 0.0, -1.0], (8, 1)))
+    np.testing.assert_allclose(1.5 - hits.distance, radii, atol=1e-6)

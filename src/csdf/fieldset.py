@@ -186,7 +186,11 @@ class FieldSet:
         if not self.fields:
             raise CsdfError("a field set needs at least one field")
         K = len(self.fields)
-        tapes: dict[int, int] = {}
+        # id(tape) -> (pool index, the tape): the tape is held so that its id cannot be
+        # reused while this runs; reg_tape's cache keeps a few tapes per program, and a
+        # tape it dropped and freed could otherwise share its id with the next instance's
+        # tape (another parameter set), which then got the freed tape's pool row
+        tapes: dict[int, tuple[int, object]] = {}
         pool = _Pool()
         rows_f: list[np.ndarray] = []
         rows_i: list[tuple[int, int]] = []
@@ -196,12 +200,14 @@ class FieldSet:
 
         def tape_row(prog, pvals, fld=None) -> int:
             tape = reg_tape(prog, pvals)
-            t = tapes.get(id(tape))
-            if t is None:
-                t = tapes[id(tape)] = pool.add(tape.code, tape.imm, tape.out, tape.n_regs)
-                depth = cell_depth(len(tape.code)) if fld is not None else 0
-                if depth:
-                    pool.add_cells(t, fld, depth)
+            seen = tapes.get(id(tape))
+            if seen is not None:
+                return seen[0]
+            t = pool.add(tape.code, tape.imm, tape.out, tape.n_regs)
+            tapes[id(tape)] = (t, tape)
+            depth = cell_depth(len(tape.code)) if fld is not None else 0
+            if depth:
+                pool.add_cells(t, fld, depth)
             return t
 
         #: instances evaluated outside the compiled kernel (mesh calls: see nearest)

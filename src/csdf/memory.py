@@ -19,6 +19,7 @@ check does not work (probed once at import), nothing is pooled.
 
 from __future__ import annotations
 
+import math
 import mmap
 import threading
 
@@ -88,7 +89,7 @@ def result_array(shape: tuple[int, ...], dtype) -> np.ndarray:
     on recycled memory when its size is in the pooled range and a pooled map of exactly
     that size is free."""
     dtype = np.dtype(dtype)
-    count = int(np.prod(shape))
+    count = math.prod(int(n) for n in shape)  # (np.prod: ~10 us a call)
     nbytes = count * dtype.itemsize
     if not (_WORKS and MIN_BYTES <= nbytes <= MAX_BYTES):
         return np.empty(shape, dtype)

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cache import memo
 from ..memory import result_array
 from ..parallel import run_parallel
 from .codegen import BLOCK, generate, structure_key
@@ -110,20 +111,34 @@ _EXTRA = np.array([0.0, 1.0, 2.0, 0.5, np.nan])
 
 
 def _prepare(prog, pvals: np.ndarray, mode: str, dtype):
-    """``(kernel, u, du, spatial, wrt)`` for one program, parameter values and mode."""
+    """``(kernel, u, du, spatial, wrt)`` for one program, parameter values and mode.
+
+    ``u`` (uniform values ``(U + 5,)``) and ``du`` (their parameter derivatives
+    ``(U, P)``, or ``(1, 1)`` zeros) are kept for the last few parameter vectors per
+    program and mode (a fit evaluates the same ones many times); the kernels only read
+    them, and callers must not write to them."""
     low = lowered(prog)
     kmode = kernel_mode(mode)
     kernel = _kernel(low, kmode)
-    P = len(prog.params)
     spatial = kmode != "value"
     wrt = kmode == "all"
+    key = (np.asarray(pvals, dtype=np.float64).tobytes(), kmode, np.dtype(dtype).str)
+    u, du = memo(low, "_fast_uniform", key, lambda: _uniform_rows(low, pvals, spatial,
+                                                                   wrt, dtype), 16)
+    return kernel, u, du, spatial, wrt
+
+
+def _uniform_rows(low, pvals: np.ndarray, spatial: bool, wrt: bool, dtype
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The kernels' uniform inputs ``(u, du)`` (see :func:`_prepare`); not to be written."""
+    P = low.n_params
     uvals, utans, _ = low.uniform(pvals, np.float64, spatial, wrt)
     off = 3 if spatial else 0
     with np.errstate(over="ignore"):  # values beyond float32 range become inf
         u = np.concatenate([uvals, _EXTRA]).astype(dtype)
         du = (utans[:, off:off + P] if wrt else np.zeros((1, 1))).astype(dtype)
     du = np.ascontiguousarray(du) if du.size else np.zeros((1, 1), dtype)
-    return kernel, u, du, spatial, wrt
+    return u, du
 
 
 def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:

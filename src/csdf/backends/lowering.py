@@ -23,7 +23,7 @@ import numpy as np
 from ..cache import memo
 from ..layout import N_COORDS
 from ..ops import OPS_BY_CODE, tie_strict
-from .numpy_backend import uniform_prefix
+from .numpy_backend import prefix_run
 
 __all__ = ["Lowered", "lowered", "numba_available", "UNIFORM_BASE", "FLAG_B_ZERO",
            "FLAG_A_ZERO", "FLAG_OUT_ZERO", "FLAG_TIE_STRICT"]
@@ -104,6 +104,14 @@ class Lowered:
             deps[row] = ds
             self._prefix_deps[row] = sorted(ds)
         self._prefix_row_of = {k: row for k, row in self.prefix_rows}
+        #: ``(n_prefix, P)`` True where prefix instruction k reads parameter i (directly
+        #: or through earlier prefix results)
+        self._prefix_dep_mask = np.zeros((n_prefix, P), dtype=bool)
+        for k, row in self.prefix_rows:
+            self._prefix_dep_mask[k, self._prefix_deps[row]] = True
+        #: the last prefix run per ``tangents`` flag: ``(pvals (P,), raw values, raw
+        #: tangents)`` (see :func:`csdf.backends.numpy_backend.prefix_run`)
+        self._prefix_last: dict[bool, tuple[np.ndarray, list, list]] = {}
 
     def prefix_param_deps(self) -> dict[int, list[int]]:
         """``row -> sorted parameter indices`` for the prefix rows that depend on any."""
@@ -126,7 +134,7 @@ class Lowered:
     def _uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
         prog = self.prog
         P = self.n_params
-        vals, dparams = uniform_prefix(prog, pvals, self.n_prefix, tangents=wrt_params)
+        vals, dparams = self._prefix(pvals, wrt_params)
         U = self.n_uniform_rows
         uvals = np.empty(U, dtype=np.float64)
         uvals[:P] = pvals
@@ -143,6 +151,25 @@ class Lowered:
         zero = np.all(utans == 0, axis=1)
         with np.errstate(over="ignore"):  # values beyond float32 range become inf
             return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
+
+    def _prefix(self, pvals: np.ndarray, tangents: bool) -> tuple[list, list]:
+        """Values and parameter derivatives of the prefix instructions (as
+        :func:`csdf.backends.numpy_backend.uniform_prefix`), computing again only those
+        that read a parameter whose value changed since the last run (a fit that moves
+        only the pose, or a few parameters, recomputes little; the results are the same
+        bit for bit)."""
+        pv = np.array(pvals, dtype=np.float64).reshape(-1)
+        last = self._prefix_last.get(tangents)
+        keep = previous = None
+        if last is not None and len(last[0]) == len(pv):
+            # bitwise equal (0.0 and -0.0 compare equal but may give other results)
+            same = last[0].view(np.int64) == pv.view(np.int64)
+            keep = ~(self._prefix_dep_mask & ~same).any(axis=1)
+            previous = (last[1], last[2])
+        out_v, out_d, raw_v, raw_t = prefix_run(self.prog, pv, self.n_prefix, tangents,
+                                                keep, previous)
+        self._prefix_last[tangents] = (pv, raw_v, raw_t)
+        return out_v, out_d
 
     def is_const_row(self, row: int) -> bool:
         """True when ``row`` holds a constant of the program (rows of parameters and

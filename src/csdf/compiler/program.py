@@ -129,6 +129,7 @@ class Program:
             box.setflags(write=False)
             self.bounds = box
         self._param_index = {p.name: i for i, p in enumerate(self.params)}
+        self._param_order = tuple(p.name for p in self.params)
         self.consts.setflags(write=False)
         self.code.setflags(write=False)
 
@@ -211,6 +212,12 @@ class Program:
                 or, with ``check_ranges``, one outside its range (the message names
                 the parameter, the value and the range).
         """
+        if (not check_ranges and not kw and type(params) is dict
+                and tuple(params) == self._param_order
+                and all(type(v) is float or type(v) is np.float64 for v in params.values())):
+            # every value given, in order, as floats (a solver's state): what the loop
+            # below gives, without its per-name checks
+            return np.fromiter(params.values(), dtype=np.float64, count=len(params))
         vals = np.array([p.default for p in self.params], dtype=np.float64)
         given = dict(params or {})
         overlap = set(given) & set(kw)

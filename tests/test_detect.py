@@ -690,6 +690,21 @@ def test_resolve_yaw_turns_a_lamp_back(lamp_scan, turn):
     assert abs(out[2].rotation[:, 2] @ run.plane[0]) > 0.9999  # still upright
 
 
+def _squat_lamp_over(truth, solid, z: float, **sizes):
+    """A scan of ``solid`` standing on the floor at ``(0, 0.3, z)`` (its centre) from the
+    lamp tests' camera, prepared for lamps, and the lamp detection ``truth`` moved
+    there with ``sizes`` replacing its parameters: ``(run, detection)``."""
+    scene = _floor_scene()
+    scene.add(solid, pose=csdf.Pose(translation=(0.0, 0.3, z)), name="distractor")
+    cam = csdf.Camera.look_at(eye=(0.0, -1.4, 1.5), target=(0.0, 0.3, 0.3), fov=40,
+                              width=200, height=150)
+    P, _, _ = csdf.scan(scene, cam, noise=0.012, outliers=0.0, seed=3)
+    gt = _camera_pose(cam, _yawed(0.0, (0.0, 0.3, 0.0)))
+    over = dataclasses.replace(truth, rotation=gt.rotation, translation=gt.translation,
+                               params=dict(truth.params, **sizes))
+    return _prepared(P, ["lamp"]), over
+
+
 def test_intruders_reject_a_squat_lamp_over_a_can(lamp_scan):
     """A lamp stretched to its range limits over a cylinder passes verification (its
     base and shade explain the can's side within three noise levels); the can's points
@@ -698,20 +713,11 @@ def test_intruders_reject_a_squat_lamp_over_a_can(lamp_scan):
     surf, _ = run._surface_at(m, truth.params)
     box = np.array([surf.min(axis=0), surf.max(axis=0)])
     assert run._intruders(m, truth, box) < 0.5 * MAX_INTRUDERS
-    scene = _floor_scene()
-    scene.add(csdf.cylinder(0.12, 0.25), pose=csdf.Pose(translation=(0.0, 0.3, 0.125)),
-              name="can")
-    cam = csdf.Camera.look_at(eye=(0.0, -1.4, 1.5), target=(0.0, 0.3, 0.3), fov=40,
-                              width=200, height=150)
-    P, _, _ = csdf.scan(scene, cam, noise=0.012, outliers=0.0, seed=3)
-    can = _prepared(P, ["lamp"])
-    gt = _camera_pose(cam, _yawed(0.0, (0.0, 0.3, 0.0)))
-    squat = dict(truth.params, base_radius=0.13, shade_bottom=0.11, shade_height=0.157,
-                 shade_top=0.108, stem_height=0.15, wall=0.006)
-    over = dataclasses.replace(truth, rotation=gt.rotation, translation=gt.translation,
-                               params=squat)
+    can, over = _squat_lamp_over(truth, csdf.cylinder(0.12, 0.25), 0.125, base_radius=0.13,
+                                 shade_bottom=0.11, shade_height=0.157, shade_top=0.108,
+                                 stem_height=0.15, wall=0.006)
     assert can._verify(m, over)[0]  # the other tests pass it
-    surf, _ = can._surface_at(m, squat)
+    surf, _ = can._surface_at(m, over.params)
     box = np.array([surf.min(axis=0), surf.max(axis=0)])
     assert can._intruders(m, over, box) > 1.5 * MAX_INTRUDERS
 
@@ -743,24 +749,17 @@ def test_front_fraction_rejects_a_lamp_laid_over_a_ball(lamp_scan):
 
     _, _, run, m, _, truth = lamp_scan
     inl = run._verify(m, truth)[2]
-    assert run._front_fraction(m, truth, inl) < 0.5 * MAX_FRONT
-    scene = _floor_scene()
-    scene.add(csdf.sphere(0.12), pose=csdf.Pose(translation=(0.0, 0.3, 0.12)), name="ball")
-    cam = csdf.Camera.look_at(eye=(0.0, -1.4, 1.5), target=(0.0, 0.3, 0.3), fov=40,
-                              width=200, height=150)
-    P, _, _ = csdf.scan(scene, cam, noise=0.012, outliers=0.0, seed=3)
-    ball = _prepared(P, ["lamp"])
-    gt = _camera_pose(cam, _yawed(0.0, (0.0, 0.3, 0.0)))
-    squat = dict(truth.params, base_radius=0.13, shade_bottom=0.13, shade_height=0.147,
-                 shade_top=0.05, stem_height=0.15, wall=0.006)
-    over = dataclasses.replace(truth, rotation=gt.rotation, translation=gt.translation,
-                               params=squat)
+    surf, _ = run._surface_at(m, truth.params)
+    assert run._front_fraction(m, truth, inl, surf) < 0.5 * MAX_FRONT
+    ball, over = _squat_lamp_over(truth, csdf.sphere(0.12), 0.12, base_radius=0.13,
+                                  shade_bottom=0.13, shade_height=0.147, shade_top=0.05,
+                                  stem_height=0.15, wall=0.006)
     ok, _, inl, _, _ = ball._verify(m, over)
     assert ok  # the other tests pass it
-    surf, _ = ball._surface_at(m, squat)
+    surf, _ = ball._surface_at(m, over.params)
     box = np.array([surf.min(axis=0), surf.max(axis=0)])
     assert ball._intruders(m, over, box) <= MAX_INTRUDERS  # the intruder test too
-    assert ball._front_fraction(m, over, inl) > MAX_FRONT
+    assert ball._front_fraction(m, over, inl, surf) > MAX_FRONT
 
 
 def test_span_is_the_clusters_diameter_whatever_its_turn():

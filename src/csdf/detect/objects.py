@@ -824,7 +824,8 @@ class _Run:
         ok = q["visible_see_through"] <= MAX_SEE_THROUGH and unexpl <= MAX_UNEXPLAINED
         return bool(ok), 1.0 - unexpl, inl, checked
 
-    def _front_fraction(self, m: _Model, res: FitResult, inl: np.ndarray) -> float:
+    def _front_fraction(self, m: _Model, res: FitResult, inl: np.ndarray,
+                        surf: np.ndarray) -> float:
         """The fraction of the rays on the fit ``res``'s visible surface that show a
         point of its own clusters floating in front of it: of the scan points whose rays
         pass within the fitted model's bounding sphere and hit the model, those whose
@@ -837,14 +838,15 @@ class _Run:
         a sphere, whose side bulges out between the lamp's shade and base (right fits
         have 0-6 % there on the benchmark's seeds 0-29, noise tails). At most
         ``FRONT_RAYS`` rays are cast (an even stride over them: no random draw).
-        0 when the viewpoint is inside the model's bounding sphere or no ray hits."""
+        ``surf``: the model's surface samples at ``res.params`` ``(K, 3)``, model frame
+        (:meth:`_surface_at`). 0 when the viewpoint is inside the model's bounding
+        sphere or no ray hits."""
         from ..render.trace import sphere_trace, trace_field
 
         labs, counts = np.unique(self.label[inl], return_counts=True)
         own = labs[(labs >= 0) & (counts >= 0.1 * max(len(inl), 1))]
         if len(own) == 0:
             return 0.0
-        surf, _ = self._surface_at(m, res.params)
         lo, hi = surf.min(axis=0), surf.max(axis=0)
         mid = 0.5 * (lo + hi)
         cw = res.pose.apply(mid[None])[0]
@@ -958,8 +960,9 @@ class _Run:
         _, score, res, inl, checked = top
         if self.vp is not None:
             surf, _ = self._surface_at(m, res.params)
-            if self._intruders(m, res, np.array([surf.min(axis=0), surf.max(axis=0)])
-                               ) > MAX_INTRUDERS or self._front_fraction(m, res, inl) > MAX_FRONT:
+            box = np.array([surf.min(axis=0), surf.max(axis=0)])
+            if (self._intruders(m, res, box) > MAX_INTRUDERS
+                    or self._front_fraction(m, res, inl, surf) > MAX_FRONT):
                 return None
         return Detection(model=m.name, pose=Pose(res.rotation, res.translation),
                          params=dict(res.params), score=score, inliers=inl, shape=m.shape,

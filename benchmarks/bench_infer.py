@@ -208,17 +208,23 @@ def preferred(res, prefer: str) -> str:
     return T.to_text(T.cuts_last(trees[order[0]]), inv.__getitem__)
 
 
+def _grid(box: np.ndarray, n: int) -> np.ndarray:
+    """The ``(n^3, 3)`` points of an ``n``^3 grid over ``box`` ``(2, 3)`` padded by 10 %
+    on every side."""
+    lo, hi = box
+    pad = 0.1 * (hi - lo)
+    axes = [np.linspace(lo[d] - pad[d], hi[d] + pad[d], n) for d in range(3)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
 def same_solid(a, b, box: np.ndarray, n: int = 96) -> bool:
     """Whether two shapes are one solid: their signs agree at every point of an
     ``n``^3 grid over ``box`` padded by 10 % and at 4,000 points 0.2 % of the diagonal
     inside and outside ``a``'s surface (so that a thin sliver between the grid's
     samples is not missed)."""
-    lo, hi = box
-    pad = 0.1 * (hi - lo)
-    axes = [np.linspace(lo[d] - pad[d], hi[d] + pad[d], n) for d in range(3)]
-    g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    g = _grid(box, n)
     sp, sn = csdf.sample_surface(a, 2000, seed=2)
-    h = 0.002 * float(np.linalg.norm(hi - lo))
+    h = 0.002 * float(np.linalg.norm(box[1] - box[0]))
     p = np.concatenate([g, sp + h * sn, sp - h * sn])
     fa = csdf.as_field(a, backend=BACKEND).value(p)
     fb = csdf.as_field(b, backend=BACKEND).value(p)
@@ -272,10 +278,7 @@ def chamfer(a, b, diag: float) -> float:
 
 
 def iou(a, b, box: np.ndarray, n: int = 64) -> float:
-    lo, hi = box
-    pad = 0.1 * (hi - lo)
-    axes = [np.linspace(lo[d] - pad[d], hi[d] + pad[d], n) for d in range(3)]
-    g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    g = _grid(box, n)
     ia = csdf.as_field(a, backend=BACKEND).value(g) <= 0
     ib = csdf.as_field(b, backend=BACKEND).value(g) <= 0
     u = np.logical_or(ia, ib).sum()

@@ -96,3 +96,33 @@ def test_infer_structure_counts_only_rewritings_of_the_true_solid():
     truth2 = ("difference", ("union", 0, 1), 2)
     assert bi.structure(res, truth2, leaves2, box, "((box_1 | sphere_1) - cylinder_1)")
     assert not bi.structure(res, truth2, leaves2, box, "((box_1 - cylinder_1) | sphere_1)")
+
+
+def test_infer_one_view_measures_see_only_what_the_sensor_sees():
+    """``bench_infer.seen_leaves`` and ``view_structure``: a hole drilled into the back
+    of a box is not seen from the front, where the box with a peg there looks the
+    same; from behind both the hole and the difference are seen."""
+    bi = _load("bench_infer")
+    eye = np.eye(3)
+    to_x = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # z -> x
+    leaves = [("box", eye, np.zeros(3), {"size_x": 1.0, "size_y": 1.0, "size_z": 1.0}),
+              ("cylinder", to_x, np.array([-0.6, 0.0, 0.0]), {"radius": 0.2,
+                                                                "height": 0.8})]
+    truth = ("difference", 0, 1)
+    shape = bi._shape_of(truth, leaves)
+    box = bi.csdf.as_field(shape).bounds
+
+    class Res:
+        primitives = [{"name": n, "kind": k, "translation": list(t)} for n, (k, _, t, _)
+                      in zip(("box_1", "cylinder_1"), leaves)]
+
+    front = bi.view_camera(np.array([5.0, 0.8, 0.6]), box)
+    back = bi.view_camera(np.array([-5.0, 0.8, 0.6]), box)
+    assert bi.seen_leaves(leaves, shape, front).tolist() == [True, False]
+    assert bi.seen_leaves(leaves, shape, back).tolist() == [True, True]
+    tol = 0.002 * float(np.linalg.norm(box[1] - box[0]))
+    for text, from_front, from_back in (("(box_1 - cylinder_1)", True, True),
+                                        ("(box_1 | cylinder_1)", True, False),
+                                        ("(box_1 & cylinder_1)", False, False)):
+        assert bi.view_structure(Res(), truth, leaves, front, tol, text) is from_front
+        assert bi.view_structure(Res(), truth, leaves, back, tol, text) is from_back

@@ -46,7 +46,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..detect.neighbours import neighbourhood, normals_arg, points_arg, viewpoint_arg
+from ..detect.neighbours import (
+    K_NORMALS,
+    neighbourhood,
+    normals_arg,
+    points_arg,
+    viewpoint_arg,
+)
 from ..detect.primitives import detect_primitives
 from ..detect.solids import SOLID_PARAMS
 from ..errors import CsdfError
@@ -91,6 +97,14 @@ BACKGROUND_POINTS = 2000
 CORNER_MAX = 3000
 #: the share of such a detection's points the planes must explain
 CORNER_SHARE = 0.8
+#: neighbours whose plane gives a point's normal when the cloud comes without normals
+#: (detection's own default is 12). A scan's noise is of the order of its point spacing
+#: (0.2 % of the diagonal against 0.3 % at 640 x 480), so the normals of 12 neighbours
+#: are 8 degrees off (median; 21 at the 90th percentile) and detection splits a
+#: cylinder into tangent planes and a cone; with 24 they are 4 degrees off (the error
+#: falls as ``1 / k``) while an edge blurs over about one more point spacing
+#: (benchmarks/INFER_RESULTS.md, session 17)
+NORMAL_NEIGHBOURS = 24
 #: points the joint refinement fits (a seeded subsample)
 FIT_POINTS = 2000
 #: free-space points the joint refinement keeps out of the material (with a viewpoint)
@@ -402,7 +416,8 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
            max_primitives: int, seed: int, epsilon, penalty) -> _Problem:
     """Normals, detection, candidates, the noise level, penalty and score samples."""
     rng = np.random.default_rng(seed)
-    nb = neighbourhood(P, viewpoint=vp, want_normals=N is None)
+    nb = neighbourhood(P, k=NORMAL_NEIGHBOURS if N is None else K_NORMALS, viewpoint=vp,
+                       want_normals=N is None)
     if N is None:  # estimated: oriented when turned to a viewpoint
         N_det = nb.normals
         N = nb.normals if vp is not None else None
@@ -436,7 +451,7 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
         free = np.concatenate([free_points(P, vp, tau, diag, rng, FREE_POINTS),
                                view.background(diag, rng, BACKGROUND_POINTS)])
     kd = cKDTree(P)
-    reach, area = support_scales(kd, S, len(P), tau)
+    reach, area = support_scales(kd, S, len(P), tau, NS, vp)
     pool = Pool(S, NS, free, kd, N, reach, area, tau, float(penalty), rng, view)
     fit_idx = np.sort(rng.choice(len(P), size=min(FIT_POINTS, len(P)), replace=False))
     fit_free = None if free is None else free[np.sort(rng.choice(

@@ -14,6 +14,7 @@ from .candidates import Leaf, leaf_surface, same_leaf
 from .search import Scorer
 
 __all__ = ["Pool", "free_points", "background_points", "oriented_normals", "support_scales",
+           "foreshortening",
            "SURFACE_SAMPLES", "ORIENTED", "SUPPORT_COS"]
 
 #: points on each candidate's surface for the made-up-surface term (clouds without a
@@ -132,16 +133,36 @@ def background_points(P: np.ndarray, vp: np.ndarray, diag: float, rng, n: int
     return View(P, vp, rng).background(diag, rng, n)
 
 
-def support_scales(kd: cKDTree, S: np.ndarray, n: int, tau: float) -> tuple[float, float]:
+def support_scales(kd: cKDTree, S: np.ndarray, n: int, tau: float,
+                   NS: np.ndarray | None = None, vp: np.ndarray | None = None
+                   ) -> tuple[float, float]:
     """``(reach, area)`` of a cloud of ``n`` points (its k-d tree ``kd``, a sample ``S``
     ``(M, 3)`` of it): how far (scene units) a measured point may be from surface it
     supports (three point spacings, at least ``3 tau``), and the measured surface's
     area (scene units squared: each point stands for ``pi r^2 / k``, ``r`` the distance
-    to its ``k``-th neighbour, ``k = 8``)."""
+    to its ``k``-th neighbour, ``k = 8``). With a single view (``vp`` ``(3,)`` and the
+    sample's normals ``NS`` ``(M, 3)``), the area as the sensor sees it: each point's
+    share foreshortened by the cosine between its normal and its ray
+    (:func:`foreshortening`), the same measure as the made-up surface's."""
     k = 8
-    d, _ = kd.query(S[: min(len(S), 2000)], k=k + 1)
+    m = min(len(S), 2000)
+    d, _ = kd.query(S[:m], k=k + 1)
     reach = max(3.0 * tau, 3.0 * float(np.median(d[:, 1])))
-    return reach, n * math.pi * float(np.median(d[:, k])) ** 2 / k
+    if vp is None or NS is None:
+        return reach, n * math.pi * float(np.median(d[:, k])) ** 2 / k
+    share = math.pi * d[:, k] ** 2 / k * foreshortening(S[:m], NS[:m], vp)
+    return reach, n * float(np.mean(share))
+
+
+def foreshortening(q: np.ndarray, g: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """``(K,)`` ``|cos|`` of the angle between the unit normals ``g`` ``(K, 3)`` at the
+    points ``q`` ``(K, 3)`` and the rays from the sensor at ``vp`` ``(3,)``: the
+    share of its area a surface element shows the sensor, so the share of the returns
+    it is expected to give (a face seen edge-on gives almost none, and a sensor drops
+    the grazing returns it does measure)."""
+    ray = q - vp
+    ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
+    return np.abs(np.einsum("ij,ij->i", g, ray))
 
 
 def oriented_normals(P: np.ndarray, N: np.ndarray) -> np.ndarray | None:
@@ -235,7 +256,10 @@ class Pool:
                 pts.append(q)
                 grads.append(nrm)
                 own.append(np.full(len(q), n0 + k))
-                wt.append(np.full(len(q), area / len(q)))
+                w = np.full(len(q), area / len(q))
+                # one view: surface counts as much as it shows the sensor
+                wt.append(w if self.view is None else
+                          w * foreshortening(q, nrm, self.view.vp))
             q = np.concatenate(pts)
             far = self._unsupported(q, np.concatenate(grads))
             old = np.array([lf.values(self.surf)[0] for lf in fresh]).reshape(

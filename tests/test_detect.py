@@ -669,6 +669,33 @@ def test_ray_cast_turns_peak_at_the_lamps_own(lamp_scan):
     assert score[0] - np.median(score) > 10 * GAIN_CAP_LOG
 
 
+def test_own_points_in_front_count_against_a_turn(lamp_scan):
+    """A lamp turned by 60 degrees (its spokes halfway between the true ones): with the
+    lamp's own cluster given, the true spokes' points floating in front of its shade
+    count against it too, so the true turn's lead grows."""
+    _, inst, run, m, gt, truth = lamp_scan
+    rays = run._ray_set(m, truth)
+    idx = max(run.clusters, key=lambda c: int(np.sum(inst[c] == 1)))
+    labs = run._own_clusters(idx)
+    assert len(labs) == 1
+    angles = np.radians([0.0, 60.0])
+    plain, _ = run._yaw_scan_rays(m, truth, rays, angles)
+    mine, _ = run._yaw_scan_rays(m, truth, rays, angles, labs)
+    assert mine[0] - mine[1] > plain[0] - plain[1] + 2 * GAIN_CAP_LOG
+    assert abs(mine[0] - plain[0]) <= 5 * GAIN_CAP_LOG  # the right turn: noise tails
+
+
+def test_subsamples_depend_only_on_the_set(lamp_scan):
+    run = lamp_scan[2]
+    idx = np.flatnonzero(run.label >= 0)
+    a = run._subsample(idx, 100)
+    run._subsample(idx[::2], 50)  # other work in between changes nothing
+    b = run._subsample(idx.copy(), 100)
+    assert np.array_equal(a, b) and len(a) == 100
+    assert np.all(np.diff(a) > 0) and np.isin(a, idx).all()
+    assert run._subsample(idx[:80], 100) is not None and len(run._subsample(idx[:80], 100)) == 80
+
+
 @pytest.mark.parametrize("turn", [0.9, -0.8])
 def test_resolve_yaw_turns_a_lamp_back(lamp_scan, turn):
     P, inst, run, m, gt, truth = lamp_scan

@@ -565,6 +565,23 @@ def test_yaw_scan_turns_a_fit_back_to_the_seen_yaw(chair_scan):
         assert min(back, 2 * math.pi - back) < math.radians(10)
 
 
+def test_screen_costs_only_what_can_win_and_finds_the_same_best(chair_scan):
+    """The screen's pruned search (the lower bound first) returns exactly the best of
+    costing every pose at every parameter set."""
+    from csdf.detect.objects import REFINE_TOP
+
+    P, inst, _ = chair_scan
+    run = _prepared(P, ["chair", "table"])
+    idx = max(run.clusters, key=lambda c: int(np.sum(inst[c] == 1)))
+    S = run.P[run._subsample(idx, 200)]
+    for m in run.models:
+        poses = run._upright(m, run.P[idx])
+        sets = [0, 1, 2]
+        full = sorted((float(c), i, k) for k in sets
+                      for i, c in enumerate(run._two_sided(m, poses, S, m.starts[k])))
+        assert run._screen(m, poses, S, sets) == full[:REFINE_TOP]
+
+
 def test_occluded_points_are_those_behind_scan_points(chair_scan):
     P, inst, gt = chair_scan
     run = _prepared(P, ["chair"])

@@ -820,3 +820,13 @@ def test_span_is_the_clusters_diameter_whatever_its_turn():
     with_outliers = np.vstack([Q, [[2.0, 2.0, 0.0], [-2.0, 1.5, 0.5], [0.0, -2.2, 1.0]]])
     assert 0.9 * diam < _span(with_outliers) <= diam
     assert _span(Q[:1]) == 0.0
+
+
+def test_models_are_prepared_once_per_shape_and_name():
+    from csdf.detect.objects import _models_arg
+
+    a = _models_arg(["stool"])[0]
+    assert _models_arg("stool")[0] is a  # the zoo's one shape: prepared once
+    b = _models_arg({"seat": "stool"})[0]
+    assert b is not a and b.name == "seat"
+    assert _models_arg([csdf.zoo.load("stool", height=0.6)])[0] is not a

@@ -205,6 +205,10 @@ RAY_MARGIN = 2.0
 RETRY_STARTS = 2
 #: ... when it explained at least this fraction of the free points it was fitted to
 RETRY_EXPLAINED = 0.5
+#: a winner whose visible surface is unexplained over this fraction (the sensor saw
+#: through it or nothing there) is fitted again from ``RETRY_STARTS`` other parameter
+#: starts too
+REFIT_UNEXPLAINED = 0.05
 #: the largest fraction of the points inside a fit's box that may lie in its free
 #: space in front of it (:meth:`_Run._intruders`)
 MAX_INTRUDERS = 0.25
@@ -1042,16 +1046,23 @@ class _Run:
                 self._turns(m, idx, base, found,
                             YAW_REFITS if found else YAW_REFITS_FAILED)
         best = None
-        for m, _, _, found in done:
+        for m, init, _, found in done:
             if not found:
                 continue
             top = max(found, key=lambda f: f[0])
             if best is None or top[0] > best[1][0]:
-                best = (m, top)
+                best = (m, top, init)
         if best is None:
             return None
-        m, top = best
+        m, top, init = best
         if self.plane is not None and self.upright and self.vp is not None:
+            if 1.0 - top[1] > REFIT_UNEXPLAINED and init is not None:
+                # part of its visible surface unexplained: its parameters may have
+                # grown where nothing holds them (a bookshelf's depth at its bound);
+                # other parameter starts compete by explained mass, which counts that
+                found = [top]
+                self._other_params(m, idx, top[2], init, found)
+                top = max(found, key=lambda f: f[0])
             top = self._resolve_yaw(m, idx, top)
         _, score, res, inl, checked = top
         if self.vp is not None:

@@ -23,8 +23,12 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    signed distance at a fixed subsample of the cluster, plus the truncated squared
    distance from each of the model's surface samples that face the sensor to the
    nearest scan point (a model standing where the sensor saw nothing pays; a sample
-   hidden behind a nearer scan point does not); the best ``REFINE_TOP`` get a few
-   pose-only Gauss-Newton steps (:func:`csdf.fit` on the subsample). Without a support,
+   hidden behind a nearer scan point does not; the first term bounds the cost from
+   below, so the second is computed only for the hypotheses that can still reach the
+   best ``REFINE_TOP``: :meth:`_Run._screen`); the best ``REFINE_TOP`` get a few
+   pose-only Gauss-Newton steps (:func:`csdf.fit` on the subsample), and the
+   ``MODELS_REFINED`` models whose best costs least, those within ``SCREEN_RATIO``
+   times the least, go on to step 5. Without a support,
    :func:`csdf.fit`'s ``multistart`` search replaces this step.
 5. **Refinement.** The best hypothesis is refined by :func:`csdf.fit` in pose and shape
    parameters (``viewpoint=`` visibility, ``loss='auto'``) on the cluster's points near
@@ -47,7 +51,8 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    a cluster no model explains as one, after the band test rejected a large fit, is
    searched by the halves of its footprint (:meth:`_Run.best_in_parts`). A model whose
    fit explained most of the points but failed is fitted again from ``RETRY_STARTS``
-   other parameter starts (:meth:`_Run._other_params`).
+   other parameter starts (:meth:`_Run._other_params`); so is a winner with over
+   ``REFIT_UNEXPLAINED`` of its visible surface unexplained.
 8. **Turns resting on a small part** (:meth:`_Run._resolve_yaw`): when the winner's
    model has a turn about its axis, not a symmetry, that moves under ``YAW_DOUBT`` of
    its surface (a lamp's spokes), it is refitted held upright (:meth:`_Run._polish`)

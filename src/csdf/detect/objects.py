@@ -228,6 +228,9 @@ FRONT_RAYS = 6000
 POLISH_BAND = 5.0
 POLISH_POINTS = 1200
 POLISH_ITER = 60
+#: upright refits from a better-scoring turn of the winner's upright refit (0: the turn
+#: is judged at the refit's own parameters only)
+TURN_REFITS = 0
 #: a winner's turn is in doubt when the model has a turn, not a symmetry, that moves
 #: less than this fraction of its surface samples by more than three noise levels
 #: (the turn rests on a small part of it: a lamp's spokes)
@@ -1315,7 +1318,7 @@ class _Run:
         own = None  # the winner refitted upright at its own turn
         cands = []  # the turned candidates
         start = res
-        for k in range(2):
+        for k in range(1 + TURN_REFITS):
             r = self._polish(m, idx, start)
             if r is None:
                 break

@@ -60,7 +60,7 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    points of its own clusters floating in front of it count against a turn, as rays
    that see through it do):
    the refit replaces the winner when its rays score more, and another turn replaces
-   that when it scores more than the winner's own turn refitted the same way.
+   that when it scores more than the refit's own turn at the refit's parameters.
 9. **Points floating inside** (:meth:`_Run._intruders`): a detection with over
    ``MAX_INTRUDERS`` of the points in its box in its free space in front of it (a
    model stretched over something else) is dropped; so is one with over ``MAX_FRONT``
@@ -1291,10 +1291,12 @@ class _Run:
         (:meth:`_polish`: its parameters, which place the spokes, come out right) and
         ray-cast (:meth:`_ray_scores`) at turns ``RAY_STEP`` degrees apart over one
         period of its symmetry about that axis; if another turn scores more than
-        ``RAY_MARGIN`` explained points more, that turn, and the model refitted from it,
-        are candidates too. Of the candidates that pass verification, the one scoring
-        most on the same rays replaces the winner when it scores more than
-        ``RAY_MARGIN`` explained points more than the winner does."""
+        ``RAY_MARGIN`` explained points more at the refit's parameters, that turn is a
+        candidate too (and, with ``TURN_REFITS``, the model refitted from it; none by
+        default: the refit's free turn drifted back to a wrong one). The refit
+        replaces the winner when its rays score more by the margin, and the turned
+        candidate, if it passes verification, replaces that when it scores more than
+        the refit's own turn by the margin and more than the choice."""
         res = top[2]
         full = np.radians(np.arange(0.0, 360.0, RAY_STEP))
         sym, moved = self._turn_profile(m, full)

@@ -231,6 +231,9 @@ POLISH_ITER = 60
 #: upright refits from a better-scoring turn of the winner's upright refit (0: the turn
 #: is judged at the refit's own parameters only)
 TURN_REFITS = 0
+#: ... and the margin (explained points) by which a turn at those parameters must
+#: score more than the refit's own turn
+TURN_RAY_MARGIN = 1.0
 #: a winner's turn is in doubt when the model has a turn, not a symmetry, that moves
 #: less than this fraction of its surface samples by more than three noise levels
 #: (the turn rests on a small part of it: a lamp's spokes)
@@ -1316,6 +1319,9 @@ class _Run:
         labs = self._own_clusters(top[3])
         score, _ = self._yaw_scan_rays(m, res, rays, angles[:1], labs)
         margin = RAY_MARGIN * GAIN_CAP_LOG
+        # one turn against another at the same parameters (TURN_REFITS = 0) needs no
+        # margin for the parameters' differences
+        turn_margin = (TURN_RAY_MARGIN if TURN_REFITS == 0 else RAY_MARGIN) * GAIN_CAP_LOG
         orig = (float(score[0]), top)
         own = None  # the winner refitted upright at its own turn
         cands = []  # the turned candidates
@@ -1333,7 +1339,7 @@ class _Run:
             else:
                 cands.append((float(s2[0]), (gain, sc, r, il, ch)))
             i = int(np.argmax(s2))
-            if i == 0 or s2[i] - s2[0] <= margin:
+            if i == 0 or s2[i] - s2[0] <= turn_margin:
                 break
             start = dataclasses.replace(r, rotation=poses[i][0])
             ok, sc, il, ch, gain = self._verify(m, start)
@@ -1350,7 +1356,7 @@ class _Run:
         if cands:
             turned = max(cands, key=lambda c: c[0])  # the first of equals
             ref = own[0] if own is not None else orig[0]
-            if turned[0] - ref > margin and turned[0] > best[0]:
+            if turned[0] - ref > turn_margin and turned[0] > best[0]:
                 best = turned
         return best[1]
 

@@ -1294,12 +1294,12 @@ class _Run:
         (:meth:`_polish`: its parameters, which place the spokes, come out right) and
         ray-cast (:meth:`_ray_scores`) at turns ``RAY_STEP`` degrees apart over one
         period of its symmetry about that axis; if another turn scores more than
-        ``RAY_MARGIN`` explained points more at the refit's parameters, that turn is a
-        candidate too (and, with ``TURN_REFITS``, the model refitted from it; none by
+        ``TURN_RAY_MARGIN`` explained points more at the refit's parameters, that turn
+        is a candidate too (and, with ``TURN_REFITS``, the model refitted from it; none by
         default: the refit's free turn drifted back to a wrong one). The refit
         replaces the winner when its rays score more by the margin, and the turned
         candidate, if it passes verification, replaces that when it scores more than
-        the refit's own turn by the margin and more than the choice."""
+        the refit's own turn by ``TURN_RAY_MARGIN`` and more than the choice."""
         res = top[2]
         full = np.radians(np.arange(0.0, 360.0, RAY_STEP))
         sym, moved = self._turn_profile(m, full)

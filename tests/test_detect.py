@@ -565,6 +565,23 @@ def test_yaw_scan_turns_a_fit_back_to_the_seen_yaw(chair_scan):
         assert min(back, 2 * math.pi - back) < math.radians(10)
 
 
+def test_screen_costs_only_what_can_win_and_finds_the_same_best(chair_scan):
+    """The screen's pruned search (the lower bound first) returns exactly the best of
+    costing every pose at every parameter set."""
+    from csdf.detect.objects import REFINE_TOP
+
+    P, inst, _ = chair_scan
+    run = _prepared(P, ["chair", "table"])
+    idx = max(run.clusters, key=lambda c: int(np.sum(inst[c] == 1)))
+    S = run.P[run._subsample(idx, 200)]
+    for m in run.models:
+        poses = run._upright(m, run.P[idx])
+        sets = [0, 1, 2]
+        full = sorted((float(c), i, k) for k in sets
+                      for i, c in enumerate(run._two_sided(m, poses, S, m.starts[k])))
+        assert run._screen(m, poses, S, sets) == full[:REFINE_TOP]
+
+
 def test_occluded_points_are_those_behind_scan_points(chair_scan):
     P, inst, gt = chair_scan
     run = _prepared(P, ["chair"])
@@ -667,6 +684,33 @@ def test_ray_cast_turns_peak_at_the_lamps_own(lamp_scan):
     assert int(np.argmax(score)) == 0
     # the spokes' rays: tens of explained points above the typical turn
     assert score[0] - np.median(score) > 10 * GAIN_CAP_LOG
+
+
+def test_own_points_in_front_count_against_a_turn(lamp_scan):
+    """A lamp turned by 60 degrees (its spokes halfway between the true ones): with the
+    lamp's own cluster given, the true spokes' points floating in front of its shade
+    count against it too, so the true turn's lead grows."""
+    _, inst, run, m, gt, truth = lamp_scan
+    rays = run._ray_set(m, truth)
+    idx = max(run.clusters, key=lambda c: int(np.sum(inst[c] == 1)))
+    labs = run._own_clusters(idx)
+    assert len(labs) == 1
+    angles = np.radians([0.0, 60.0])
+    plain, _ = run._yaw_scan_rays(m, truth, rays, angles)
+    mine, _ = run._yaw_scan_rays(m, truth, rays, angles, labs)
+    assert mine[0] - mine[1] > plain[0] - plain[1] + 2 * GAIN_CAP_LOG
+    assert abs(mine[0] - plain[0]) <= 5 * GAIN_CAP_LOG  # the right turn: noise tails
+
+
+def test_subsamples_depend_only_on_the_set(lamp_scan):
+    run = lamp_scan[2]
+    idx = np.flatnonzero(run.label >= 0)
+    a = run._subsample(idx, 100)
+    run._subsample(idx[::2], 50)  # other work in between changes nothing
+    b = run._subsample(idx.copy(), 100)
+    assert np.array_equal(a, b) and len(a) == 100
+    assert np.all(np.diff(a) > 0) and np.isin(a, idx).all()
+    assert run._subsample(idx[:80], 100) is not None and len(run._subsample(idx[:80], 100)) == 80
 
 
 @pytest.mark.parametrize("turn", [0.9, -0.8])
@@ -776,3 +820,13 @@ def test_span_is_the_clusters_diameter_whatever_its_turn():
     with_outliers = np.vstack([Q, [[2.0, 2.0, 0.0], [-2.0, 1.5, 0.5], [0.0, -2.2, 1.0]]])
     assert 0.9 * diam < _span(with_outliers) <= diam
     assert _span(Q[:1]) == 0.0
+
+
+def test_models_are_prepared_once_per_shape_and_name():
+    from csdf.detect.objects import _models_arg
+
+    a = _models_arg(["stool"])[0]
+    assert _models_arg("stool")[0] is a  # the zoo's one shape: prepared once
+    b = _models_arg({"seat": "stool"})[0]
+    assert b is not a and b.name == "seat"
+    assert _models_arg([csdf.zoo.load("stool", height=0.6)])[0] is not a

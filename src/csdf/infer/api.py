@@ -97,13 +97,13 @@ BACKGROUND_POINTS = 2000
 CORNER_MAX = 3000
 #: the share of such a detection's points the planes must explain
 CORNER_SHARE = 0.8
-#: neighbours whose plane gives a point's normal when the cloud comes without normals
-#: (detection's own default is 12). A scan's noise is of the order of its point spacing
-#: (0.2 % of the diagonal against 0.3 % at 640 x 480), so the normals of 12 neighbours
-#: are 8 degrees off (median; 21 at the 90th percentile) and detection splits a
-#: cylinder into tangent planes and a cone; with 24 they are 4 degrees off (the error
-#: falls as ``1 / k``) while an edge blurs over about one more point spacing
-#: (benchmarks/INFER_RESULTS.md, session 17)
+#: neighbours whose plane gives a point's normal when a single-view scan comes without
+#: normals (detection's own default, 12, otherwise: measured on scans only). A scan's
+#: noise is of the order of its point spacing (0.2 % of the diagonal against 0.3 % at
+#: 640 x 480), so the normals of 12 neighbours are 8 degrees off (median; 21 at the
+#: 90th percentile) and detection splits a cylinder into tangent planes and a cone;
+#: with 24 they are 4 degrees off (the error falls as ``1 / k``) while an edge blurs
+#: over about one more point spacing (benchmarks/INFER_RESULTS.md, session 17)
 NORMAL_NEIGHBOURS = 24
 #: points the joint refinement fits (a seeded subsample)
 FIT_POINTS = 2000
@@ -416,8 +416,8 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
            max_primitives: int, seed: int, epsilon, penalty) -> _Problem:
     """Normals, detection, candidates, the noise level, penalty and score samples."""
     rng = np.random.default_rng(seed)
-    nb = neighbourhood(P, k=NORMAL_NEIGHBOURS if N is None else K_NORMALS, viewpoint=vp,
-                       want_normals=N is None)
+    k = NORMAL_NEIGHBOURS if N is None and vp is not None else K_NORMALS
+    nb = neighbourhood(P, k=k, viewpoint=vp, want_normals=N is None)
     if N is None:  # estimated: oriented when turned to a viewpoint
         N_det = nb.normals
         N = nb.normals if vp is not None else None

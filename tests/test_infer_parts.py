@@ -461,3 +461,24 @@ def test_a_cone_whose_taper_is_within_the_noise_is_its_cylinder():
         if want == "cylinder":
             assert lf.vals["radius"] == pytest.approx(0.4)
             assert np.allclose(lf.t, 0.0)
+
+
+def test_a_trim_that_trims_nothing_is_dropped_after_the_face_moves():
+    """A leaf whose removal lowers the score (a trim around the whole part: only its
+    penalty) is dropped, and the rest stays as it is."""
+    from types import SimpleNamespace
+
+    from csdf.infer import api as A
+
+    shape = csdf.box((1.0, 0.8, 0.6)) - csdf.sphere(0.3).translate((0.5, 0.0, 0.3))
+    P, N = csdf.sample_surface(shape, 4000, seed=2)
+    leaves = [Leaf("box", np.eye(3), np.zeros(3), {"size_x": 1.0, "size_y": 0.8,
+                                                   "size_z": 0.6}, 1),
+              Leaf("sphere", np.eye(3), np.array([0.5, 0.0, 0.3]), {"radius": 0.3}, -1),
+              Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0,
+                                                   "size_z": 2.0}, 1)]
+    prob = SimpleNamespace(pool=_pool(P, N, leaves))
+    trimmed = prob.pool.scorer().score(("difference", ("intersection", 0, 2), 1))
+    out = A._drop_leaves(prob, trimmed)
+    assert out.tree == ("difference", 0, 1)
+    assert out.total == pytest.approx(trimmed.total - 0.004, abs=1e-9)

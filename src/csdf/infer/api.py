@@ -654,6 +654,27 @@ def _move_faces(prob: _Problem, best: Scored, deadline: float, rounds: int = FAC
     return best
 
 
+def _drop_leaves(prob: _Problem, best: Scored) -> Scored:
+    """``best`` with leaves dropped, one at a time, while that lowers the score (the
+    leaves as they are, not refined again). After the face moves: a trim that made up
+    for a face the moves have put right then only costs its penalty (the drops of
+    :meth:`_Search.drops` come before the face moves, and refine the rest, which can
+    move a face no point holds)."""
+    scorer = prob.pool.scorer()
+    while T.size(best.tree) > 1:
+        for c in T.leaves(best.tree):
+            rest = T.remove(best.tree, c)
+            if rest is None or not consistent(rest, scorer.signs):
+                continue
+            sc = scorer.score(rest)
+            if sc.total < best.total - 1e-12:
+                best = sc
+                break
+        else:
+            break
+    return best
+
+
 def _through_final(prob: _Problem, best: Scored) -> Scored:
     """``best`` with each cut (a box or cylinder cut away) moved out where no point
     shows its faces, unless that scores worse by more than a hundredth of the penalty:
@@ -909,6 +930,9 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     run.drops()
     assert run.best is not None
     best = _move_faces(prob, run.best, t0 + FACES_UNTIL * float(time_limit))
+    dropped = _drop_leaves(prob, best)
+    if dropped is not best:
+        best = _move_faces(prob, dropped, t0 + FACES_UNTIL * float(time_limit))
     if best is not run.best:
         run.history.append((time.perf_counter() - t0, T.size(best.tree), best.total, best.tree))
     history = run.history

@@ -26,8 +26,9 @@
    level); the trees refined are the best of the best tree's size and of one leaf
    fewer or more, and the best of every other size; each refined tree is polished by
    local moves over all candidates and its own refined primitives, and refined again
-   when that changed it; the lowest score wins. A cone whose taper is within the noise is
-   written as its cylinder (:func:`_straighten`).
+   when that changed it; the lowest score wins. After the final face moves, leaves
+   are dropped while that lowers the score (:func:`_drop_leaves`). A cone whose
+   taper is within the noise is written as its cylinder (:func:`_straighten`).
 5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
    cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
    ``InferResult.alternatives``; ``prefer='local'`` or ``'global'`` returns the one

@@ -179,6 +179,12 @@ SEEDED_STRUCTURE = {
 }
 
 
+#: other writings of the same solid: C's hole misses the ring, so it is cut before or
+#: after the ring's union (no point can tell; ``infer`` returns either, by a score
+#: difference far under one point)
+SAME_SOLID = {"C": ["((((block - notch) | ball) | ring) - hole)"]}
+
+
 @pytest.mark.parametrize("name", sorted(SEEDED_TREES))
 def test_exact_structure_of_seeded_trees(name):
     """Boxes from faces that do not meet (a box trimmed by a sphere), a notch cut from a
@@ -200,8 +206,9 @@ def test_exact_structure_of_seeded_trees(name):
     assert len(label) == len(where), res.tree
     labels = sorted(label.values())
     got = T.from_text(res.tree, lambda k: labels.index(label[k]))
-    expect = T.from_text(want, labels.index)
-    assert T.canonical(got) == T.canonical(expect), res.tree
+    expect = [T.canonical(T.from_text(w, labels.index))
+              for w in [want] + SAME_SOLID.get(name, [])]
+    assert T.canonical(got) in expect, res.tree
     q = np.random.default_rng(2).uniform(-1.2, 1.2, (20_000, 3))
     a = csdf.as_field(shape).value(q) <= 0
     b = csdf.as_field(res.shape).value(q) <= 0

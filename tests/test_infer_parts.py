@@ -305,6 +305,78 @@ def test_refinement_recovers_sizes_and_positions():
     assert math.isclose(out["ch"], 1.0)  # the hole's length shows in no point
 
 
+@pytest.mark.parametrize("kind,vals", [
+    ("box", {"size_x": 1.0, "size_y": 0.5, "size_z": 0.3}),
+    ("cone", {"r1": 0.4, "r2": 0.2, "height": 0.8}),
+    ("torus", {"major": 0.4, "minor": 0.1}),
+])
+def test_a_leaf_turned_by_the_refinement_is_the_shape_it_fitted(kind, vals):
+    """The refinement's shape (turn angles as parameters) and the leaf posed by
+    ``R @ turn_matrix(...)`` are one solid."""
+    from csdf.infer import api as A
+    from csdf.infer.refine import turn_matrix
+    from csdf.shapes.domain import orient_matrix
+
+    R = np.eye(3) if kind == "box" else orient_matrix([0.3, 0.2, 0.9])
+    lf = Leaf(kind, R, np.array([0.1, 0.2, 0.3]), vals)
+    ang = {"x": 0.1, "y": -0.2, "z": 0.3 if kind == "box" else 0.0}
+    X = np.random.default_rng(0).normal(size=(300, 3))
+    params = {f"a_turn_{k}": v for k, v in ang.items() if k in A.TURNS[kind]}
+    f = csdf.as_field(A._leaf_shape(lf, "a", True), params=params).value(X)
+    posed = lf.moved(R=R @ turn_matrix(ang["x"], ang["y"], ang["z"]))
+    assert np.allclose(f, posed.values(X)[0], atol=1e-12)
+    assert np.allclose(A._turned(lf, ang["x"], ang["y"], ang["z"]).values(X)[0],
+                       posed.values(X)[0], atol=1e-12)
+
+
+def test_refinement_turns_an_axis_detected_askew():
+    """A cone detected 5.5 degrees off its axis is turned onto it (and snapped to the
+    coordinate axis it lies along) by the joint refinement, with its sizes."""
+    from types import SimpleNamespace
+
+    from csdf.infer import api as A
+    from csdf.shapes.domain import orient_matrix
+
+    shape = csdf.box((1.0, 1.0, 0.4)) | \
+        csdf.capped_cone(0.35, 0.1, 0.6).translate((0.0, 0.0, 0.2))
+    P, N = csdf.sample_surface(shape, 8000, seed=1)
+    P = P + np.random.default_rng(0).normal(0.0, 0.003, P.shape)
+    a = math.radians(5.5)
+    leaves = [Leaf("box", np.eye(3), np.array([0.01, 0.0, 0.0]),
+                   {"size_x": 1.0, "size_y": 1.02, "size_z": 0.4}, 1),
+              Leaf("cone", orient_matrix([math.sin(a), 0.0, math.cos(a)]),
+                   np.array([0.02, 0.01, 0.2]), {"r1": 0.34, "r2": 0.11, "height": 0.6}, 1)]
+    idx = np.random.default_rng(0).choice(len(P), 2000, replace=False)
+    prob = SimpleNamespace(pool=SimpleNamespace(leaves=leaves), fit_points=P[idx],
+                           fit_normals=N[idx], fit_free=None, tau=0.01)
+    still = A._refine(prob, ("union", 0, 1), False)[1]
+    assert still.R[0, 2] == pytest.approx(math.sin(a))  # without turns: kept
+    cone = A._refine(prob, ("union", 0, 1), True)[1]
+    assert np.array_equal(cone.R[:, 2], [0.0, 0.0, 1.0])
+    assert cone.vals["r1"] == pytest.approx(0.35, abs=0.005)
+    assert cone.vals["r2"] == pytest.approx(0.1, abs=0.005)
+    assert np.allclose(cone.t[:2], 0.0, atol=0.005)
+
+
+def test_every_size_best_tree_is_refined():
+    """The trees refined: by turns of the best tree's size and one leaf fewer or more,
+    then the best of every other size (only those first ones polished whatever their
+    score)."""
+    from csdf.infer import api as A
+    from csdf.infer.search import Scored
+
+    trees = [("union", ("union", 0, 1), ("union", 2, 3)), ("union", ("union", 0, 1), 4),
+             ("union", ("union", 0, 2), 4), ("union", 0, 1), 0,
+             ("union", ("union", ("union", 0, 1), ("union", 2, 3)), 5)]
+    found = [Scored(t, 0.0, 0.0, 0.1 + 0.01 * i) for i, t in enumerate(trees)]
+    out, polished = A._to_refine(found, 3)
+    assert out[:polished] == [trees[0], trees[1], trees[5]]  # sizes 4, 3, 5
+    assert out[polished:] == [trees[4], trees[3]]  # sizes 1 and 2
+    out, polished = A._to_refine(found, 5)
+    assert out[:polished] == [trees[0], trees[1], trees[5], trees[2]]
+    assert out[polished:] == [trees[4], trees[3]]
+
+
 def test_a_notch_taken_for_a_cylinder_gives_its_planes():
     """Two faces at right angles (a notch's floor and wall), which a cylinder follows
     within a few noise levels, are found as two planes when they fit better."""
@@ -389,3 +461,24 @@ def test_a_cone_whose_taper_is_within_the_noise_is_its_cylinder():
         if want == "cylinder":
             assert lf.vals["radius"] == pytest.approx(0.4)
             assert np.allclose(lf.t, 0.0)
+
+
+def test_a_trim_that_trims_nothing_is_dropped_after_the_face_moves():
+    """A leaf whose removal lowers the score (a trim around the whole part: only its
+    penalty) is dropped, and the rest stays as it is."""
+    from types import SimpleNamespace
+
+    from csdf.infer import api as A
+
+    shape = csdf.box((1.0, 0.8, 0.6)) - csdf.sphere(0.3).translate((0.5, 0.0, 0.3))
+    P, N = csdf.sample_surface(shape, 4000, seed=2)
+    leaves = [Leaf("box", np.eye(3), np.zeros(3), {"size_x": 1.0, "size_y": 0.8,
+                                                   "size_z": 0.6}, 1),
+              Leaf("sphere", np.eye(3), np.array([0.5, 0.0, 0.3]), {"radius": 0.3}, -1),
+              Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0,
+                                                   "size_z": 2.0}, 1)]
+    prob = SimpleNamespace(pool=_pool(P, N, leaves))
+    trimmed = prob.pool.scorer().score(("difference", ("intersection", 0, 2), 1))
+    out = A._drop_leaves(prob, trimmed)
+    assert out.tree == ("difference", 0, 1)
+    assert out.total == pytest.approx(trimmed.total - 0.004, abs=1e-9)

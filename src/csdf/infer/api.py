@@ -20,12 +20,15 @@
    curved detection kept (:func:`_residual`); the beam search resumes with those
    candidates too.
 4. **Parameters**: the best trees' continuous parameters (every primitive's sizes and
-   position, named ``cylinder_1_radius``, ``cylinder_1_x``, ...) refined jointly by
-   :func:`csdf.fit` (Levenberg-Marquardt on the exact parameter Jacobian of the whole
-   tree, Huber loss at the noise level); each refined tree is polished by local moves
-   over all candidates and its own refined primitives, and refined again when that
-   changed it; the lowest score wins. A cone whose taper is within the noise is
-   written as its cylinder (:func:`_straighten`).
+   position, named ``cylinder_1_radius``, ``cylinder_1_x``, ..., and its orientation
+   as turns about its own axes) refined jointly (:mod:`.refine`: Levenberg-Marquardt
+   on the exact parameter Jacobian of the whole tree, a Cauchy loss at the noise
+   level); the trees refined are the best of the best tree's size and of one leaf
+   fewer or more, and the best of every other size; each refined tree is polished by
+   local moves over all candidates and its own refined primitives, and refined again
+   when that changed it; the lowest score wins. After the final face moves, leaves
+   are dropped while that lowers the score (:func:`_drop_leaves`). A cone whose
+   taper is within the noise is written as its cylinder (:func:`_straighten`).
 5. **Alternatives**: the trees the points cannot tell from the winner (its trims and
    cuts applied elsewhere, scoring within :data:`INDISTINCT` of the penalty) are
    ``InferResult.alternatives``; ``prefer='local'`` or ``'global'`` returns the one
@@ -33,8 +36,7 @@
 
 The effort (beam width, trees refined) is fixed for a given ``time_limit``, so that a
 seed gives the same result on any machine; the time limit stops the search early only
-on a machine too slow for that effort. The orientations of the primitives are the
-detected ones (not refined jointly).
+on a machine too slow for that effort.
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ from .candidates import (
     snap,
 )
 from .pool import Pool, View, free_points, oriented_normals, support_scales
-from .refine import refine_params
+from .refine import refine_params, turn_matrix
 from .search import (
     Scored,
     beam_search,
@@ -264,8 +266,17 @@ def _straighten(prob: _Problem, best: Scored) -> Scored:
     return best
 
 
-def _leaf_shape(lf: Leaf, name: str):
-    """A leaf as a csdf shape: sizes and position as parameters named after ``name``."""
+#: the turn angles (radians) the joint refinement gives each kind of leaf
+#: (:func:`.refine.turn_matrix`): about its own x and y axes (a tilt of a cylinder's,
+#: cone's or torus's axis; a turn about that axis changes nothing), a box also about z
+TURNS = {"box": ("x", "y", "z"), "cylinder": ("x", "y"), "cone": ("x", "y"),
+         "torus": ("x", "y"), "sphere": ()}
+
+
+def _leaf_shape(lf: Leaf, name: str, turn: bool = False):
+    """A leaf as a csdf shape: sizes and position as parameters named after ``name``;
+    with ``turn``, also the leaf's turn angles :data:`TURNS` (``{name}_turn_x``, ...,
+    radians, 0 here) about its own axes, for the joint refinement."""
     p = {k: param(f"{name}_{k}", float(v), 0.0, math.inf) for k, v in lf.vals.items()}
     if lf.kind == "sphere":
         s = sphere(p["radius"])
@@ -277,6 +288,9 @@ def _leaf_shape(lf: Leaf, name: str):
         s = torus(p["major"], p["minor"])
     else:
         s = box((p["size_x"], p["size_y"], p["size_z"]))
+    if turn:  # about z first, then x, then y (turn_matrix's order)
+        for ax in sorted(TURNS[lf.kind], key="zxy".index):
+            s = s.rotate(param(f"{name}_turn_{ax}", 0.0), ax)
     a = lf.R[:, 2]
     if lf.kind in ("cylinder", "cone", "torus") and np.allclose(lf.R, orient_matrix(a),
                                                                 atol=1e-15):
@@ -292,9 +306,9 @@ def _leaf_shape(lf: Leaf, name: str):
     return s.translate(pos)
 
 
-def _shape(tree, leaves: list[Leaf]):
+def _shape(tree, leaves: list[Leaf], turn: bool = False):
     names = _names(tree, leaves)
-    return T.build(tree, lambda i: _leaf_shape(leaves[i], names[i])), names
+    return T.build(tree, lambda i: _leaf_shape(leaves[i], names[i], turn)), names
 
 
 @dataclass
@@ -468,14 +482,23 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
     return prob
 
 
-def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
-    """The tree's leaves after a joint fit of all their sizes and positions
-    (:func:`.refine.refine_params` on the fit sample and, with a viewpoint, the
-    free-space points): ``{leaf index: refined Leaf}`` (unchanged when the fit fails)."""
+#: whether the joint refinement also turns the leaves (:data:`TURNS`;
+#: :func:`_refined_tree`)
+REFINE_TURNS = True
+
+
+def _refine(prob: _Problem, tree, turn: bool = False) -> dict[int, Leaf]:
+    """The tree's leaves after a joint fit of all their sizes, positions and (with
+    ``turn``) orientations (:func:`.refine.refine_params` on the fit
+    sample and, with a viewpoint, the free-space points): ``{leaf index: refined
+    Leaf}`` (unchanged when the fit fails). A turned leaf's axes within
+    :data:`.candidates.SNAP_DEGREES` of the coordinate axes are turned onto them, as
+    a detection's are (:func:`.candidates.snap`)."""
     leaves = prob.pool.leaves
-    shape, names = _shape(tree, leaves)
+    shape, names = _shape(tree, leaves, turn)
     values: dict[str, float] = {}
     sizes: set[str] = set()
+    turns: set[str] = set()
     for i, name in names.items():
         lf = leaves[i]
         for k in SOLID_PARAMS[lf.kind]:
@@ -483,9 +506,12 @@ def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
             sizes.add(f"{name}_{k}")
         for a, v in zip("xyz", lf.t):
             values[f"{name}_{a}"] = float(v)
+        for ax in TURNS[lf.kind] if turn else ():
+            values[f"{name}_turn_{ax}"] = 0.0
+            turns.add(f"{name}_turn_{ax}")
     try:
         res = refine_params(shape, values, sizes, prob.fit_points, prob.fit_normals,
-                            prob.fit_free, prob.tau, REFINE_BACKEND)
+                            prob.fit_free, prob.tau, REFINE_BACKEND, turns)
     except (CsdfError, np.linalg.LinAlgError):
         return {i: leaves[i] for i in names}
     out = {}
@@ -493,19 +519,43 @@ def _refine(prob: _Problem, tree) -> dict[int, Leaf]:
         lf = leaves[i]
         vals = {k: float(res[f"{name}_{k}"]) for k in SOLID_PARAMS[lf.kind]}
         t = np.array([res[f"{name}_{a}"] for a in "xyz"], dtype=np.float64)
-        if not (np.all(np.isfinite(t)) and all(np.isfinite(v) for v in vals.values())):
+        ang = {ax: float(res.get(f"{name}_turn_{ax}", 0.0)) for ax in "xyz"}
+        if not (np.all(np.isfinite(t)) and all(np.isfinite(v) for v in vals.values())
+                and all(np.isfinite(v) for v in ang.values())):
             return {i: leaves[i] for i in names}
-        out[i] = lf.moved(t=t, vals=vals, origin="refined")
+        new = lf.moved(t=t, vals=vals, origin="refined")
+        if any(ang.values()):
+            new = _turned(new, ang["x"], ang["y"], ang["z"])
+        out[i] = new
     return out
 
 
-def _refine_and_polish(prob: _Problem, tree, maxp: int, deadline: float) -> Scored:
+def _turned(lf: Leaf, ax: float, ay: float, az: float) -> Leaf:
+    """``lf`` turned about its own axes by the refinement's angles (radians,
+    :func:`.refine.turn_matrix`); a cylinder's, cone's or torus's frame then is
+    :func:`orient_matrix` of its axis (its turn about the axis changes nothing), and
+    axes within :data:`.candidates.SNAP_DEGREES` of the coordinate axes are turned
+    onto them (:func:`.candidates.snap`). The frame's origin stays where it is."""
+    R = lf.R @ turn_matrix(ax, ay, az)
+    if lf.kind in ("cylinder", "cone", "torus"):
+        R = orient_matrix(R[:, 2])
+    return snap(lf.moved(R=R))
+
+
+def _refine_and_polish(prob: _Problem, tree, maxp: int, deadline: float,
+                       polish_below: float = math.inf) -> Scored:
     """``tree`` refined jointly, polished by local moves (:func:`search.polish`) over
-    every candidate and its refined leaves, and refined again when that changed it."""
+    every candidate and its refined leaves, and refined again when that changed it.
+    Not polished when the refined tree scores ``polish_below`` or more (a tree refined
+    only in case its refinement makes it the best)."""
     pool = prob.pool
     sc = pool.scorer().score(tree)
     for _ in range(2):
         tree = _refined_tree(prob, tree)
+        if polish_below < math.inf:
+            sc = pool.scorer().score(tree)
+            if sc.total >= polish_below:
+                return sc
         sc = polish(pool.scorer(), tree, list(range(len(pool.leaves))), maxp, deadline,
                     pool.kinds)
         if T.normal_form(sc.tree) == T.normal_form(tree):
@@ -521,11 +571,26 @@ def _relabel(tree, mapping: dict[int, int]):
 
 
 def _refined_tree(prob: _Problem, tree):
-    """The tree over its jointly refined leaves (added to the pool)."""
-    new = _refine(prob, tree)
+    """The tree over its jointly refined leaves (added to the pool): sizes and
+    positions first; then (:data:`REFINE_TURNS`, a tree with a leaf other than a
+    sphere) orientations too, from there, kept when the tree then scores lower. The
+    refinement's objective knows the points, not the made-up surface: with more
+    freedom it can move an end no point holds (a hole's end into the part it should
+    pass through), so the score decides."""
+    new = _refine(prob, tree, False)
     keys = list(new)
     idx = prob.pool.add([new[k] for k in keys])
-    return _relabel(tree, dict(zip(keys, idx)))
+    out = _relabel(tree, dict(zip(keys, idx)))
+    if not REFINE_TURNS or not any(TURNS[prob.pool.leaves[i].kind] for i in T.leaves(out)):
+        return out
+    new = _refine(prob, out, True)
+    keys = list(new)
+    idx = prob.pool.add([new[k] for k in keys])
+    turned = _relabel(out, dict(zip(keys, idx)))
+    scorer = prob.pool.scorer()
+    if scorer.score(turned).total < scorer.score(out).total - 1e-12:
+        return turned
+    return out
 
 
 def _residual(prob: _Problem, tree) -> list[Leaf]:
@@ -605,6 +670,27 @@ def _move_faces(prob: _Problem, best: Scored, deadline: float, rounds: int = FAC
     return best
 
 
+def _drop_leaves(prob: _Problem, best: Scored) -> Scored:
+    """``best`` with leaves dropped, one at a time, while that lowers the score (the
+    leaves as they are, not refined again). After the face moves: a trim that made up
+    for a face the moves have put right then only costs its penalty (the drops of
+    :meth:`_Search.drops` come before the face moves, and refine the rest, which can
+    move a face no point holds)."""
+    scorer = prob.pool.scorer()
+    while T.size(best.tree) > 1:
+        for c in T.leaves(best.tree):
+            rest = T.remove(best.tree, c)
+            if rest is None or not consistent(rest, scorer.signs):
+                continue
+            sc = scorer.score(rest)
+            if sc.total < best.total - 1e-12:
+                best = sc
+                break
+        else:
+            break
+    return best
+
+
 def _through_final(prob: _Problem, best: Scored) -> Scored:
     """``best`` with each cut (a box or cylinder cut away) moved out where no point
     shows its faces, unless that scores worse by more than a hundredth of the penalty:
@@ -673,9 +759,19 @@ def _preferred(alternatives: list[Scored], prefer: str) -> Scored:
     return Scored(T.cuts_last(win.tree), win.data, win.free, win.total)
 
 
-def _to_refine(found: list[Scored], n: int) -> list:
-    """Up to ``n`` trees of ``found`` (best first) to refine: by turns the best not yet
-    taken of the best tree's size, of one leaf fewer and of one leaf more."""
+#: whether :func:`_to_refine` also takes the best tree of every other size
+REFINE_EVERY_SIZE = True
+
+
+def _to_refine(found: list[Scored], n: int) -> tuple[list, int]:
+    """The trees of ``found`` (best first) to refine, and how many of them to polish
+    whatever their refined score (the first ones): up to ``n`` taken by turns, the
+    best not yet taken of the best tree's size, of one leaf fewer and of one leaf
+    more; then (:data:`REFINE_EVERY_SIZE`) the best tree of each other size, smallest
+    first (polished only when refined it is the best so far: a polish from a small
+    tree is a search of its own). Refinement moves scores by more than a penalty, and
+    an unrefined larger tree can beat a smaller one only because the smaller one was
+    never refined."""
     k = T.size(found[0].tree)
     groups = [[s.tree for s in found if T.size(s.tree) == m] for m in (k, k - 1, k + 1)]
     out: list = []
@@ -683,7 +779,11 @@ def _to_refine(found: list[Scored], n: int) -> list:
         for g in groups:
             if g and len(out) < n:
                 out.append(g.pop(0))
-    return out
+    n = len(out)
+    if REFINE_EVERY_SIZE:
+        for m in sorted({T.size(s.tree) for s in found} - {k, k - 1, k + 1}):
+            out.append(next(s.tree for s in found if T.size(s.tree) == m))
+    return out, n
 
 
 class _Search:
@@ -724,15 +824,17 @@ class _Search:
         self._better(found[0])
         return found
 
-    def refine(self, tree) -> None:
+    def refine(self, tree, polish: bool = True) -> None:
         """Refine and polish ``tree`` (:func:`_refine_and_polish`) unless one of its
-        normal form was, or no time is left."""
+        normal form was, or no time is left; without ``polish``, polished only when
+        the refined tree is the best so far."""
         key = T.normal_form(tree)
         if key in self.done or (self.best is not None and not self._time_left()):
             return
         self.done.add(key)
         ts = time.perf_counter()
-        sc = _refine_and_polish(self.prob, tree, self.maxp, self.deadline)
+        below = math.inf if polish or self.best is None else self.best.total
+        sc = _refine_and_polish(self.prob, tree, self.maxp, self.deadline, below)
         self.slowest = max(self.slowest, time.perf_counter() - ts)
         self._better(sc)
         _note(self.t0, "refined", sc.total, sc.tree)
@@ -836,13 +938,17 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
             break
         found = run.beam([s.tree for s in found])
     # joint refinement of the best trees (of the best one's size and one leaf fewer or
-    # more: refinement moves scores by more than a penalty), then of the best with each
-    # leaf dropped
-    for tree in _to_refine(found, max(3, int(REFINE_PER_SECOND * effort))):
-        run.refine(tree)
+    # more, and the best of every other size: refinement moves scores by more than a
+    # penalty), then of the best with each leaf dropped
+    trees, polished = _to_refine(found, max(3, int(REFINE_PER_SECOND * effort)))
+    for j, tree in enumerate(trees):
+        run.refine(tree, j < polished)
     run.drops()
     assert run.best is not None
     best = _move_faces(prob, run.best, t0 + FACES_UNTIL * float(time_limit))
+    dropped = _drop_leaves(prob, best)
+    if dropped is not best:
+        best = _move_faces(prob, dropped, t0 + FACES_UNTIL * float(time_limit))
     if best is not run.best:
         run.history.append((time.perf_counter() - t0, T.size(best.tree), best.total, best.tree))
     history = run.history

@@ -1,5 +1,5 @@
-"""Joint refinement of a CSG tree's continuous parameters: every primitive's sizes and
-position, by Levenberg-Marquardt on the exact parameter Jacobian of the whole tree
+"""Joint refinement of a CSG tree's continuous parameters: every primitive's sizes,
+position and orientation, by Levenberg-Marquardt on the exact parameter Jacobian of the whole tree
 (one forward-mode pass of the compiled tree gives values, gradients and
 ``d f / d params`` at every point).
 
@@ -13,26 +13,50 @@ The objective follows the search's score (:mod:`.search`), smoothed:
 * free space (a single-view scan): ``mean(min(f(q), 0)^2) / tau^2`` over points the
   sensor looked through: material there is pushed out of the rays.
 
-The orientations of the leaves are kept; sizes stay positive.
+Sizes stay positive. Orientations are refined as turns of each leaf's own frame by
+angles that start at 0 (:func:`turn_matrix`: about the leaf's x and y axes, which tilt
+a cylinder's, cone's or torus's axis, and for a box also about its z axis), each kept
+within :data:`MAX_TURN` of the start; the caller names the angle parameters.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from ..field import as_field
 
-__all__ = ["refine_params", "ITERATIONS"]
+__all__ = ["refine_params", "turn_matrix", "ITERATIONS", "MAX_TURN"]
 
 #: Levenberg-Marquardt iterations at most
 ITERATIONS = 25
 #: the smallest size (a share of ``tau``) a primitive keeps
 MIN_SIZE = 0.5
+#: the largest turn (radians, each angle) a refinement gives a leaf: about 17 degrees,
+#: three times the largest error of a detected axis seen (5.5 degrees); a larger turn
+#: is another candidate's job, not a correction
+MAX_TURN = 0.3
+
+
+def turn_matrix(ax: float = 0.0, ay: float = 0.0, az: float = 0.0) -> np.ndarray:
+    """``(3, 3)`` the rotation ``Ry(ay) Rx(ax) Rz(az)`` (radians, right-hand rule): a
+    leaf turned by the angles of a refinement is posed by ``R @ turn_matrix(...)``
+    (the shape turned about its own z, then x, then y axis before its rotation
+    ``R``)."""
+    def rot(a: float, i: int) -> np.ndarray:
+        c, s = math.cos(a), math.sin(a)
+        j, k = (i + 1) % 3, (i + 2) % 3
+        m = np.eye(3)
+        m[j, j], m[j, k], m[k, j], m[k, k] = c, -s, s, c
+        return m
+
+    return rot(ay, 1) @ rot(ax, 0) @ rot(az, 2)
 
 
 def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarray,
                   NX: np.ndarray | None, Q: np.ndarray | None, tau: float,
-                  backend: str) -> dict[str, float]:
+                  backend: str, turns: set[str] | None = None) -> dict[str, float]:
     """The parameter values of ``shape`` that fit the points best.
 
     Args:
@@ -44,6 +68,8 @@ def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarra
         Q: ``(K, 3)`` free-space points (scene units), or None.
         tau: the noise level (scene units).
         backend: the evaluator.
+        turns: the names that are turn angles (radians, kept within
+            :data:`MAX_TURN` of their start).
 
     Returns:
         The refined ``{name: value}`` (the start when no step lowered the objective).
@@ -51,7 +77,12 @@ def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarra
     fld = as_field(shape, params=values, backend=backend, check_ranges=False)
     names = list(fld.param_names)
     theta = np.array([values[n] for n in names], dtype=np.float64)
+    turns = turns or set()
     lo = np.array([MIN_SIZE * tau if n in sizes else -np.inf for n in names])
+    hi = np.full(len(names), np.inf)
+    for i, n in enumerate(names):
+        if n in turns:
+            lo[i], hi[i] = theta[i] - MAX_TURN, theta[i] + MAX_TURN
     c = 0.5 * tau
     pts = X if Q is None else np.concatenate([X, Q])
     m = len(X)
@@ -90,7 +121,7 @@ def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarra
         improved = False
         for _ in range(8):
             step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -b)
-            cand = np.maximum(theta + step, lo)
+            cand = np.clip(theta + step, lo, hi)
             f2, _, _ = evaluate(cand, False)
             c2 = cost(f2, keep)
             if np.isfinite(c2) and c2 < best:

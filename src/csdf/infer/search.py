@@ -49,7 +49,8 @@ from .tree import Tree, field_of, leaves, normal_form, remove, replace, size
 #: none, which penalises larger trees. ``1e-6`` counts only where the leaf is the
 #: active operand (its own value is 0 there, to round-off): the made-up surface as
 #: defined, but the search then finds some larger trees that the size penalty alone
-#: does not stop (benchmarks/INFER_RESULTS.md, session 16)
+#: does not stop (benchmarks/INFER_RESULTS.md, sessions 16 and 17: with orientations
+#: refined it keeps tree 88 and one-view 28, and loses one-view 79)
 ON_SURFACE = 1.0
 
 __all__ = ["Scorer", "Scored", "beam_search", "polish", "consistent", "parities", "swap",

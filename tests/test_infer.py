@@ -181,8 +181,11 @@ SEEDED_STRUCTURE = {
 
 #: other writings of the same solid: C's hole misses the ring, so it is cut before or
 #: after the ring's union (no point can tell; ``infer`` returns either, by a score
-#: difference far under one point)
-SAME_SOLID = {"C": ["((((block - notch) | ball) | ring) - hole)"]}
+#: difference far under one point); so may the notch be, as its outer face, which no
+#: point shows (it lies past the block's end), may stop short of the ring (the
+#: inferred one stops at x = 0.71, the ring starts at 0.72)
+SAME_SOLID = {"C": ["((((block - notch) | ball) | ring) - hole)",
+                    "((((block | ball) | ring) - hole) - notch)"]}
 
 
 @pytest.mark.parametrize("name", sorted(SEEDED_TREES))

@@ -482,3 +482,97 @@ def test_a_trim_that_trims_nothing_is_dropped_after_the_face_moves():
     out = A._drop_leaves(prob, trimmed)
     assert out.tree == ("difference", 0, 1)
     assert out.total == pytest.approx(trimmed.total - 0.004, abs=1e-9)
+
+
+def test_a_large_leaf_gets_more_surface_points_and_supported_ones_are_dropped():
+    """A leaf's points for the made-up surface grow with its area, so that one stands
+    for at most ``SURFACE_SHARE`` of the measured area; points measured points support
+    (the way the leaf's sign lets it be used) never count, and only the others are
+    kept."""
+    from csdf.infer.pool import SURFACE_MAX, SURFACE_SAMPLES, SURFACE_SHARE, surface_samples
+
+    assert surface_samples(0.01, 1.0) == SURFACE_SAMPLES
+    n = surface_samples(1.0, 1.0)
+    assert n == math.ceil(1.0 / SURFACE_SHARE) and SURFACE_SAMPLES < n < SURFACE_MAX
+    assert surface_samples(1e6, 1.0) == SURFACE_MAX
+    assert surface_samples(1.0, 0.0) == SURFACE_SAMPLES
+    P, N = csdf.sample_surface(csdf.box((1.0, 1.0, 1.0)), 20_000, seed=3)
+    cube = Leaf("box", np.eye(3), np.zeros(3), {"size_x": 1.0, "size_y": 1.0, "size_z": 1.0},
+                1)
+    big = Leaf("box", np.eye(3), np.zeros(3), {"size_x": 3.0, "size_y": 3.0, "size_z": 3.0},
+               1)
+    pool = _pool(P, N, [cube, big])
+    kept = np.bincount(pool.owner, minlength=2)
+    assert kept[0] < 0.01 * surface_samples(6.0, pool.area)  # the cube's: all supported
+    assert kept[1] > 0.9 * surface_samples(54.0, pool.area)  # the big box's: none
+    w = pool.weight[pool.owner == 1] / pool.area
+    assert w.max() <= max(SURFACE_SHARE, 54.0 / pool.area / SURFACE_MAX) * 1.0001
+    sc = pool.scorer()
+    assert sc.score(0).free < 0.01 and sc.score(1).free > 5.0
+
+
+def test_a_trial_scores_as_the_leaf_added():
+    """:meth:`Pool.trial` scores a tree with one leaf replaced as the pool scores it once
+    the leaf is added (the same draws of its surface points)."""
+    import copy
+
+    shape = csdf.box((2.0, 2.0, 0.5)) - csdf.cylinder(0.3, 1.0)
+    P, N = csdf.sample_surface(shape, 8000, seed=4)
+    box = Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 0.5}, 1)
+    cyl = Leaf("cylinder", np.eye(3), np.array([0.0, 0.0, 0.1]),
+               {"radius": 0.3, "height": 0.3}, -1)
+    other = Leaf("sphere", np.eye(3), np.array([3.0, 0.0, 0.0]), {"radius": 0.2}, 1)
+    pool = _pool(P, N, [box, other, cyl])
+    tree = ("difference", 0, 2)
+    longer = cyl.moved(t=np.zeros(3), vals={"radius": 0.3, "height": 0.7})
+    twin = copy.deepcopy(pool)
+    tried = pool.trial(tree, 2, [longer])[0]
+    v = twin.add([longer])[0]
+    added = twin.scorer().score(("difference", 0, v))
+    assert tried.total == pytest.approx(added.total, abs=1e-12)
+    assert tried.free == pytest.approx(added.free, abs=1e-12)
+    assert tried.total < pool.scorer().score(tree).total - 0.01  # the skin is gone
+    assert len(pool.leaves) == 3  # nothing added
+
+
+def test_estimated_normals_support_surface_near_an_edge():
+    """With estimated normals a measured point supports surface facing within 90
+    degrees of its normal (near an edge they lean towards the other face); with given
+    normals within 60. Surface facing away is unsupported either way."""
+    from scipy.spatial import cKDTree
+
+    P = np.zeros((1, 3))
+    N = np.array([[0.0, 0.0, 1.0]])
+    tilt = math.radians(75.0)
+    g = np.array([[math.sin(tilt), 0.0, math.cos(tilt)], [0.0, 0.0, -1.0]])
+    q = np.array([[0.001, 0.0, 0.0], [0.001, 0.0, 0.0]])
+    for estimated, want in ((False, [True, True]), (True, [False, True])):
+        pool = Pool(P, N, None, cKDTree(P), N, 0.01, 1.0, 0.01, 0.004,
+                    np.random.default_rng(0), None, estimated)
+        assert pool._unsupported(q, g)[0].tolist() == want  # as material
+
+
+def test_a_cut_refined_short_is_moved_through():
+    """A hole through a plate, given as a cut that stops short of the plate's bottom
+    (a skin no point shows): :func:`_cuts_through` moves its end out and the tree then
+    scores lower; a cut that is right stays as it is."""
+    from types import SimpleNamespace
+
+    from csdf.infer import api as A
+
+    shape = csdf.box((2.0, 2.0, 0.5)) - csdf.cylinder(0.3, 1.0)
+    P, N = csdf.sample_surface(shape, 20_000, seed=5)
+    box = Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 0.5}, 1)
+    short = Leaf("cylinder", np.eye(3), np.array([0.0, 0.0, 0.15]),
+                 {"radius": 0.3, "height": 0.4}, -1)  # z from -0.05 to 0.35
+    through = Leaf("cylinder", np.eye(3), np.zeros(3), {"radius": 0.3, "height": 1.0}, -1)
+    prob = SimpleNamespace(pool=_pool(P, N, [box, short, through]), P=P)
+    before = prob.pool.scorer().score(("difference", 0, 1))
+    out = A._cuts_through(prob, ("difference", 0, 1))
+    cut = prob.pool.leaves[out[2]]
+    assert out[2] != 1 and cut.t[2] - cut.vals["height"] / 2 <= -0.25 + 1e-9
+    assert prob.pool.scorer().score(out).total < before.total - 0.01
+    kept = A._cuts_through(prob, ("difference", 0, 2))  # through already
+    cut = prob.pool.leaves[kept[2]]
+    assert cut.t[2] - cut.vals["height"] / 2 <= -0.25 + 1e-9
+    assert cut.t[2] + cut.vals["height"] / 2 >= 0.25 - 1e-9

@@ -34,7 +34,9 @@ from ..errors import CsdfError
 from ..fit import fit
 from ..shapes.domain import orient_matrix
 
-__all__ = ["Leaf", "snap", "extended", "face_moves", "leaf_surface", "plane_boxes",
+__all__ = ["Leaf", "snap", "extended", "face_moves", "leaf_surface",
+           "leaf_area",
+           "plane_boxes",
            "other_kind",
            "orientation", "same_leaf", "SNAP_DEGREES", "EXTEND_BELOW", "FRAME_DEGREES"]
 
@@ -240,6 +242,22 @@ def leaf_surface(lf: Leaf, n: int, rng: np.random.Generator
         cap_n = np.where(on_base, -1.0, 1.0)[:, None] * z_axis
         nrm = np.where(on_side[:, None], side_n, cap_n)
     return q @ lf.R.T + lf.t, nrm @ lf.R.T, float(area)
+
+
+def leaf_area(lf: Leaf) -> float:
+    """The area of a leaf's surface (scene units squared), as :func:`leaf_surface`
+    gives it, without drawing points."""
+    v = lf.vals
+    if lf.kind == "sphere":
+        return 4 * math.pi * v["radius"] ** 2
+    if lf.kind == "torus":
+        return 4 * math.pi ** 2 * v["major"] * v["minor"]
+    if lf.kind == "box":
+        x, y, z = v["size_x"], v["size_y"], v["size_z"]
+        return 2.0 * (x * y + y * z + x * z)
+    r1, r2 = (v["radius"], v["radius"]) if lf.kind == "cylinder" else (v["r1"], v["r2"])
+    return math.pi * (r1 + r2) * math.hypot(v["height"], r1 - r2) + \
+        math.pi * (r1 * r1 + r2 * r2)
 
 
 def orientation(lf: Leaf, Q: np.ndarray, NQ: np.ndarray) -> int:

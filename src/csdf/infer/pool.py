@@ -10,22 +10,73 @@ import math
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from .candidates import Leaf, leaf_surface, same_leaf
-from .search import Scorer
+from .candidates import Leaf, leaf_area, leaf_surface, same_leaf
+from .search import Scored, Scorer, swap
+from .tree import leaves as tree_leaves
 
 __all__ = ["Pool", "free_points", "background_points", "oriented_normals", "support_scales",
            "foreshortening",
-           "SURFACE_SAMPLES", "ORIENTED", "SUPPORT_COS"]
+           "surface_samples", "SURFACE_SAMPLES", "SURFACE_SHARE", "SURFACE_MAX", "ORIENTED",
+           "SUPPORT_COS", "SUPPORT_COS_ESTIMATED"]
 
-#: points on each candidate's surface for the made-up-surface term (clouds without a
-#: viewpoint)
+#: the fewest points drawn on each candidate's surface for the made-up-surface term
 SURFACE_SAMPLES = 200
+#: the most of the measured surface's area one of those points may stand for (a share):
+#: a large leaf gets more points (:func:`surface_samples`), so that one point that
+#: happens to fall where nothing was measured (near an edge, on a sliver the tree
+#: keeps) cannot cost a quarter of a primitive's penalty or more. With a fixed count, a
+#: box mostly trimmed away (seven times the area the sensor saw) had points standing
+#: for 0.036 each, nine penalties: the made-up surface of the true tree came out
+#: anywhere from 0.000 to 0.08 with the draw (benchmarks/INFER_RESULTS.md, session 18)
+SURFACE_SHARE = 0.001
+#: the most points drawn on one candidate's surface
+SURFACE_MAX = 4000
 #: hull points whose normals must point outwards for given normals to be taken as
 #: oriented (a share; below ``1 -`` this they are taken as pointing inwards)
 ORIENTED = 0.8
 #: a measured point supports a surface point when its normal is within this cosine of
 #: the surface's
 SUPPORT_COS = 0.5
+#: the same for normals estimated from the points (a scan's): any normal on the
+#: surface's side. Near an edge the neighbours of an estimated normal lie on both
+#: faces, so it leans up to 90 degrees off either: with :data:`SUPPORT_COS` the true
+#: tree of a box trimmed by a cylinder made up 0.009-0.016 of surface along the
+#: trimmed edge (two to four penalties), 0.001 with this (benchmarks/INFER_RESULTS.md,
+#: session 18). A cut's wall inside a thin part still faces against the part's points.
+SUPPORT_COS_ESTIMATED = 0.0
+
+
+def _fit(buf: np.ndarray, rows: int | None, cols: int | None = None) -> np.ndarray:
+    """``buf`` (1-D, or 2-D for ``cols``) with room for ``rows`` rows and ``cols``
+    columns (None: as they are), at least doubled when it grows, its content kept."""
+    shape = list(buf.shape)
+    want = list(shape)
+    if rows is not None and rows > shape[0]:
+        want[0] = max(rows, 2 * shape[0])
+    if cols is not None and cols > shape[1]:
+        want[1] = max(cols, 2 * shape[1])
+    if want == shape:
+        return buf
+    out = np.zeros(want, dtype=buf.dtype)
+    out[tuple(slice(0, k) for k in shape)] = buf
+    return out
+
+
+def _relabel(tree, mapping: dict[int, int]):
+    if isinstance(tree, (int, np.integer)):
+        return mapping[int(tree)]
+    return (tree[0], _relabel(tree[1], mapping), _relabel(tree[2], mapping))
+
+
+def surface_samples(area: float, measured: float) -> int:
+    """How many points to draw on a candidate's surface of ``area`` (scene units
+    squared) for the made-up-surface term, against the ``measured`` surface's area
+    (the same units): each stands for at most :data:`SURFACE_SHARE` of the measured
+    area, at least :data:`SURFACE_SAMPLES` and at most :data:`SURFACE_MAX` of them."""
+    if not (measured > 0 and math.isfinite(area)):
+        return SURFACE_SAMPLES
+    return int(min(SURFACE_MAX, max(SURFACE_SAMPLES,
+                                    math.ceil(area / (SURFACE_SHARE * measured)))))
 
 
 def free_points(P: np.ndarray, vp: np.ndarray, tau: float, diag: float, rng, n: int
@@ -198,22 +249,77 @@ class Pool:
         rng: draws the points on the candidates' surfaces.
         view: what a single-view sensor saw (:class:`View`), or None (a cloud taken
             all around).
+        estimated: whether the normals ``N`` were estimated from the points (a
+            measured point then supports surface facing within 90 degrees of its
+            normal, :data:`SUPPORT_COS_ESTIMATED`; else 60, :data:`SUPPORT_COS`).
     """
 
     def __init__(self, S, NS, free, kd, N, reach: float, area: float, tau: float,
-                 penalty: float, rng, view: View | None = None):
+                 penalty: float, rng, view: View | None = None, estimated: bool = False):
+        self.support_cos = SUPPORT_COS_ESTIMATED if estimated else SUPPORT_COS
         self.S, self.NS, self.free, self.kd, self.N, self.view = S, NS, free, kd, N, view
         self.reach, self.area, self.tau, self.penalty, self.rng = reach, area, tau, penalty, rng
         self.leaves: list[Leaf] = []
-        self.at_points = np.zeros((0, len(S)))
-        self.dots = None if NS is None else np.zeros((0, len(S)))
-        self.at_free = None if free is None else np.zeros((0, len(free)))
-        self.surf = np.zeros((0, 3))
-        self.owner = np.zeros(0, dtype=int)
-        self.weight = np.zeros(0)
-        self.unsupported = np.zeros((2, 0), dtype=bool)
-        self.at_surface = np.zeros((0, 0))
+        # growable buffers (rows: candidates; columns of the surface ones: points on
+        # the candidates' surfaces), so that adding a candidate copies nothing
+        m = len(S)
+        self._pts = np.zeros((16, m))
+        self._dots = None if NS is None else np.zeros((16, m))
+        self._free = None if free is None else np.zeros((16, len(free)))
+        self._ns = 0  # surface points held
+        self._surf = np.zeros((1024, 3))
+        self._owner = np.zeros(1024, dtype=int)
+        self._weight = np.zeros(1024)
+        self._uns = np.zeros((2, 1024), dtype=bool)
+        self._at_surf = np.zeros((16, 1024))
         self._scorer: Scorer | None = None
+
+    # views of the buffers: ``(L, M)``, ``(L, M)``, ``(L, Q)``, ``(L, S)``, ``(S, 3)``,
+    # ``(S,)``, ``(S,)``, ``(2, S)`` for ``L`` candidates and ``S`` surface points
+    @property
+    def at_points(self) -> np.ndarray:
+        """``(L, M)`` each candidate's signed distance at the sample of the points."""
+        return self._pts[:len(self.leaves)]
+
+    @property
+    def dots(self) -> np.ndarray | None:
+        """``(L, M)`` cosines between each candidate's gradient and the sample's
+        normals, or None."""
+        return None if self._dots is None else self._dots[:len(self.leaves)]
+
+    @property
+    def at_free(self) -> np.ndarray | None:
+        """``(L, Q)`` each candidate's signed distance at the free-space points, or
+        None."""
+        return None if self._free is None else self._free[:len(self.leaves)]
+
+    @property
+    def at_surface(self) -> np.ndarray:
+        """``(L, S)`` each candidate's signed distance at the surface points."""
+        return self._at_surf[:len(self.leaves), :self._ns]
+
+    @property
+    def surf(self) -> np.ndarray:
+        """``(S, 3)`` the points on the candidates' surfaces that no measured point
+        supports (:meth:`_unsupported`: only those can count)."""
+        return self._surf[:self._ns]
+
+    @property
+    def owner(self) -> np.ndarray:
+        """``(S,)`` the candidate each surface point lies on."""
+        return self._owner[:self._ns]
+
+    @property
+    def weight(self) -> np.ndarray:
+        """``(S,)`` the area (scene units squared) each surface point stands for
+        (foreshortened with a viewpoint)."""
+        return self._weight[:self._ns]
+
+    @property
+    def unsupported(self) -> np.ndarray:
+        """``(2, S)`` which surface points measured points do not support: row 0 for
+        a material leaf, row 1 for a cut."""
+        return self._uns[:, :self._ns]
 
     def index(self, lf: Leaf) -> int | None:
         """The index of a candidate that is ``lf`` within ``tau / 10``, or None."""
@@ -222,9 +328,61 @@ class Pool:
                 return i
         return None
 
+    def _rows(self, leaves: list[Leaf]) -> tuple[np.ndarray, np.ndarray | None,
+                                                  np.ndarray | None]:
+        """``leaves``' values ``(K, M)`` at the sample, cosines ``(K, M)`` (or None) and
+        values ``(K, Q)`` at the free-space points (or None)."""
+        rows, drows, frows = [], [], []
+        for lf in leaves:
+            f, g = lf.values(self.S)
+            rows.append(f)
+            if self.NS is not None:
+                drows.append(np.einsum("ij,ij->i", g, self.NS))
+            if self.free is not None:
+                frows.append(lf.values(self.free)[0])
+        m = len(self.S)
+        return (np.array(rows).reshape(len(leaves), m),
+                None if self.NS is None else np.array(drows).reshape(len(leaves), m),
+                None if self.free is None else
+                np.array(frows).reshape(len(leaves), len(self.free)))
+
+    def _draw(self, leaves: list[Leaf]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                  np.ndarray]:
+        """Points on the surfaces of ``leaves`` (:func:`surface_samples` of each) that
+        measured points do not support: ``(points (K, 3), unsupported (2, K), the leaf
+        each lies on (K,) as an index into leaves, weight (K,))``. A point measured
+        points support, the way its leaf may be used (as material for a leaf of sign
+        +1, as a cut for -1, either for 0: :func:`.search.consistent`), never counts:
+        only the others are kept."""
+        pts, own, wt, grads = [], [], [], []
+        for k, lf in enumerate(leaves):
+            n = surface_samples(leaf_area(lf), self.area)
+            q, nrm, area = leaf_surface(lf, n, self.rng)
+            pts.append(q)
+            grads.append(nrm)
+            own.append(np.full(len(q), k))
+            w = np.full(len(q), area / len(q))
+            # one view: surface counts as much as it shows the sensor
+            wt.append(w if self.view is None else w * foreshortening(q, nrm, self.view.vp))
+        q = np.concatenate(pts)
+        far = self._unsupported(q, np.concatenate(grads))
+        owner = np.concatenate(own)
+        sign = np.array([lf.sign for lf in leaves], dtype=int)[owner]
+        keep = np.where(sign > 0, far[0], np.where(sign < 0, far[1], far[0] | far[1]))
+        return q[keep], far[:, keep], owner[keep], np.concatenate(wt)[keep]
+
+    @staticmethod
+    def _values(leaves: list[Leaf], X: np.ndarray) -> np.ndarray:
+        """``(len(leaves), len(X))`` the leaves' signed distances at ``X`` ``(K, 3)``."""
+        out = np.empty((len(leaves), len(X)))
+        for i, lf in enumerate(leaves):
+            out[i] = lf.values(X)[0] if len(X) else 0.0
+        return out
+
     def add(self, new: list[Leaf]) -> list[int]:
         """Add candidates (those not already held); returns each one's index."""
         out, fresh = [], []
+        n0 = len(self.leaves)
         for lf in new:
             i = self.index(lf)
             if i is None:
@@ -235,42 +393,67 @@ class Pool:
         if not fresh:
             return out
         self._scorer = None
-        rows, drows, frows = [], [], []
-        for lf in fresh:
-            f, g = lf.values(self.S)
-            rows.append(f)
-            if self.NS is not None:
-                drows.append(np.einsum("ij,ij->i", g, self.NS))
-            if self.free is not None:
-                frows.append(lf.values(self.free)[0])
-        self.at_points = np.vstack([self.at_points, rows])
-        if self.dots is not None:
-            self.dots = np.vstack([self.dots, drows])
-        if self.at_free is not None:
-            self.at_free = np.vstack([self.at_free, frows])
+        n1 = len(self.leaves)
+        rows, drows, frows = self._rows(fresh)
+        self._pts = _fit(self._pts, n1)
+        self._pts[n0:n1] = rows
+        if self._dots is not None:
+            self._dots = _fit(self._dots, n1)
+            self._dots[n0:n1] = drows
+        if self._free is not None:
+            self._free = _fit(self._free, n1)
+            self._free[n0:n1] = frows
         if self.kd is not None:
-            n0 = len(self.leaves) - len(fresh)
-            pts, own, wt, grads = [], [], [], []
-            for k, lf in enumerate(fresh):
-                q, nrm, area = leaf_surface(lf, SURFACE_SAMPLES, self.rng)
-                pts.append(q)
-                grads.append(nrm)
-                own.append(np.full(len(q), n0 + k))
-                w = np.full(len(q), area / len(q))
-                # one view: surface counts as much as it shows the sensor
-                wt.append(w if self.view is None else
-                          w * foreshortening(q, nrm, self.view.vp))
-            q = np.concatenate(pts)
-            far = self._unsupported(q, np.concatenate(grads))
-            old = np.array([lf.values(self.surf)[0] for lf in fresh]).reshape(
-                len(fresh), len(self.surf))
-            cols = np.array([lf.values(q)[0] for lf in self.leaves])
-            self.at_surface = np.hstack([np.vstack([self.at_surface, old]), cols])
-            self.surf = np.vstack([self.surf, q])
-            self.owner = np.concatenate([self.owner, *own])
-            self.weight = np.concatenate([self.weight, *wt])
-            self.unsupported = np.concatenate([self.unsupported, far], axis=1)
+            q, far, own, wt = self._draw(fresh)
+            s0, s1 = self._ns, self._ns + len(q)
+            self._at_surf = _fit(self._at_surf, n1, s1)
+            self._at_surf[n0:n1, :s0] = self._values(fresh, self._surf[:s0])
+            self._at_surf[:n1, s0:s1] = self._values(self.leaves, q)
+            self._surf = _fit(self._surf, s1)
+            self._surf[s0:s1] = q
+            self._owner = _fit(self._owner, s1)
+            self._owner[s0:s1] = n0 + own
+            self._weight = _fit(self._weight, s1)
+            self._weight[s0:s1] = wt
+            self._uns = _fit(self._uns, None, s1)
+            self._uns[:, s0:s1] = far
+            self._ns = s1
         return out
+
+    def trial(self, tree, c: int, variants: list[Leaf]) -> list[Scored]:
+        """The scores of ``tree`` with its leaf ``c`` replaced by each of ``variants``
+        (leaves not added to the pool): as :meth:`scorer` would give them once added,
+        but computed over the tree's own leaves alone (a face moved: a dozen trial
+        leaves per face, where adding them would evaluate every candidate at their
+        surface points). The trees of the returned :class:`Scored` are in the indices
+        of a sub-pool (``tree``'s leaves, then the variants): use only their scores."""
+        used = sorted({int(i) for i in tree_leaves(tree)})
+        u, m = len(used), len(variants)
+        sub = {i: k for k, i in enumerate(used)}
+        rows, drows, frows = self._rows(variants)
+        at_points = np.vstack([self.at_points[used], rows])
+        dots = None if drows is None else np.vstack([self.dots[used], drows])
+        at_free = None if frows is None else np.vstack([self.at_free[used], frows])
+        signs = np.array([self.leaves[i].sign for i in used] + [v.sign for v in variants],
+                         dtype=int)
+        if self.kd is None:
+            scorer = Scorer(at_points, dots, at_free, self.tau, self.penalty, signs=signs)
+        else:
+            cols = np.flatnonzero(np.isin(self.owner, used))
+            q, far, own, wt = self._draw(variants)
+            old_q = self.surf[cols]
+            mine = [self.leaves[i] for i in used]
+            at_surface = np.block([
+                [self.at_surface[used][:, cols], self._values(mine, q)],
+                [self._values(variants, old_q), self._values(variants, q)]])
+            owner = np.concatenate([np.array([sub[int(i)] for i in self.owner[cols]],
+                                             dtype=int), u + own])
+            weight = np.concatenate([self.weight[cols], wt])
+            unsupported = np.concatenate([self.unsupported[:, cols], far], axis=1)
+            scorer = Scorer(at_points, dots, at_free, self.tau, self.penalty, at_surface,
+                            owner, weight / self.area, unsupported, signs)
+        base = _relabel(tree, sub)
+        return [scorer.score(swap(base, sub[c], u + j)) for j in range(m)]
 
     def truncate(self, n: int, keep: int | None = None) -> int | None:
         """Drop the candidates from index ``n`` on (trial variants), except ``keep``,
@@ -284,18 +467,19 @@ class Pool:
         if len(rows) == len(self.leaves):
             return None if keep is None else n
         self._scorer = None
-        self.leaves = [self.leaves[i] for i in rows]
-        self.at_points = self.at_points[rows]
-        if self.dots is not None:
-            self.dots = self.dots[rows]
-        if self.at_free is not None:
-            self.at_free = self.at_free[rows]
+        self._pts = self.at_points[rows]
+        if self._dots is not None:
+            self._dots = self.dots[rows]
+        if self._free is not None:
+            self._free = self.at_free[rows]
         if self.kd is not None:
             cols = np.isin(self.owner, rows)
-            self.at_surface = self.at_surface[rows][:, cols]
-            self.surf, self.weight = self.surf[cols], self.weight[cols]
-            self.owner = np.where(self.owner[cols] == keep, n, self.owner[cols])
-            self.unsupported = self.unsupported[:, cols]
+            self._at_surf = self.at_surface[rows][:, cols]
+            self._surf, self._weight = self.surf[cols], self.weight[cols]
+            self._owner = np.where(self.owner[cols] == keep, n, self.owner[cols])
+            self._uns = self.unsupported[:, cols]
+            self._ns = int(cols.sum())
+        self.leaves = [self.leaves[i] for i in rows]
         return None if keep is None else n
 
     def _unsupported(self, q: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -303,10 +487,11 @@ class Pool:
         ``g`` ``(K, 3)`` should have been measured but were not: row 0 where the leaf is
         material (the surface faces along ``g``), row 1 where it is cut away (against
         ``g``). A measured point supports a surface point within ``reach`` with its
-        normal within 60 degrees of the surface's (any normal when their signs are
-        unknown): the surface of a cut inside a thin wall is near the wall's points,
-        but faces the other way. With a single view, only surface the sensor could see
-        needs support: facing it, and not behind what it measured (:meth:`View.hidden`)."""
+        normal within 60 degrees of the surface's (90 for estimated normals; any
+        normal when their signs are unknown): the surface of a cut inside a thin wall
+        is near the wall's points, but faces the other way. With a single view, only
+        surface the sensor could see needs support: facing it, and not behind what it
+        measured (:meth:`View.hidden`)."""
         d, idx = self.kd.query(q, k=8, distance_upper_bound=self.reach)
         near = np.isfinite(d)
         if self.N is None:
@@ -314,8 +499,8 @@ class Pool:
             out = np.stack([~sup, ~sup])
         else:
             c = np.einsum("ikj,ij->ik", self.N[np.where(near, idx, 0)], g)
-            out = np.stack([~(near & (c > SUPPORT_COS)).any(axis=1),
-                            ~(near & (c < -SUPPORT_COS)).any(axis=1)])
+            out = np.stack([~(near & (c > self.support_cos)).any(axis=1),
+                            ~(near & (c < -self.support_cos)).any(axis=1)])
         if self.view is not None:
             seen = ~self.view.hidden(q, 3 * self.tau)
             facing = np.einsum("ij,ij->i", g, self.view.vp - q) > 0

@@ -53,6 +53,10 @@ from .tree import Tree, field_of, leaves, normal_form, remove, replace, size
 #: refined it keeps tree 88 and one-view 28, and loses one-view 79)
 ON_SURFACE = 1.0
 
+#: the most leaf sets whose unsupported surface points a :class:`Scorer` keeps
+#: gathered (:meth:`Scorer._bare`)
+BARE_CACHE = 512
+
 __all__ = ["Scorer", "Scored", "beam_search", "polish", "consistent", "parities", "swap",
            "evaluate_oriented", "grow"]
 
@@ -146,6 +150,7 @@ class Scorer:
         n = at_points.shape[0]
         self.signs = np.zeros(n, dtype=int) if signs is None else np.asarray(signs, int)
         self.count = 0
+        self._cache: dict[tuple, tuple] = {}
         if at_surface is not None:
             order = np.argsort(owner, kind="stable")
             self._order = order
@@ -188,17 +193,32 @@ class Scorer:
             g, _ = evaluate_oriented(tree, self.at_free, None)
             free = float(np.mean(np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0)))
         if self.at_surface is not None:
-            # the share of the tree's own surface where no point was measured
-            par = parities(tree)
-            idx = np.concatenate([self._slices[i] for i in par])
-            bare = np.concatenate([self.unsupported[int(odd), self._slices[i]]
-                                   for i, odd in par.items()])
-            # a leaf's surface point counts where the tree's field is near 0 there
+            # the share of the tree's own surface where no point was measured: a
+            # leaf's surface point counts where the tree's field is near 0 there
             # (ON_SURFACE)
-            h = field_of(tree, lambda i: self.at_surface[i, idx])
-            on = np.abs(h) <= ON_SURFACE * self.tau
-            free += float(self.weight[idx][on & bare].sum())
+            block, weight, row = self._bare(parities(tree))
+            h = field_of(tree, lambda i: block[row[i]])
+            free += float(weight[np.abs(h) <= ON_SURFACE * self.tau].sum())
         return Scored(tree, data, free, data + free + self.penalty * size(tree))
+
+    def _bare(self, par: dict[int, bool]) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+        """For a tree's leaves and their parities ``par``: the surface points of those
+        leaves that no measured point supports the way each is used, as ``(the leaves'
+        values there (K, B), their weights (B,), {leaf: its row})``, kept for the next
+        tree of the same leaves (the search's moves put one leaf elsewhere: the same
+        set, in hundreds of trees), :data:`BARE_CACHE` sets at most."""
+        key = tuple(sorted(par.items()))
+        got = self._cache.get(key)
+        if got is None:
+            rows = [i for i, _ in key]
+            idx = np.concatenate([self._slices[i][self.unsupported[int(odd), self._slices[i]]]
+                                  for i, odd in key])
+            got = (self.at_surface[np.ix_(rows, idx)], self.weight[idx],
+                   {i: k for k, i in enumerate(rows)})
+            if len(self._cache) >= BARE_CACHE:
+                self._cache.clear()
+            self._cache[key] = got
+        return got
 
 
 def _paths(tree: Tree, path: tuple = (), odd: bool = False

@@ -443,9 +443,16 @@ class Pool:
             q, far, own, wt = self._draw(variants)
             old_q = self.surf[cols]
             mine = [self.leaves[i] for i in used]
+            # a variant at another variant's points is never needed (no tree holds
+            # two of them): those entries stay 0
+            own_vals = np.zeros((m, len(q)))
+            for j, v in enumerate(variants):
+                on = own == j
+                if on.any():
+                    own_vals[j, on] = v.values(q[on])[0]
             at_surface = np.block([
                 [self.at_surface[used][:, cols], self._values(mine, q)],
-                [self._values(variants, old_q), self._values(variants, q)]])
+                [self._values(variants, old_q), own_vals]])
             owner = np.concatenate([np.array([sub[int(i)] for i in self.owner[cols]],
                                              dtype=int), u + own])
             weight = np.concatenate([self.weight[cols], wt])

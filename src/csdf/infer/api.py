@@ -593,21 +593,22 @@ def _refined_tree(prob: _Problem, tree):
     return _cuts_through(prob, out) if REFINE_THROUGH else out
 
 
-#: whether :func:`_refined_tree` tries each refined cut moved out where no point shows
-#: its faces (:func:`_cuts_through`)
+#: whether :func:`_refined_tree` moves the faces of each refined cut
+#: (:func:`_cuts_through`)
 REFINE_THROUGH = True
 
 
 def _cuts_through(prob: _Problem, tree):
     """``tree`` with faces of its cut boxes and caps of its cut cylinders (under an odd
-    number of differences' right operands) moved out to the cloud's extent
-    (:func:`.candidates.faces_out`), one at a time while the best such move lowers the
-    score. The refinement fits a cut's faces to the points on them and leaves a face
-    with none where it was, as its objective knows nothing of the made-up surface: a
-    hole drilled into one part of a union, whose far end no point shows, was refined
-    short, leaving a skin of that part where the sensor saw none (made-up surface of
-    four penalties: benchmarks/INFER_RESULTS.md, session 18, one-view tree 86), and
-    the search then preferred the hole drilled through the whole union."""
+    number of differences' right operands) moved (:func:`.candidates.face_moves`: by
+    shares of the size, or out to the cloud's extent), the best move of each cut at a
+    time, up to :data:`FACE_ROUNDS` of them, while it lowers the score. The
+    refinement fits a cut's faces to the points on them and leaves a face with none
+    where it was, as its objective knows nothing of the made-up surface: a hole
+    drilled into one part of a union, whose far end no point shows, was refined short,
+    leaving a skin of that part where the sensor saw none (made-up surface of four
+    penalties: benchmarks/INFER_RESULTS.md, session 18, one-view tree 86), and the
+    search then preferred the hole drilled through the whole union."""
     pool = prob.pool
     best = pool.scorer().score(tree)
     for c, odd in sorted(parities(tree).items()):

@@ -34,10 +34,8 @@ from ..errors import CsdfError
 from ..fit import fit
 from ..shapes.domain import orient_matrix
 
-__all__ = ["Leaf", "snap", "extended", "face_moves", "leaf_surface",
-           "leaf_area",
-           "plane_boxes",
-           "other_kind",
+__all__ = ["Leaf", "snap", "extended", "face_moves", "leaf_surface", "leaf_area",
+           "plane_boxes", "other_kind",
            "orientation", "same_leaf", "SNAP_DEGREES", "EXTEND_BELOW", "FRAME_DEGREES"]
 
 #: axes within this many degrees of a coordinate axis are turned onto it

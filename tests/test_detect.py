@@ -855,3 +855,22 @@ def test_ray_evidence_confirms_a_seen_model_not_a_hidden_one(lamp_scan):
     hidden = _prepared(P, ["lamp"])
     _, confirmed = hidden._ray_evidence(m, truth, np.zeros(0, dtype=int), surf)
     assert confirmed < 0.5 * MIN_CONFIRMED
+
+
+def test_a_detection_claims_its_own_clusters_not_a_neighbours_points():
+    """A detection's inliers (the points it claims) keep its own clusters' points, a
+    piece of another cluster it mostly explains, and unclustered points, but not the
+    few points of a neighbour that lie within three noise levels of its surface."""
+    from types import SimpleNamespace
+
+    from csdf.detect.objects import _Run
+
+    label = np.array([0] * 10 + [1] * 10 + [2] * 4 + [-1] * 2)
+    run = SimpleNamespace(label=label, claimed=np.zeros(len(label), dtype=bool),
+                          sizes=np.array([10, 10, 4]))
+    idx = np.arange(10)
+    inl = np.concatenate([idx, [10, 11, 12], [20, 21, 22], [24, 25]])
+    kept = _Run._own_inliers(run, inl, idx)
+    assert kept.tolist() == [*range(10), 20, 21, 22, 24, 25]
+    run.claimed[13:20] = True  # the neighbour's other points claimed already: a piece
+    assert _Run._own_inliers(run, inl, idx).tolist() == inl.tolist()

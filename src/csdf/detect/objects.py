@@ -1109,9 +1109,29 @@ class _Run:
             front, confirmed = self._ray_evidence(m, res, inl, surf)
             if front > MAX_FRONT or confirmed < MIN_CONFIRMED:
                 return None
+        inl = self._own_inliers(inl, idx)
         return Detection(model=m.name, pose=Pose(res.rotation, res.translation),
                          params=dict(res.params), score=score, inliers=inl, shape=m.shape,
                          source=m.source, fit=checked)
+
+    def _own_inliers(self, inl: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """The inliers ``inl`` ``(K,)`` (point indices) of a detection on the points
+        ``idx`` that it claims: those of the clusters of ``idx``, of clusters at least
+        ``PIECE_INSIDE`` of whose free points it explains (a piece of the object cut
+        off by an occluder) and of no cluster (outliers near its surface); not a
+        neighbour's points that happen to lie within three noise levels of its surface
+        (a bookshelf explained 86 points of a lamp standing beside it at 2.2 cm noise,
+        and the lamp, left with 225 of its 311 points, was fitted turned wrong)."""
+        lab = self.label[inl]
+        labs, counts = np.unique(lab[lab >= 0], return_counts=True)
+        if len(labs) == 0:
+            return inl
+        own = set(np.unique(self.label[idx]).tolist())
+        free = np.bincount(self.label[(self.label >= 0) & ~self.claimed],
+                           minlength=len(self.sizes))
+        keep = [int(c) for c, k in zip(labs, counts)
+                if c in own or k >= PIECE_INSIDE * max(int(free[c]), 1)]
+        return inl[(lab < 0) | np.isin(lab, keep)]
 
     def _upright_shape(self, m: _Model) -> Any:
         """``m``'s shape turned about its z axis and shifted along its x and y axes by

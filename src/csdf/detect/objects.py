@@ -45,7 +45,9 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    (:func:`_gain` summed over the free points near them, less the free-space evidence
    in the same units); the winner's best other yaw of a ``YAW_STEPS`` scan, and those
    of failed models the screen ranked above it, are fitted again and compete too. The
-   winner's inliers are claimed: other clusters that
+   winner's inliers are claimed (those of its own clusters, of clusters it mostly
+   explains and of none, not a neighbour's points near its surface:
+   :meth:`_Run._own_inliers`): other clusters that
    are mostly claimed are skipped (one object split in two by an occluder), and a
    cluster with enough unclaimed points left is searched again (two objects touching);
    a cluster no model explains as one, after the band test rejected a large fit, is
@@ -262,7 +264,9 @@ class Detection:
         score: the fraction of the model's visible surface that the scan confirms
             (``1 - visible_unexplained`` from the viewpoint; without a viewpoint the
             fraction of the fitted points within three noise levels).
-        inliers: ``(K,)`` indices of the scan points it explains.
+        inliers: ``(K,)`` indices of the scan points it explains (within three noise
+            levels of its surface, off the support): those of its own clusters, of
+            clusters it explains at least half of, and of no cluster.
         shape: the model (a :class:`csdf.Shape` or :class:`csdf.Program`).
         source: what :func:`detections_to_scene` hands to :meth:`csdf.Scene.add`: the
             zoo name or model file given, else the shape.

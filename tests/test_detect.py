@@ -830,3 +830,47 @@ def test_models_are_prepared_once_per_shape_and_name():
     b = _models_arg({"seat": "stool"})[0]
     assert b is not a and b.name == "seat"
     assert _models_arg([csdf.zoo.load("stool", height=0.6)])[0] is not a
+
+
+def test_ray_evidence_confirms_a_seen_model_not_a_hidden_one(lamp_scan):
+    """The scan confirms most of the rays on a lamp it sees; behind a screen, the same
+    lamp at the same pose has its silhouette hidden behind nearer points, and a
+    detection there would rest on nothing the sensor saw."""
+    from csdf.detect.objects import MAX_FRONT, MIN_CONFIRMED
+
+    _, _, run, m, _, truth = lamp_scan
+    inl = run._verify(m, truth)[2]
+    surf, _ = run._surface_at(m, truth.params)
+    front, confirmed = run._ray_evidence(m, truth, inl, surf)
+    assert confirmed > 2 * MIN_CONFIRMED
+    assert front == run._front_fraction(m, truth, inl, surf) < 0.5 * MAX_FRONT
+    scene = _floor_scene()
+    scene.add("lamp", pose=_yawed(0.7, (0.0, 0.3, 0.0)),
+              params={"shade_height": 0.2, "stem_height": 0.3}, name="lamp")
+    scene.add(csdf.box((1.0, 0.05, 1.2)), pose=csdf.Pose(translation=(0.0, -0.15, 0.6)),
+              name="screen")
+    cam = csdf.Camera.look_at(eye=(0.0, -1.4, 1.5), target=(0.0, 0.3, 0.3), fov=40,
+                              width=200, height=150)
+    P, _, _ = csdf.scan(scene, cam, noise=0.012, outliers=0.0, seed=3)
+    hidden = _prepared(P, ["lamp"])
+    _, confirmed = hidden._ray_evidence(m, truth, np.zeros(0, dtype=int), surf)
+    assert confirmed < 0.5 * MIN_CONFIRMED
+
+
+def test_a_detection_claims_its_own_clusters_not_a_neighbours_points():
+    """A detection's inliers (the points it claims) keep its own clusters' points, a
+    piece of another cluster it mostly explains, and unclustered points, but not the
+    few points of a neighbour that lie within three noise levels of its surface."""
+    from types import SimpleNamespace
+
+    from csdf.detect.objects import _Run
+
+    label = np.array([0] * 10 + [1] * 10 + [2] * 4 + [-1] * 2)
+    run = SimpleNamespace(label=label, claimed=np.zeros(len(label), dtype=bool),
+                          sizes=np.array([10, 10, 4]))
+    idx = np.arange(10)
+    inl = np.concatenate([idx, [10, 11, 12], [20, 21, 22], [24, 25]])
+    kept = _Run._own_inliers(run, inl, idx)
+    assert kept.tolist() == [*range(10), 20, 21, 22, 24, 25]
+    run.claimed[13:20] = True  # the neighbour's other points claimed already: a piece
+    assert _Run._own_inliers(run, inl, idx).tolist() == inl.tolist()

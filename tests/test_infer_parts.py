@@ -11,7 +11,7 @@ import pytest
 
 import csdf
 from csdf.infer import tree as T
-from csdf.infer.candidates import Leaf, leaf_surface, plane_boxes
+from csdf.infer.candidates import Leaf, leaf_area, leaf_surface, plane_boxes
 from csdf.infer.pool import (
     Pool,
     background_points,
@@ -195,6 +195,7 @@ def test_leaf_surface_is_on_the_surface_and_uniform(kind, vals):
     mesh_area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]),
                                      axis=1).sum()
     assert area == pytest.approx(mesh_area, rel=0.02)
+    assert leaf_area(lf) == pytest.approx(area, rel=1e-12)  # the same area without points
     # uniform by area: the share of the points on each half (by a plane through the
     # centre) matches the share of the area
     side = (q - lf.t) @ np.array([1.0, 0.0, 0.0]) > 0

@@ -579,6 +579,18 @@ def _prepare(P: np.ndarray, ms: list[_Model], normals, vp: np.ndarray | None, se
     return run
 
 
+def _joined(label: np.ndarray, labels: np.ndarray, idx: np.ndarray, total: np.ndarray
+            ) -> list[int]:
+    """The clusters among ``labels`` ``(K,)`` (points' cluster labels, -1 for none) that
+    a fit on the points ``idx`` takes as its object's: those of ``idx`` (by the scan's
+    labels ``label`` ``(M,)``), and any other with at least ``PIECE_INSIDE`` of
+    ``total[c]`` (its points that count, ``(C,)``) among ``labels`` (a piece of the same
+    object cut off by an occluder)."""
+    labs, counts = np.unique(labels[labels >= 0], return_counts=True)
+    own = set(np.unique(label[idx]).tolist())
+    return [int(c) for c, k in zip(labs, counts) if c in own or k >= PIECE_INSIDE * total[c]]
+
+
 class _Run:
     """The state of one :func:`detect` call."""
 
@@ -824,10 +836,7 @@ class _Run:
             c = init.pose.apply(m.centre[None])[0]
         inside = ~self.claimed & (self.label >= 0) & (
             np.linalg.norm(self.P - c, axis=1) <= 1.1 * m.radius)
-        labs, counts = np.unique(self.label[inside], return_counts=True)
-        own = set(np.unique(self.label[idx]).tolist())
-        keep = [lab for lab, k in zip(labs, counts)
-                if lab in own or k >= PIECE_INSIDE * self.sizes[lab]]
+        keep = _joined(self.label, self.label[inside], idx, self.sizes)
         return np.flatnonzero(inside & np.isin(self.label, keep))
 
     def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | dict | None
@@ -1127,14 +1136,11 @@ class _Run:
         (a bookshelf explained 86 points of a lamp standing beside it at 2.2 cm noise,
         and the lamp, left with 225 of its 311 points, was fitted turned wrong)."""
         lab = self.label[inl]
-        labs, counts = np.unique(lab[lab >= 0], return_counts=True)
-        if len(labs) == 0:
+        if not (lab >= 0).any():
             return inl
-        own = set(np.unique(self.label[idx]).tolist())
         free = np.bincount(self.label[(self.label >= 0) & ~self.claimed],
                            minlength=len(self.sizes))
-        keep = [int(c) for c, k in zip(labs, counts)
-                if c in own or k >= PIECE_INSIDE * max(int(free[c]), 1)]
+        keep = _joined(self.label, lab, idx, np.maximum(free, 1))
         return inl[(lab < 0) | np.isin(lab, keep)]
 
     def _upright_shape(self, m: _Model) -> Any:

@@ -565,12 +565,6 @@ def _refine_and_polish(prob: _Problem, tree, maxp: int, deadline: float,
     return sc
 
 
-def _relabel(tree, mapping: dict[int, int]):
-    if isinstance(tree, (int, np.integer)):
-        return mapping.get(int(tree), int(tree))
-    return (tree[0], _relabel(tree[1], mapping), _relabel(tree[2], mapping))
-
-
 def _refined_tree(prob: _Problem, tree):
     """The tree over its jointly refined leaves (added to the pool): sizes and
     positions first; then (:data:`REFINE_TURNS`, a tree with a leaf other than a
@@ -581,12 +575,12 @@ def _refined_tree(prob: _Problem, tree):
     new = _refine(prob, tree, False)
     keys = list(new)
     idx = prob.pool.add([new[k] for k in keys])
-    out = _relabel(tree, dict(zip(keys, idx)))
+    out = T.relabel(tree, dict(zip(keys, idx)))
     if REFINE_TURNS and any(TURNS[prob.pool.leaves[i].kind] for i in T.leaves(out)):
         new = _refine(prob, out, True)
         keys = list(new)
         idx = prob.pool.add([new[k] for k in keys])
-        turned = _relabel(out, dict(zip(keys, idx)))
+        turned = T.relabel(out, dict(zip(keys, idx)))
         scorer = prob.pool.scorer()
         if scorer.score(turned).total < scorer.score(out).total - 1e-12:
             out = turned

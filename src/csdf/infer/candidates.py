@@ -182,6 +182,7 @@ def leaf_surface(lf: Leaf, n: int, rng: np.random.Generator
     outward unit normals (n, 3), area)`` (scene frame and units; the normals from the
     solid's shape, as the distance's gradient can vanish on an edge or a cap)."""
     v = lf.vals
+    area = leaf_area(lf)
     u = rng.random((n, 3))
     ang = 2 * math.pi * u[:, 0]
     c, s = np.cos(ang), np.sin(ang)
@@ -191,7 +192,6 @@ def leaf_surface(lf: Leaf, n: int, rng: np.random.Generator
         d = rng.normal(size=(n, 3))
         nrm = d / np.linalg.norm(d, axis=1, keepdims=True)
         q = v["radius"] * nrm
-        area = 4 * math.pi * v["radius"] ** 2
     elif lf.kind == "torus":
         R, r = v["major"], v["minor"]
         # the tube angle with density proportional to the distance from the axis
@@ -204,11 +204,8 @@ def leaf_surface(lf: Leaf, n: int, rng: np.random.Generator
             u[bad, 2] = rng.random(int(bad.sum()))
         nrm = np.cos(phi)[:, None] * radial + np.sin(phi)[:, None] * z_axis
         q = R * radial + r * nrm
-        area = 4 * math.pi ** 2 * R * r
     elif lf.kind == "box":
-        h = np.array([v["size_x"], v["size_y"], v["size_z"]]) / 2
-        faces = np.array([4 * h[1] * h[2], 4 * h[0] * h[2], 4 * h[0] * h[1]])
-        area = 2 * float(faces.sum())
+        h, faces = _box_faces(v)
         axis = np.searchsorted(np.cumsum(faces) / faces.sum(), u[:, 0] * 0.999999)
         sign = np.where(u[:, 1] < 0.5, -1.0, 1.0)
         q = (2 * rng.random((n, 3)) - 1) * h
@@ -216,16 +213,8 @@ def leaf_surface(lf: Leaf, n: int, rng: np.random.Generator
         nrm = np.zeros((n, 3))
         nrm[np.arange(n), axis] = sign
     else:  # cylinder and cone: side and two caps
-        if lf.kind == "cylinder":
-            r1 = r2 = v["radius"]
-            z0 = -0.5 * v["height"]
-        else:
-            r1, r2, z0 = v["r1"], v["r2"], 0.0
+        r1, r2, z0, slant, side, caps = _frustum(lf)
         hgt = v["height"]
-        slant = math.hypot(hgt, r1 - r2)
-        side = math.pi * (r1 + r2) * slant
-        caps = (math.pi * r1 * r1, math.pi * r2 * r2)
-        area = side + caps[0] + caps[1]
         w = u[:, 1] * area
         t = u[:, 2]
         # the side: height by area (radius linear in height)
@@ -242,20 +231,39 @@ def leaf_surface(lf: Leaf, n: int, rng: np.random.Generator
     return q @ lf.R.T + lf.t, nrm @ lf.R.T, float(area)
 
 
+def _box_faces(v: dict) -> tuple[np.ndarray, np.ndarray]:
+    """A box's half sizes ``(3,)`` and the areas ``(3,)`` of its faces across x, y, z."""
+    h = np.array([v["size_x"], v["size_y"], v["size_z"]]) / 2
+    return h, np.array([4 * h[1] * h[2], 4 * h[0] * h[2], 4 * h[0] * h[1]])
+
+
+def _frustum(lf: Leaf) -> tuple[float, float, float, float, float, tuple[float, float]]:
+    """A cylinder's or cone's ``(r1, r2, z0, slant, side area, (base cap area, top cap
+    area))``: radii at its base and top, the base's height in the leaf's frame, the
+    side's slant length (scene units and units squared)."""
+    v = lf.vals
+    if lf.kind == "cylinder":
+        r1 = r2 = v["radius"]
+        z0 = -0.5 * v["height"]
+    else:
+        r1, r2, z0 = v["r1"], v["r2"], 0.0
+    slant = math.hypot(v["height"], r1 - r2)
+    return (r1, r2, z0, slant, math.pi * (r1 + r2) * slant,
+            (math.pi * r1 * r1, math.pi * r2 * r2))
+
+
 def leaf_area(lf: Leaf) -> float:
-    """The area of a leaf's surface (scene units squared), as :func:`leaf_surface`
-    gives it, without drawing points."""
+    """The area of a leaf's surface (scene units squared), the one :func:`leaf_surface`
+    gives, without drawing points."""
     v = lf.vals
     if lf.kind == "sphere":
         return 4 * math.pi * v["radius"] ** 2
     if lf.kind == "torus":
         return 4 * math.pi ** 2 * v["major"] * v["minor"]
     if lf.kind == "box":
-        x, y, z = v["size_x"], v["size_y"], v["size_z"]
-        return 2.0 * (x * y + y * z + x * z)
-    r1, r2 = (v["radius"], v["radius"]) if lf.kind == "cylinder" else (v["r1"], v["r2"])
-    return math.pi * (r1 + r2) * math.hypot(v["height"], r1 - r2) + \
-        math.pi * (r1 * r1 + r2 * r2)
+        return 2 * float(_box_faces(v)[1].sum())
+    _, _, _, _, side, caps = _frustum(lf)
+    return side + caps[0] + caps[1]
 
 
 def orientation(lf: Leaf, Q: np.ndarray, NQ: np.ndarray) -> int:

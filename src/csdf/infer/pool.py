@@ -13,6 +13,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from .candidates import Leaf, leaf_area, leaf_surface, same_leaf
 from .search import Scored, Scorer, swap
 from .tree import leaves as tree_leaves
+from .tree import relabel
 
 __all__ = ["Pool", "free_points", "background_points", "oriented_normals", "support_scales",
            "foreshortening",
@@ -60,12 +61,6 @@ def _fit(buf: np.ndarray, rows: int | None, cols: int | None = None) -> np.ndarr
     out = np.zeros(want, dtype=buf.dtype)
     out[tuple(slice(0, k) for k in shape)] = buf
     return out
-
-
-def _relabel(tree, mapping: dict[int, int]):
-    if isinstance(tree, (int, np.integer)):
-        return mapping[int(tree)]
-    return (tree[0], _relabel(tree[1], mapping), _relabel(tree[2], mapping))
 
 
 def surface_samples(area: float, measured: float) -> int:
@@ -459,35 +454,8 @@ class Pool:
             unsupported = np.concatenate([self.unsupported[:, cols], far], axis=1)
             scorer = Scorer(at_points, dots, at_free, self.tau, self.penalty, at_surface,
                             owner, weight / self.area, unsupported, signs)
-        base = _relabel(tree, sub)
+        base = relabel(tree, sub)
         return [scorer.score(swap(base, sub[c], u + j)) for j in range(m)]
-
-    def truncate(self, n: int, keep: int | None = None) -> int | None:
-        """Drop the candidates from index ``n`` on (trial variants), except ``keep``,
-        which becomes candidate ``n`` with its values and surface points as they were;
-        returns its new index (None without ``keep``)."""
-        rows = list(range(min(n, len(self.leaves))))
-        if keep is not None and keep >= n:
-            rows.append(keep)
-        elif keep is not None:
-            return keep
-        if len(rows) == len(self.leaves):
-            return None if keep is None else n
-        self._scorer = None
-        self._pts = self.at_points[rows]
-        if self._dots is not None:
-            self._dots = self.dots[rows]
-        if self._free is not None:
-            self._free = self.at_free[rows]
-        if self.kd is not None:
-            cols = np.isin(self.owner, rows)
-            self._at_surf = self.at_surface[rows][:, cols]
-            self._surf, self._weight = self.surf[cols], self.weight[cols]
-            self._owner = np.where(self.owner[cols] == keep, n, self.owner[cols])
-            self._uns = self.unsupported[:, cols]
-            self._ns = int(cols.sum())
-        self.leaves = [self.leaves[i] for i in rows]
-        return None if keep is None else n
 
     def _unsupported(self, q: np.ndarray, g: np.ndarray) -> np.ndarray:
         """``(2, K)`` which surface points ``q`` ``(K, 3)`` whose leaf's outward normal is

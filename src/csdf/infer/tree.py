@@ -46,6 +46,14 @@ def leaves(tree: Tree) -> list[int]:
     return leaves(tree[1]) + leaves(tree[2])
 
 
+def relabel(tree: Tree, mapping: dict[int, int]) -> Tree:
+    """The tree with each leaf ``i`` in ``mapping`` renamed ``mapping[i]`` (the others
+    kept)."""
+    if isinstance(tree, (int, np.integer)):
+        return mapping.get(int(tree), int(tree))
+    return (tree[0], relabel(tree[1], mapping), relabel(tree[2], mapping))
+
+
 def size(tree: Tree) -> int:
     """The number of leaves."""
     return len(leaves(tree))

@@ -466,6 +466,9 @@ def test_detect_bad_models():
         csdf.detect(P, ["stool"], viewpoint=(0, 0))
     with pytest.raises(csdf.CsdfError, match="twice"):
         csdf.detect(P, ["stool", "stool"])
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(csdf.CsdfError, match="max_instances"):
+            csdf.detect(P, ["stool"], max_instances=bad)
 
 
 def test_cli_detect(clutter, tmp_path):
@@ -489,6 +492,26 @@ def test_cli_detect(clutter, tmp_path):
     assert png.stat().st_size > 10_000
     r = CliRunner().invoke(app, ["detect", str(ply), "--models", "nosuch", "-o", str(out)])
     assert r.exit_code != 0 and "nosuch" in r.output
+
+
+def test_picture_projection_camera_and_world_frames():
+    from csdf.detect.picture import _project
+
+    # camera frame (x right, y down, z forward): a pinhole at the origin
+    P = np.array([[0.0, 0.0, 2.0], [1.0, -1.0, 2.0]])
+    uv = _project(P, np.zeros(3))
+    assert np.allclose(uv, [[0, 0], [0.5, 0.5]])
+    # world frame, z up: the target at the centre, higher points higher in the
+    # picture, and points to the right of the sensor (looking along -x) on the right
+    vp = np.array([3.0, 0.0, 1.0])
+    target = np.array([0.0, 0.0, 1.0])
+    Q = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0], [0.0, 1.0, 1.0]])  # +y: right
+    uv = _project(Q, vp, target)
+    assert np.allclose(uv[0], 0)
+    assert uv[1, 1] > 0.2 and abs(uv[1, 0]) < 1e-12
+    assert uv[2, 0] > 0.2 and abs(uv[2, 1]) < 1e-12
+    # no viewpoint: a view down -z
+    assert np.allclose(_project(Q, None), Q[:, :2])
 
 
 def test_feet_split_a_cluster_wider_than_the_model():

@@ -534,8 +534,13 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
     P = points_arg(points)
     ms = _models_arg(models)
     vp = viewpoint_arg(viewpoint)
+    if max_instances is not None and (isinstance(max_instances, bool)
+                                      or not isinstance(max_instances, (int, np.integer))
+                                      or max_instances < 1):
+        raise CsdfError(f"max_instances must be None or a whole number >= 1, got "
+                        f"{max_instances!r}")
     cap = math.inf if max_instances is None else int(max_instances)
-    if cap <= 0 or len(P) < 10:
+    if len(P) < 10:
         return []
     run = _prepare(P, ms, normals, vp, seed, noise, min_points, upright)
     out: list[Detection] = []

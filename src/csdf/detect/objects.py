@@ -60,7 +60,9 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    its surface (a lamp's spokes), it is refitted held upright (:meth:`_Run._polish`)
    and its turn chosen by ray casting the sensor's rays (:meth:`_Run._ray_scores`;
    points of its own clusters floating in front of it count against a turn, as rays
-   that see through it do):
+   that see through it do; the model's parts dilated by ``RAY_SPREAD`` noise levels
+   in the sensor's image, so that spokes fitted a few millimetres off still meet the
+   rays that saw them):
    the refit replaces the winner when its rays score more, and another turn replaces
    that when it scores more than the refit's own turn at the refit's parameters.
 9. **Points floating inside** (:meth:`_Run._intruders`): a detection with over
@@ -243,6 +245,11 @@ TURN_REFITS = 0
 #: ... and the margin (explained points) by which a turn at those parameters must
 #: score more than the refit's own turn
 TURN_RAY_MARGIN = 1.0
+#: the turn scan's rays are bundles of five parallel rays this many noise levels apart
+#: (:meth:`_Run._ray_scores`' ``spread``): a small part fitted a few millimetres off
+#: (a lamp's 5 mm spokes, placed by shade parameters fitted to points at 11-23 mm
+#: noise) still meets the rays that saw it
+RAY_SPREAD = 0.2
 #: a winner's turn is in doubt when the model has a turn, not a symmetry, that moves
 #: less than this fraction of its surface samples by more than three noise levels
 #: (the turn rests on a small part of it: a lamp's spokes)
@@ -1268,7 +1275,7 @@ class _Run:
                                        self._subsample(behind, RAY_BACKGROUND)]))
 
     def _ray_scores(self, m: _Model, params: dict, poses: list, rays: np.ndarray,
-                    own: np.ndarray | None = None) -> np.ndarray:
+                    own: np.ndarray | None = None, spread: float = 0.0) -> np.ndarray:
         """``(H,)`` how well each pose ``(R, t)`` of ``m`` at ``params`` predicts the
         ranges the sensor measured along the rays of the scan points ``rays`` ``(K,)``:
         the model is ray-cast along each, and a ray scores :func:`_gain` of its range
@@ -1284,7 +1291,17 @@ class _Run:
         the first did before, and the right turn's lead on a lamp of 1,100 points was
         3.6, under the margin.) A range sensor's noise lies along its rays, so this
         sees thin parts (a lamp's spokes) that the points' distances to the surface,
-        blurred by the noise in every direction, do not."""
+        blurred by the noise in every direction, do not.
+
+        ``spread`` (scene units, > 0): each ray is also cast as four parallel rays
+        shifted across it by ``spread``, and the nearest hit of the five is the
+        model's range on that ray: the model dilated by ``spread`` in the sensor's
+        image. A thin part placed a few millimetres off by its parameters (a lamp's
+        5 mm spokes, whose shade parameters a fit to points at 11-23 mm noise leaves
+        3-7 mm off) then still meets the rays that saw it, and a wrong turn's spokes
+        block more of the rays that saw the shade's inside. (The grown outline sees
+        through too, alike at every turn of a model that is symmetric but for its
+        thin parts.)"""
         from ..render.trace import sphere_trace, trace_field
 
         surf, _ = self._surface_at(m, params)
@@ -1294,10 +1311,22 @@ class _Run:
                           what="detect", check_ranges=False)
         _, _, rng_scan = self._ray_index()
         D = self.dirs[rays]
-        O = np.concatenate([np.repeat(((self.vp - t) @ R)[None], len(rays), axis=0)
-                            for R, t in poses])
+        offsets = [np.zeros((len(rays), 3))]
+        if spread > 0.0:
+            # parallel rays shifted across the ray by ``spread`` (four ways): the
+            # nearest hit of the five is the model's range there, as if the model
+            # were dilated by ``spread`` in the sensor's image
+            ref = np.where(np.abs(D[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+            u = np.cross(D, ref)
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            v = np.cross(D, u)
+            offsets += [spread * u, -spread * u, spread * v, -spread * v]
         Dm = np.concatenate([D @ R for R, _ in poses])
-        tm = sphere_trace(fld, O, Dm).t.reshape(len(poses), len(rays))
+        tm = np.full(len(Dm), np.inf)
+        for off in offsets:
+            O = np.concatenate([(self.vp + off - t) @ R for R, t in poses])
+            tm = np.fmin(tm, sphere_trace(fld, O, Dm).t)
+        tm = tm.reshape(len(poses), len(rays))
         r = rng_scan[rays][None, :] - tm
         hit = np.isfinite(tm)
         a = np.abs(np.where(hit, r, 0.0))
@@ -1310,8 +1339,8 @@ class _Run:
         return g.sum(axis=1)
 
     def _yaw_scan_rays(self, m: _Model, res: FitResult, rays: np.ndarray,
-                       angles: np.ndarray, own: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, list]:
+                       angles: np.ndarray, own: np.ndarray | None = None,
+                       spread: float = 0.0) -> tuple[np.ndarray, list]:
         """The fit ``res`` of ``m`` turned about the vertical through its own origin by
         each of ``angles`` ``(Y,)`` (radians): ``(ray-cast scores (Y,)
         (:meth:`_ray_scores` on the rays of ``rays``, ``own`` its own clusters),
@@ -1327,7 +1356,7 @@ class _Run:
             Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
                 nrm, nrm)
             poses.append((Rt @ res.rotation, t))
-        return self._ray_scores(m, dict(res.params), poses, rays, own), poses
+        return self._ray_scores(m, dict(res.params), poses, rays, own, spread), poses
 
     def _turn_profile(self, m: _Model, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """How turns ``angles`` ``(Y,)`` (radians) about the model's own z axis move its
@@ -1354,8 +1383,9 @@ class _Run:
         noise levels (:meth:`_turn_profile`; a lamp, whose three 5 mm spokes under the
         shade are its only mark). Then the winner is refitted held upright
         (:meth:`_polish`: its parameters, which place the spokes, come out right) and
-        ray-cast (:meth:`_ray_scores`) at turns ``RAY_STEP`` degrees apart over one
-        period of its symmetry about that axis; if another turn scores more than
+        ray-cast (:meth:`_ray_scores`, rays spread by ``RAY_SPREAD`` noise levels) at
+        turns ``RAY_STEP`` degrees apart over one period of its symmetry about that
+        axis; if another turn scores more than
         ``TURN_RAY_MARGIN`` explained points more at the refit's parameters, that turn
         is a candidate too (and, with ``TURN_REFITS``, the model refitted from it; none by
         default: the refit's free turn drifted back to a wrong one). The refit
@@ -1379,7 +1409,8 @@ class _Run:
         if len(rays) == 0:
             return top
         labs = self._own_clusters(top[3])
-        score, _ = self._yaw_scan_rays(m, res, rays, angles[:1], labs)
+        spread = RAY_SPREAD * self.sigma
+        score, _ = self._yaw_scan_rays(m, res, rays, angles[:1], labs, spread)
         margin = RAY_MARGIN * GAIN_CAP_LOG
         # one turn against another at the same parameters (TURN_REFITS = 0) needs no
         # margin for the parameters' differences
@@ -1395,7 +1426,7 @@ class _Run:
             ok, sc, il, ch, gain = self._verify(m, r)
             if not ok:
                 break
-            s2, poses = self._yaw_scan_rays(m, r, rays, angles, labs)
+            s2, poses = self._yaw_scan_rays(m, r, rays, angles, labs, spread)
             if k == 0:
                 own = (float(s2[0]), (gain, sc, r, il, ch))
             else:

@@ -115,3 +115,23 @@ def test_memoised_normal_forms_are_the_forms():
         assert T.normal_form(t) == fresh
         assert T.normal_form(t) == T.normal_form(t, lambda i: str(i))
     assert len(T._NF_MEMO) > 2000  # subtrees kept
+
+
+def test_kept_subtree_fields_change_no_score():
+    """Scores with the fields of some trees' subtrees kept (:meth:`Scorer.keep`) are
+    those computed afresh, for trees built around those subtrees and for others."""
+    sc = _scorer(5)
+    rng = np.random.default_rng(6)
+    base = _random_tree(rng, [0, 1, 2, 3, 4, 5])
+    fresh = {}
+    trees = [base] + [T.replace(base, path, (op, sub, c)) for path, sub in T.subtrees(base)
+                      for op in ("union", "difference") for c in (6, 7)]
+    trees += [_random_tree(rng, list(rng.permutation(9)[:5])) for _ in range(50)]
+    for t in trees:
+        s = sc.score(t)
+        fresh[t] = (s.data, s.free, s.total)
+    sc.keep([base] + [T.remove(base, c) for c in range(6)])
+    assert len(sc._kept[0]) >= 5 and len(sc._kept[1]) >= 5
+    for t in trees:
+        s = sc.score(t)
+        assert (s.data, s.free, s.total) == fresh[t]

@@ -536,6 +536,59 @@ def test_a_trial_scores_as_the_leaf_added():
     assert len(pool.leaves) == 3  # nothing added
 
 
+def test_a_bounded_trial_scores_the_variants_that_can_win_as_before():
+    """:meth:`Pool.trial` with a bound: None for exactly the variants scoring that or
+    more, the others' scores as an unbounded trial gives them (the same draws), and
+    the pool's generator left where the unbounded trial leaves it."""
+    import copy
+
+    shape = csdf.box((2.0, 2.0, 0.5)) - csdf.cylinder(0.3, 1.0)
+    P, N = csdf.sample_surface(shape, 8000, seed=4)
+    box = Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 0.5}, 1)
+    cyl = Leaf("cylinder", np.eye(3), np.array([0.0, 0.0, 0.1]),
+               {"radius": 0.3, "height": 0.3}, -1)
+    pool = _pool(P, N, [box, cyl])
+    tree = ("difference", 0, 1)
+    variants = [cyl.moved(t=np.array([0.0, 0.0, z]), vals={"radius": r, "height": h})
+                for z, r, h in ((0.0, 0.3, 0.7), (0.0, 0.3, 0.2), (0.1, 0.28, 0.7),
+                                (0.0, 0.5, 0.7), (0.05, 0.3, 0.6), (0.3, 0.3, 0.2))]
+    twin = copy.deepcopy(pool)
+    full = twin.trial(tree, 1, variants)
+    totals = sorted(s.total for s in full)
+    below = 0.5 * (totals[2] + totals[3])
+    got = pool.trial(tree, 1, variants, below)
+    assert [g is None for g in got] == [f.total >= below for f in full]
+    for g, f in zip(got, full):
+        if g is not None:
+            assert (g.data, g.free, g.total) == (f.data, f.free, f.total)
+    assert pool.rng.random() == twin.rng.random()
+
+
+def test_a_straight_stretch_of_a_huge_torus_is_offered_as_its_cylinder():
+    """A strip of a cylinder's side (radius 0.2 along x) that detection took for a
+    torus of major radius 40 (its tube along x there): the torus's other kind is the
+    cylinder; a torus whose points go round its tube's bend has none."""
+    from csdf.infer.candidates import other_kind
+
+    rng = np.random.default_rng(7)
+    ang = rng.uniform(-0.7, 0.7, 600)
+    x = rng.uniform(-0.3, 0.3, 600)
+    Q = np.stack([x, 0.2 * np.sin(ang), 0.2 * np.cos(ang)], axis=1)
+    Q += rng.normal(0.0, 0.002, Q.shape)
+    tor = Leaf("torus", np.eye(3), np.array([0.0, -40.0, 0.0]), {"major": 40.0, "minor": 0.2})
+    rmse = float(np.sqrt(np.mean(tor.values(Q)[0] ** 2)))
+    cyl = other_kind(tor, Q, rmse, 0.006)
+    assert cyl is not None and cyl.kind == "cylinder" and cyl.origin == "straight-torus"
+    assert abs(cyl.R[:, 2] @ np.array([1.0, 0.0, 0.0])) > 0.999
+    assert cyl.vals["radius"] == pytest.approx(0.2, abs=0.005)
+    assert np.abs(cyl.t[1:]).max() < 0.01 and abs(cyl.t[0]) < 0.03
+    assert cyl.vals["height"] == pytest.approx(0.6, abs=0.05)
+    # a ring: its points span its whole bend
+    ring = Leaf("torus", np.eye(3), np.zeros(3), {"major": 0.5, "minor": 0.1})
+    P, _ = csdf.sample_surface(csdf.torus(0.5, 0.1), 2000, seed=3)
+    assert other_kind(ring, P, 0.002, 0.006) is None
+
+
 def test_estimated_normals_support_surface_near_an_edge():
     """With estimated normals a measured point supports surface facing within 90
     degrees of its normal (near an edge they lean towards the other face); with given

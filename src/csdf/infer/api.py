@@ -627,10 +627,12 @@ def _best_move(prob: _Problem, best: Scored, c: int) -> tuple[Scored, int] | Non
     moves = face_moves(pool.leaves[c], prob.P)
     if not moves:
         return None
-    scores = pool.trial(best.tree, c, moves)
-    j = int(np.argmin([s.total for s in scores]))
-    if scores[j].total >= best.total - 1e-9:
+    # only a move scoring below the tree's score can be taken
+    scores = pool.trial(best.tree, c, moves, best.total - 1e-9)
+    live = [(s.total, j) for j, s in enumerate(scores) if s is not None]
+    if not live:
         return None
+    j = min(live)[1]  # the first of the lowest
     v = pool.add([moves[j]])[0]
     sc = pool.scorer().score(swap(best.tree, c, v))
     if sc.total >= best.total - 1e-9:

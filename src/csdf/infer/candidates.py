@@ -51,6 +51,13 @@ FRAME_DEGREES = 4.0
 OTHER_KIND_GAIN = 0.9
 #: points of a candidate's inliers that the other kind's fit uses at most
 OTHER_KIND_POINTS = 600
+#: a torus is also offered as a cylinder when its inliers span less than this share of
+#: its major radius along its tube (a straight stretch of the tube: detection may take a
+#: cylinder seen as a narrow strip of its side for a torus of a huge major radius)
+STRAIGHT_TORUS = 0.5
+#: the cylinder of such a torus is kept when its rmse is below this share of the
+#: torus's (the two fit a straight stretch about as well: the score decides)
+STRAIGHT_TORUS_RMSE = 1.1
 #: the largest share of a candidate's points whose normals may disagree with its sign
 SIGN_AGREE = 0.8
 
@@ -290,7 +297,11 @@ def same_leaf(a: Leaf, b: Leaf, tol: float) -> bool:
 def other_kind(lf: Leaf, Q: np.ndarray, rmse: float, eps: float) -> Leaf | None:
     """A cone fitted to a cylinder's inliers ``Q`` ``(K, 3)`` (or a cylinder to a
     cone's) when its rmse is below :data:`OTHER_KIND_GAIN` times ``rmse``, the detected
-    kind's (scene units); else None. ``eps``: the noise level of the robust loss."""
+    kind's (scene units), or a cylinder fitted to a torus's straight stretch
+    (:func:`straight_torus`); else None. ``eps``: the noise level of the robust
+    loss."""
+    if lf.kind == "torus" and len(Q) >= 20:
+        return straight_torus(lf, Q, rmse, eps)
     if lf.kind not in ("cylinder", "cone") or len(Q) < 20:
         return None
     if lf.kind == "cylinder":
@@ -319,6 +330,46 @@ def other_kind(lf: Leaf, Q: np.ndarray, rmse: float, eps: float) -> Leaf | None:
         return None
     d, _ = new.values(Q)
     return new if float(np.sqrt(np.mean(d * d))) < OTHER_KIND_GAIN * rmse else None
+
+
+def straight_torus(lf: Leaf, Q: np.ndarray, rmse: float, eps: float) -> Leaf | None:
+    """A cylinder fitted to a torus's inliers ``Q`` ``(K, 3)`` when they span less than
+    :data:`STRAIGHT_TORUS` of its major radius along its tube, started from the
+    tube's tangent there (radius the minor radius, height the points' extent along the
+    tangent), kept when its rmse is below :data:`STRAIGHT_TORUS_RMSE` times the
+    torus's ``rmse`` (scene units); else None. ``eps``: the noise level of the robust
+    loss."""
+    R, major, minor = lf.R, lf.vals["major"], lf.vals["minor"]
+    a = R[:, 2]
+    c = Q.mean(axis=0) - lf.t
+    v = c - (c @ a) * a  # towards the points, in the torus's plane
+    if np.linalg.norm(v) < 1e-12 or major < 2.0 * minor:
+        return None
+    u = v / np.linalg.norm(v)
+    axis = np.cross(a, u)  # the tube's direction there
+    along = (Q - lf.t) @ axis
+    if float(np.ptp(along)) >= STRAIGHT_TORUS * major:
+        return None
+    centre = lf.t + major * u + (c @ a) * a + 0.5 * (along.max() + along.min()) * axis
+    vals = {"radius": minor, "height": max(float(np.ptp(along)), 2.0 * eps)}
+    if len(Q) > OTHER_KIND_POINTS:
+        Q = Q[np.linspace(0, len(Q) - 1, OTHER_KIND_POINTS).astype(int)]
+    shape, _ = canonical("cylinder")
+    try:
+        res = fit(shape, Q, init={"rotation": orient_matrix(axis), "translation": centre,
+                                  "scale": 1.0, "params": vals},
+                  estimate=("pose", "params"), loss="huber", f_scale=eps / 3.0,
+                  escape=False, debias=False, backend=SOLID_BACKEND, max_iter=60)
+    except CsdfError:
+        return None
+    new = Leaf("cylinder", np.asarray(res.rotation, float),
+               np.asarray(res.translation, float),
+               {k: float(res.params[k]) for k in SOLID_PARAMS["cylinder"]}, lf.sign,
+               origin="straight-torus")
+    if not all(np.isfinite(v) and v > 0 for v in new.vals.values()):
+        return None
+    d, _ = new.values(Q)
+    return new if float(np.sqrt(np.mean(d * d))) < STRAIGHT_TORUS_RMSE * rmse else None
 
 
 @dataclass

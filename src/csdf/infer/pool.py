@@ -341,24 +341,30 @@ class Pool:
                 None if self.free is None else
                 np.array(frows).reshape(len(leaves), len(self.free)))
 
-    def _draw(self, leaves: list[Leaf]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                  np.ndarray]:
+    def _draw(self, leaves: list[Leaf], wanted: list[bool] | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Points on the surfaces of ``leaves`` (:func:`surface_samples` of each) that
         measured points do not support: ``(points (K, 3), unsupported (2, K), the leaf
         each lies on (K,) as an index into leaves, weight (K,))``. A point measured
         points support, the way its leaf may be used (as material for a leaf of sign
         +1, as a cut for -1, either for 0: :func:`.search.consistent`), never counts:
-        only the others are kept."""
+        only the others are kept. ``wanted``: which leaves' points to return (the
+        others' are drawn all the same, so that the draws do not depend on it, but
+        not looked at)."""
         pts, own, wt, grads = [], [], [], []
         for k, lf in enumerate(leaves):
             n = surface_samples(leaf_area(lf), self.area)
             q, nrm, area = leaf_surface(lf, n, self.rng)
+            if wanted is not None and not wanted[k]:
+                continue
             pts.append(q)
             grads.append(nrm)
             own.append(np.full(len(q), k))
             w = np.full(len(q), area / len(q))
             # one view: surface counts as much as it shows the sensor
             wt.append(w if self.view is None else w * foreshortening(q, nrm, self.view.vp))
+        if not pts:
+            return np.zeros((0, 3)), np.zeros((2, 0), bool), np.zeros(0, int), np.zeros(0)
         q = np.concatenate(pts)
         far = self._unsupported(q, np.concatenate(grads))
         owner = np.concatenate(own)
@@ -415,13 +421,17 @@ class Pool:
             self._ns = s1
         return out
 
-    def trial(self, tree, c: int, variants: list[Leaf]) -> list[Scored]:
+    def trial(self, tree, c: int, variants: list[Leaf], below: float = math.inf
+              ) -> list[Scored | None]:
         """The scores of ``tree`` with its leaf ``c`` replaced by each of ``variants``
         (leaves not added to the pool): as :meth:`scorer` would give them once added,
         but computed over the tree's own leaves alone (a face moved: a dozen trial
         leaves per face, where adding them would evaluate every candidate at their
         surface points). The trees of the returned :class:`Scored` are in the indices
-        of a sub-pool (``tree``'s leaves, then the variants): use only their scores."""
+        of a sub-pool (``tree``'s leaves, then the variants): use only their scores.
+        None for a variant whose score is ``below`` or more: its data and free-space
+        terms are taken first, and when they reach ``below`` its surface points are
+        drawn (the others' draws stay as they were) but not looked at."""
         used = sorted({int(i) for i in tree_leaves(tree)})
         u, m = len(used), len(variants)
         sub = {i: k for k, i in enumerate(used)}
@@ -431,31 +441,38 @@ class Pool:
         at_free = None if frows is None else np.vstack([self.at_free[used], frows])
         signs = np.array([self.leaves[i].sign for i in used] + [v.sign for v in variants],
                          dtype=int)
-        if self.kd is None:
-            scorer = Scorer(at_points, dots, at_free, self.tau, self.penalty, signs=signs)
-        else:
+        base = relabel(tree, sub)
+        trees = [swap(base, sub[c], u + j) for j in range(m)]
+        # the score less the made-up surface: a lower bound
+        scorer = Scorer(at_points, dots, at_free, self.tau, self.penalty, signs=signs)
+        live = [scorer.score_below(t, below) is not None for t in trees]
+        if self.kd is not None:
             cols = np.flatnonzero(np.isin(self.owner, used))
-            q, far, own, wt = self._draw(variants)
+            q, far, own, wt = self._draw(variants, live)
             old_q = self.surf[cols]
             mine = [self.leaves[i] for i in used]
             # a variant at another variant's points is never needed (no tree holds
             # two of them): those entries stay 0
             own_vals = np.zeros((m, len(q)))
+            at_old = np.zeros((m, len(old_q)))  # a variant that cannot win: 0
             for j, v in enumerate(variants):
+                if not live[j]:
+                    continue
                 on = own == j
                 if on.any():
                     own_vals[j, on] = v.values(q[on])[0]
+                if len(old_q):
+                    at_old[j] = v.values(old_q)[0]
             at_surface = np.block([
                 [self.at_surface[used][:, cols], self._values(mine, q)],
-                [self._values(variants, old_q), own_vals]])
+                [at_old, own_vals]])
             owner = np.concatenate([np.array([sub[int(i)] for i in self.owner[cols]],
                                              dtype=int), u + own])
             weight = np.concatenate([self.weight[cols], wt])
             unsupported = np.concatenate([self.unsupported[:, cols], far], axis=1)
             scorer = Scorer(at_points, dots, at_free, self.tau, self.penalty, at_surface,
                             owner, weight / self.area, unsupported, signs)
-        base = relabel(tree, sub)
-        return [scorer.score(swap(base, sub[c], u + j)) for j in range(m)]
+        return [scorer.score_below(t, below) if ok else None for t, ok in zip(trees, live)]
 
     def _unsupported(self, q: np.ndarray, g: np.ndarray) -> np.ndarray:
         """``(2, K)`` which surface points ``q`` ``(K, 3)`` whose leaf's outward normal is

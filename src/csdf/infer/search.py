@@ -35,6 +35,8 @@ candidate of its kind).
 
 from __future__ import annotations
 
+import heapq
+import math
 import time
 from dataclasses import dataclass
 
@@ -71,28 +73,46 @@ class Scored:
     total: float
 
 
-def evaluate_oriented(tree: Tree, values: np.ndarray, dots: np.ndarray | None
+def evaluate_oriented(tree: Tree, values: np.ndarray, dots: np.ndarray | None,
+                      memo: dict | None = None, fill: bool = False
                       ) -> tuple[np.ndarray, np.ndarray | None]:
     """The tree's field ``(N,)`` from its leaves' fields ``values`` ``(L, N)``, and the
     cosine ``(N,)`` between the tree's outward gradient and the points' normals from
     the leaves' ``dots`` ``(L, N)`` (None without normals): the active leaf's, negated
-    under a difference's right operand."""
-    if dots is None:
-        return field_of(tree, values.__getitem__), None
+    under a difference's right operand. ``memo``: ``{subtree: (field, cosine)}`` of
+    subtrees already evaluated at these points (never changed in place), looked up
+    first; with ``fill``, every inner subtree evaluated is added to it."""
     if isinstance(tree, (int, np.integer)):
-        return values[int(tree)], dots[int(tree)]
+        return values[int(tree)], None if dots is None else dots[int(tree)]
+    if memo:
+        got = memo.get(tree)
+        if got is not None:
+            return got
+    if dots is None and memo is None:
+        return field_of(tree, values.__getitem__), None
     op, a, b = tree
-    fa, da = evaluate_oriented(a, values, dots)
-    fb, db = evaluate_oriented(b, values, dots)
-    if op == "difference":
-        fb = -fb
-        db = -db
-        pick_a = fa >= fb
-    elif op == "union":
-        pick_a = fa <= fb
+    fa, da = evaluate_oriented(a, values, dots, memo, fill)
+    fb, db = evaluate_oriented(b, values, dots, memo, fill)
+    if dots is None:
+        if op == "union":
+            out = np.minimum(fa, fb), None
+        elif op == "intersection":
+            out = np.maximum(fa, fb), None
+        else:
+            out = np.maximum(fa, -fb), None
     else:
-        pick_a = fa >= fb
-    return np.where(pick_a, fa, fb), np.where(pick_a, da, db)
+        if op == "difference":
+            fb = -fb
+            db = -db
+            pick_a = fa >= fb
+        elif op == "union":
+            pick_a = fa <= fb
+        else:
+            pick_a = fa >= fb
+        out = np.where(pick_a, fa, fb), np.where(pick_a, da, db)
+    if fill and memo is not None:
+        memo[tree] = out
+    return out
 
 
 def parities(tree: Tree, odd: bool = False) -> dict[int, bool]:
@@ -151,11 +171,26 @@ class Scorer:
         self.signs = np.zeros(n, dtype=int) if signs is None else np.asarray(signs, int)
         self.count = 0
         self._cache: dict[tuple, tuple] = {}
+        # the fields of the subtrees :meth:`keep` was given: at the points, at the
+        # free-space points
+        self._kept: tuple[dict, dict] = ({}, {})
         if at_surface is not None:
             order = np.argsort(owner, kind="stable")
             self._order = order
             starts = np.searchsorted(owner[order], np.arange(n + 1))
             self._slices = [order[starts[i]:starts[i + 1]] for i in range(n)]
+
+    def keep(self, trees: list[Tree]) -> None:
+        """Keep the fields of ``trees`` and of all their subtrees (at the points and at
+        the free-space points) for the trees scored next, forgetting those kept
+        before: a local move rebuilds a tree around subtrees of the tree it moves from
+        and of that tree without one leaf (:func:`polish`), and its score then
+        evaluates only the nodes the move made (the same arrays: the same score)."""
+        self._kept = ({}, {})
+        for t in trees:
+            evaluate_oriented(t, self.at_points, self.dots, self._kept[0], True)
+            if self.at_free is not None:
+                evaluate_oriented(t, self.at_free, None, self._kept[1], True)
 
     @property
     def n_leaves(self) -> int:
@@ -163,7 +198,7 @@ class Scorer:
 
     def _costs(self, tree: Tree) -> np.ndarray:
         """``(M,)`` each sample point's data cost under ``tree``."""
-        f, d = evaluate_oriented(tree, self.at_points, self.dots)
+        f, d = evaluate_oriented(tree, self.at_points, self.dots, self._kept[0])
         cost = np.minimum((f / self.tau) ** 2, 1.0)
         return cost if d is None else np.where(d > 0.0, cost, 1.0)
 
@@ -186,12 +221,28 @@ class Scorer:
 
     def score(self, tree: Tree) -> Scored:
         """The :class:`Scored` tree."""
+        out = self.score_below(tree, math.inf)
+        assert out is not None
+        return out
+
+    def score_below(self, tree: Tree, bound: float) -> Scored | None:
+        """The :class:`Scored` tree, or None when its total is ``bound`` or more. The
+        terms are taken cheapest first (the size, the data, the free space, the
+        made-up surface), each one 0 or more, and the rest are skipped as soon as
+        those taken reach ``bound``: a local move or a beam's tree that cannot win
+        costs its data term alone (the same decisions as comparing full scores:
+        floating-point addition of terms of one sign is monotone)."""
         self.count += 1
+        pen = self.penalty * size(tree)
         data = float(np.mean(self._costs(tree)))
+        if data + pen >= bound:
+            return None
         free = 0.0
         if self.at_free is not None and self.at_free.shape[1]:
-            g, _ = evaluate_oriented(tree, self.at_free, None)
+            g, _ = evaluate_oriented(tree, self.at_free, None, self._kept[1])
             free = float(np.mean(np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0)))
+            if data + free + pen >= bound:
+                return None
         if self.at_surface is not None:
             # the share of the tree's own surface where no point was measured: a
             # leaf's surface point counts where the tree's field is near 0 there
@@ -199,7 +250,8 @@ class Scorer:
             block, weight, row = self._bare(parities(tree))
             h = field_of(tree, lambda i: block[row[i]])
             free += float(weight[np.abs(h) <= ON_SURFACE * self.tau].sum())
-        return Scored(tree, data, free, data + free + self.penalty * size(tree))
+        total = data + free + pen
+        return None if total >= bound else Scored(tree, data, free, total)
 
     def _bare(self, par: dict[int, bool]) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
         """For a tree's leaves and their parities ``par``: the surface points of those
@@ -296,7 +348,13 @@ def beam_search(scorer: Scorer, candidates: list[int], max_primitives: int, beam
     for k in range(2, max_primitives + 1):
         if time.perf_counter() > deadline:
             break
-        seen: dict[str, Scored] = {normal_form(s.tree): s for s in by_size.get(k, [])}
+        # every tree of size k met (None: one that cannot make the beam), and the
+        # beam's best totals so far (negated: a max-heap); a tree is scored only as far
+        # as it may still beat the worst of them (Scorer.score_below: the same beam)
+        seen: dict[str, Scored | None] = {normal_form(s.tree): s
+                                          for s in by_size.get(k, [])}
+        top = [-s.total for s in sorted(seen.values(), key=lambda s: s.total)[:beam]]
+        heapq.heapify(top)
         for st in level:
             used = set(leaves(st.tree))
             for c in scorer.useful(st.tree, candidates, st.free):
@@ -304,15 +362,25 @@ def beam_search(scorer: Scorer, candidates: list[int], max_primitives: int, beam
                     continue
                 for t in grow(st.tree, c, signs):
                     key = normal_form(t)
-                    if key not in seen:
-                        seen[key] = scorer.score(t)
+                    if key in seen:
+                        continue
+                    # a tree scoring above the beam's worst cannot make the beam
+                    worst = -top[0] if len(top) >= beam else math.inf
+                    sc = seen[key] = scorer.score_below(t, np.nextafter(worst, math.inf))
+                    if sc is None:
+                        continue
+                    if len(top) < beam:
+                        heapq.heappush(top, -sc.total)
+                    elif sc.total < -top[0]:
+                        heapq.heapreplace(top, -sc.total)
                 if time.perf_counter() > deadline:
                     break
             if time.perf_counter() > deadline:
                 break
         if not seen:
             break
-        level = sorted(seen.values(), key=lambda s: s.total)[:beam]
+        level = sorted((s for s in seen.values() if s is not None),
+                       key=lambda s: s.total)[:beam]
         kept += level
         if level[0].total < best.total - 1e-12:
             improved = best.total - level[0].total
@@ -372,18 +440,22 @@ def polish(scorer: Scorer, tree: Tree, candidates: list[int], max_primitives: in
     seen = {normal_form(tree)}
     while time.perf_counter() < deadline:
         found = best
+        # the moves are built of the subtrees of the tree and of it less one leaf
+        scorer.keep([best.tree] + [r for r in (remove(best.tree, c)
+                                               for c in leaves(best.tree)) if r is not None])
         useful = scorer.useful(best.tree, candidates, best.free, 1.0)
         for t in _moves(best.tree, candidates, useful, max_primitives, scorer.signs, kinds):
             key = normal_form(t)
             if key in seen:
                 continue
             seen.add(key)
-            sc = scorer.score(t)
-            if sc.total < found.total - 1e-12:
+            sc = scorer.score_below(t, found.total - 1e-12)
+            if sc is not None and sc.total < found.total - 1e-12:
                 found = sc
             if time.perf_counter() > deadline:
                 break
         if found is best:
             break
         best = found
+    scorer.keep([])
     return best

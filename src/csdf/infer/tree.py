@@ -136,17 +136,41 @@ def normal_form(tree: Tree, label: Callable[[int], str] = str) -> str:
     intersection (``(a - b) & c`` is ``(a & c) - b``). On distances the two are the
     same field (``max`` is associative and commutative), so trees of one normal form
     score the same."""
+    if label is str:
+        return _nf_text(_nf_memo(tree))
     return _nf_text(_nf(tree, label))
 
 
-def _nf(tree: Tree, label: Callable[[int], str]) -> tuple[tuple[str, list[str]], list[str]]:
+#: the most subtrees whose normal forms (leaves labelled by ``str``) are kept: the
+#: search's moves rebuild a tree around subtrees it has met before
+NF_MEMO = 200_000
+_NF_MEMO: dict = {}
+
+
+def _nf_memo(tree: Tree) -> tuple[tuple[str, list[str]], list[str]]:
+    """:func:`_nf` with ``str`` labels, each subtree's kept (:data:`NF_MEMO` at most; the
+    values are never changed in place)."""
+    got = _NF_MEMO.get(tree)
+    if got is None:
+        got = _nf(tree, str, _nf_memo)
+        if len(_NF_MEMO) >= NF_MEMO:
+            _NF_MEMO.clear()
+        _NF_MEMO[tree] = got
+    return got
+
+
+def _nf(tree: Tree, label: Callable[[int], str], sub: Callable | None = None
+        ) -> tuple[tuple[str, list[str]], list[str]]:
     """``((kind, items), subtrahends)``: the set ``base - U(subtrahends)`` with ``base``
     a leaf (kind ``'L'``, one item), a union (``'U'``) or an intersection (``'I'``) of
-    the items (texts, sorted)."""
+    the items (texts, sorted). ``sub``: gives the operands' (default: this)."""
     if isinstance(tree, (int, np.integer)):
         return ("L", [label(int(tree))]), []
     op, a, b = tree
-    na, nb = _nf(a, label), _nf(b, label)
+    if sub is None:
+        na, nb = _nf(a, label), _nf(b, label)
+    else:
+        na, nb = sub(a), sub(b)
     if op == "union":
         items = [x for n in (na, nb) for x in (n[0][1] if n[0][0] == "U" and not n[1]
                                                else [_nf_text(n)])]

@@ -630,3 +630,76 @@ def test_a_cut_refined_short_is_moved_through():
     cut = prob.pool.leaves[kept[2]]
     assert cut.t[2] - cut.vals["height"] / 2 <= -0.25 + 1e-9
     assert cut.t[2] + cut.vals["height"] / 2 >= 0.25 - 1e-9
+
+
+def _cone_band(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` noisy points ``(n, 3)`` and outward normals ``(n, 3)`` of the side of a cone
+    along z (radius 0.4 at z = 0, 0.1 at z = 0.6), all the way round."""
+    rng = np.random.default_rng(seed)
+    z = rng.uniform(0.0, 0.6, n)
+    ang = rng.uniform(0.0, 2 * math.pi, n)
+    r = 0.4 - 0.5 * z
+    P = np.stack([r * np.cos(ang), r * np.sin(ang), z], axis=1)
+    N = np.stack([np.cos(ang), np.sin(ang), np.full(n, 0.5)], axis=1)
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    return P + rng.normal(0.0, 0.001, P.shape), N
+
+
+def test_a_curved_candidate_is_detected_again_on_its_own_points():
+    """A cone candidate 30 degrees off its points' axis (as a cone fitted to a narrow
+    band may be): detection on those points alone offers the cone along their axis; a
+    candidate already along it gets nothing more."""
+    from types import SimpleNamespace
+
+    from csdf.infer.api import _redetected
+
+    P, N = _cone_band(3000, 11)
+    prob = SimpleNamespace(P=P, N=N, seed=0, vp=None)
+    vals = {"r1": 0.4, "r2": 0.1, "height": 0.6}
+    tilt = math.radians(30.0)
+    off = Leaf("cone", csdf.shapes.domain.orient_matrix(
+        np.array([math.sin(tilt), 0.0, math.cos(tilt)])), np.zeros(3), vals, 1)
+    found = _redetected(prob, off, np.arange(len(P)), 0.006)
+    assert found, "no cone detected again"
+    best = max(abs(float(c.R[:, 2] @ np.array([0.0, 0.0, 1.0]))) for c, _ in found)
+    assert best > math.cos(math.radians(3.0))
+    assert all(c.kind == "cone" and c.origin == "redetected" for c, _ in found)
+    assert all(c.sign == 1 for c, _ in found)
+    right = Leaf("cone", np.eye(3), np.zeros(3), vals, 1)
+    assert _redetected(prob, right, np.arange(len(P)), 0.006) == []
+
+
+def test_a_material_cylinder_s_pointless_cap_is_trimmed_to_its_side():
+    """A cylinder candidate 0.1 too long at its top, where no cap point lies (hidden in
+    another operand): :func:`trimmed` moves that cap in to where the side's points end
+    and leaves the bottom cap, which holds points; a cylinder whose caps are right, or
+    hold points, gets none. A cone's radii follow its trimmed height."""
+    from csdf.infer.candidates import trimmed
+
+    rng = np.random.default_rng(5)
+    ang = rng.uniform(0.0, 2 * math.pi, 2000)
+    z = rng.uniform(-0.5, 0.4, 2000)
+    side = np.stack([0.3 * np.cos(ang), 0.3 * np.sin(ang), z], axis=1)
+    rr = 0.28 * np.sqrt(rng.random(300))
+    a2 = rng.uniform(0.0, 2 * math.pi, 300)
+    base = np.stack([rr * np.cos(a2), rr * np.sin(a2), np.full(300, -0.5)], axis=1)
+    Q = np.concatenate([side, base])
+    long = Leaf("cylinder", np.eye(3), np.array([0.0, 0.0, 0.05]),
+                {"radius": 0.3, "height": 1.1}, 1)
+    cut = trimmed(long, Q, 0.005)
+    assert cut is not None and cut.origin == "detected+trimmed"
+    assert cut.vals["height"] == pytest.approx(0.9, abs=0.005)
+    assert cut.t[2] == pytest.approx(-0.05, abs=0.003)
+    right = Leaf("cylinder", np.eye(3), np.array([0.0, 0.0, -0.05]),
+                 {"radius": 0.3, "height": 0.9}, 1)
+    assert trimmed(right, Q, 0.005) is None
+    top = Q[:, 2] >= 0.39
+    capped = np.concatenate([Q, Q[top] * np.array([0.5, 0.5, 0.0]) + [0.0, 0.0, 0.6]])
+    assert trimmed(long, capped, 0.005) is None
+    # a cone (radius 0.4 at z = 0 to 0.1 at 0.6) whose points end at z = 0.4
+    P, _ = _cone_band(3000, 2)
+    cone = Leaf("cone", np.eye(3), np.zeros(3), {"r1": 0.4, "r2": 0.1, "height": 0.6}, 1)
+    cc = trimmed(cone, P[P[:, 2] <= 0.4], 0.005)
+    assert cc is not None and cc.vals["height"] == pytest.approx(0.4, abs=0.005)
+    assert cc.vals["r2"] == pytest.approx(0.2, abs=0.003)
+    assert cc.vals["r1"] == pytest.approx(0.4, abs=0.003)

@@ -4,8 +4,11 @@
    cylinders, cones, tori, boxes and planes; boxes are also assembled from the planes
    (a box cut or hidden in part shows as a few faces), a cylinder is also offered as a
    cone and a cone as a cylinder when that fits their points better, and boxes and
-   cylinders also with their faces that hold no points moved out beyond the cloud; a
-   small curved detection is also tried as planes (:func:`_corner_planes`).
+   cylinders also with their faces that hold no points moved out beyond the cloud
+   (and, with :data:`TRIM`, material cylinders and cones with their caps that hold
+   none moved in to their side's points); each curved detection is detected again on
+   the points near it (:func:`_redetected`: a band seen from one side fits several
+   axes); a small curved detection is also tried as planes (:func:`_corner_planes`).
    Each candidate knows from the points' normals whether it is material or a cut.
 2. **Structure** (:mod:`.search`): a beam search over union / intersection /
    difference trees of the candidates, scored on the candidates' exact distances at a
@@ -71,6 +74,7 @@ from .candidates import (
     other_kind,
     plane_boxes,
     snap,
+    trimmed,
 )
 from .pool import Pool, View, free_points, oriented_normals, support_scales
 from .refine import refine_params, turn_matrix
@@ -120,6 +124,14 @@ PENALTY = 0.004
 BEAM_PER_SECOND = 0.5
 #: trees refined jointly after the search, per second of the time limit (at least 3)
 REFINE_PER_SECOND = 0.3
+#: whether each curved detection of the cloud is detected again on the points near it
+#: (:func:`_redetected`)
+REDETECT = True
+#: whether each material cylinder and cone is also offered with its point-less caps
+#: moved in to its side's points (:func:`.candidates.trimmed`). Off: one view 2-5, it
+#: made trees 11 right and 33 closer (IoU 0.896 -> 0.968) but lost 72 and 74 (more
+#: near-duplicate candidates; benchmarks/INFER_RESULTS.md, session 19 part 2)
+TRIM = False
 #: rounds of detection on the points the best tree leaves unexplained
 RESIDUAL_ROUNDS = 2
 #: the fewest unexplained points a residual detection looks at
@@ -355,12 +367,16 @@ class _Problem:
 
 
 def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
-                corners: bool = True) -> list[Leaf]:
+                corners: bool = True, redetect: bool = False) -> list[Leaf]:
     """Candidate leaves from detections ``dets`` made on the points ``P[sub]``: the solids
     (and a cylinder's cone, a cone's cylinder), boxes from the planes, each box and
-    cylinder also with its point-less faces moved out. ``eps``: the detections' inlier
+    cylinder also with its point-less faces moved out, each material cylinder and cone
+    also with its point-less caps moved in (:func:`.candidates.trimmed`, with
+    :data:`TRIM`). ``eps``: the detections' inlier
     distance; ``corners``: whether small curved detections are also tried as planes
-    (:func:`_corner_planes`)."""
+    (:func:`_corner_planes`); ``redetect``: whether each curved solid's kind is also
+    detected again on the points of ``sub`` within ``eps`` of it (:func:`_redetected`;
+    the whole cloud's detection only)."""
     P, N = prob.P, prob.N
     out: list[tuple[Leaf, Leaf | None]] = []  # (leaf, its variant moved out)
 
@@ -383,6 +399,15 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
         for c in (lf, alt):
             if c is not None and c.kind in prob.ks:
                 out.append((snap(c), _snapped(extended(c, P, P[inl]))))
+                if TRIM and c.sign > 0 and c.kind in ("cylinder", "cone"):
+                    near = sub[np.abs(c.values(P[sub])[0]) <= eps]
+                    cut = trimmed(c, P[near], eps)
+                    if cut is not None:
+                        out.append((snap(cut), None))
+        if redetect:
+            near = sub[np.abs(lf.values(P[sub])[0]) <= eps] if REDETECT_NEAR else inl
+            for c, ci in _redetected(prob, lf, near, eps):
+                out.append((snap(c), _snapped(extended(c, P, P[ci]))))
     if "box" in prob.ks:
         for d in dets if corners else ():
             if d.kind in ("sphere", "cylinder", "cone", "torus"):
@@ -394,6 +419,59 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
         if v is not None:
             leaves.append(v)
     return leaves
+
+
+#: curved detections (cylinder, cone, torus) of at least this many inliers are detected
+#: again on those inliers alone (:func:`_redetected`)
+REDETECT_MIN = 200
+#: the most detections of that kind on them
+REDETECT_MAX = 3
+#: a detection again is kept when its axis is this many degrees or more off the
+#: detection's (and off every one kept before)
+REDETECT_DEGREES = 5.0
+#: ... and it holds at least this share of the inliers
+REDETECT_SHARE = 0.3
+#: whether the points detected again are all those within the inlier distance of the
+#: solid (else its detection's inliers)
+REDETECT_NEAR = True
+
+
+def _redetected(prob: _Problem, lf: Leaf, inl: np.ndarray, eps: float
+                ) -> list[tuple[Leaf, np.ndarray]]:
+    """Solids of ``lf``'s kind (a cylinder, cone or torus) detected again on its inliers
+    ``P[inl]`` alone (``inl`` ``(K,)`` indices), each with its own inliers ``(K',)``
+    (indices into ``P``): a band of a cone or a torus seen from one side fits solids of
+    several axes within the noise, and detection on the whole cloud takes the first it
+    samples; on the band alone it samples more of them. Kept: those whose axis is at
+    least :data:`REDETECT_DEGREES` off ``lf``'s and every other kept one's, holding
+    :data:`REDETECT_SHARE` of the inliers. ``eps``: the inlier distance (scene
+    units)."""
+    if lf.kind not in ("cylinder", "cone", "torus") or len(inl) < REDETECT_MIN:
+        return []
+    P, N = prob.P, prob.N
+    try:
+        dets = detect_primitives(P[inl], None if N is None else N[inl], kinds=(lf.kind,),
+                                 epsilon=eps, seed=prob.seed, viewpoint=prob.vp,
+                                 min_points=max(RESIDUAL_MIN,
+                                                int(REDETECT_SHARE * len(inl))),
+                                 max_primitives=REDETECT_MAX, flat_share=1.0)
+    except CsdfError:
+        return []
+    cos_tol = math.cos(math.radians(REDETECT_DEGREES))
+    axes = [lf.R[:, 2]]
+    out = []
+    for d in dets:
+        if d.solid is None or d.solid[0] != lf.kind:
+            continue
+        new = Leaf(d.solid[0], np.asarray(d.solid[1], float), np.asarray(d.solid[2], float),
+                   dict(d.solid[3]), origin="redetected")
+        a = new.R[:, 2]
+        if any(abs(float(a @ b)) >= cos_tol for b in axes):
+            continue
+        ci = inl[d.inliers]
+        axes.append(a)
+        out.append((new.moved(sign=0 if N is None else orientation(new, P[ci], N[ci])), ci))
+    return out
 
 
 def _corner_planes(prob: _Problem, idx: np.ndarray, rmse: float, eps: float) -> list:
@@ -475,7 +553,7 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
                     tau, diag,
                     nb.spacing, pool, rng, seed)
     eps = max(3.0 * float(np.median(rmse)), 1e-4 * diag)
-    leaves = _candidates(prob, dets, np.arange(len(P)), eps)
+    leaves = _candidates(prob, dets, np.arange(len(P)), eps, redetect=REDETECT)
     if not leaves:
         raise CsdfError("infer: no primitive of the kinds "
                         f"{', '.join(ks)} found in the cloud")

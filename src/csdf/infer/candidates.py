@@ -11,7 +11,13 @@ points the best tree found so far leaves unexplained):
   of its faces, cut or hidden in part by the rest of the tree, often not as a whole box;
 * each box and cylinder also with its faces that hold no points moved out to the
   cloud's extent (:func:`extended`): a cutter's ends are outside the object, a trimmed
-  solid's are beyond the trimming operand.
+  solid's are beyond the trimming operand;
+* with ``api.TRIM`` (off by default), each material cylinder and cone also with its
+  caps that hold no points moved in to where its side's points end (:func:`trimmed`):
+  a cap hidden in another operand;
+* each curved solid of the whole cloud's detection also as detected again on the
+  points near it alone (``api._redetected``): a band seen from one side fits solids of
+  several axes.
 
 Each candidate carries the orientation its points show (:attr:`Leaf.sign`): ``+1``
 when the cloud's normals point out of it (material: a union or intersection operand,
@@ -34,7 +40,7 @@ from ..errors import CsdfError
 from ..fit import fit
 from ..shapes.domain import orient_matrix
 
-__all__ = ["Leaf", "snap", "extended", "face_moves", "leaf_surface", "leaf_area",
+__all__ = ["Leaf", "snap", "extended", "trimmed", "face_moves", "leaf_surface", "leaf_area",
            "plane_boxes", "other_kind",
            "orientation", "same_leaf", "SNAP_DEGREES", "EXTEND_BELOW", "FRAME_DEGREES"]
 
@@ -150,6 +156,40 @@ def extended(lf: Leaf, P: np.ndarray, inl: np.ndarray) -> Leaf | None:
         vals["height"] = hi[2] - lo[2]
         mid[:2] = 0.0
     return lf.moved(t=lf.t + lf.R @ mid, vals=vals, origin=lf.origin + "+through")
+
+
+def trimmed(lf: Leaf, Q: np.ndarray, eps: float) -> Leaf | None:
+    """The cylinder or cone ``lf`` with each cap that holds fewer than
+    :data:`EXTEND_BELOW` of the points ``Q`` ``(K, 3)`` (those near it) moved in to where
+    the points on its side end, when that is more than ``eps`` (scene units, the inlier
+    distance) in: detection sets the height from its inliers, which near a cap hidden
+    in another operand include that operand's points within ``eps`` of the side's
+    extension (origin ``'...+trimmed'``). None when no cap moves, or for other
+    kinds."""
+    if lf.kind not in ("cylinder", "cone") or len(Q) < 20:
+        return None
+    r1, r2, z0, _, _, _ = _frustum(lf)
+    h = lf.vals["height"]
+    q = (Q - lf.t) @ lf.R
+    z, rad = q[:, 2], np.hypot(q[:, 0], q[:, 1])
+    on_side = np.abs(rad - (r1 + (r2 - r1) * (z - z0) / h)) <= eps
+    if np.sum(on_side) < 20:
+        return None
+    lo, hi = z0, z0 + h
+    if np.sum((np.abs(z - lo) <= eps) & (rad < r1 - eps)) < EXTEND_BELOW:
+        lo = max(lo, float(z[on_side].min()))
+    if np.sum((np.abs(z - hi) <= eps) & (rad < r2 - eps)) < EXTEND_BELOW:
+        hi = min(hi, float(z[on_side].max()))
+    if (lo - z0 <= eps and z0 + h - hi <= eps) or hi - lo <= 2 * eps:
+        return None
+    vals = dict(lf.vals)
+    vals["height"] = hi - lo
+    if lf.kind == "cylinder":
+        return lf.moved(t=lf.t + lf.R[:, 2] * (0.5 * (lo + hi)), vals=vals,
+                        origin=lf.origin + "+trimmed")
+    vals["r1"] = r1 + (r2 - r1) * (lo - z0) / h
+    vals["r2"] = r1 + (r2 - r1) * (hi - z0) / h
+    return lf.moved(t=lf.t + lf.R[:, 2] * lo, vals=vals, origin=lf.origin + "+trimmed")
 
 
 #: how far a face moves in :func:`face_moves`, as shares of the solid's size along it

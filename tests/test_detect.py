@@ -922,3 +922,40 @@ def test_a_detection_claims_its_own_clusters_not_a_neighbours_points():
     assert kept.tolist() == [*range(10), 20, 21, 22, 24, 25]
     run.claimed[13:20] = True  # the neighbour's other points claimed already: a piece
     assert _Run._own_inliers(run, inl, idx).tolist() == inl.tolist()
+
+
+def test_a_size_grown_to_its_bound_is_fitted_again_held_back():
+    """A bookshelf seen from the front: no point holds its depth, and a fit that pushed
+    it to the range's top reaches into space the sensor saw empty. Fitted again with
+    the depth held back towards its default (the other sizes held too, the pose
+    refitted), it explains the scan better, and that fit wins by explained mass."""
+    from csdf.detect.objects import AT_BOUND
+
+    scene = _floor_scene()
+    pose = _yawed(0.35, (0.0, 0.4, 0.0))
+    scene.add("bookshelf", pose=pose, params={"depth": 0.32}, name="shelf")
+    cam = csdf.Camera.look_at(eye=(0.6, -2.2, 1.3), target=(0.0, 0.4, 0.8), fov=50,
+                              width=160, height=120)
+    P, _, inst = csdf.scan(scene, cam, noise=0.008, outliers=0.0, seed=4)
+    run = _prepared(P, ["bookshelf"])
+    m = run.models[0]
+    gt = _camera_pose(cam, pose)
+    idx = np.flatnonzero((inst == 1) & ~run.support)
+    depth = next(p for p in m.fld.program.params if p.name == "depth")
+    # the depth at its bound, the box pushed back so its front stays where it was seen
+    grown = float(depth.hi)
+    back = gt.rotation @ np.array([0.0, 0.5 * (grown - 0.32), 0.0])
+    res = run._candidate(m, idx, {"rotation": gt.rotation,
+                                  "translation": gt.translation + back,
+                                  "params": {"depth": grown}}, held=("depth",))
+    assert res is not None and res.params["depth"] >= depth.hi - AT_BOUND * (
+        depth.hi - depth.lo)
+    gain0 = run._verify(m, res)[4]
+    found: list = []
+    run._shrunk(m, idx, res, found)
+    assert found
+    best = max(found, key=lambda f: f[0])
+    assert best[0] > gain0  # explains more than the grown fit, which still passes
+    assert best[2].params["depth"] < grown - 0.05
+    # the other sizes held: the width does not grow in the depth's place
+    assert best[2].params["width"] == pytest.approx(res.params["width"])

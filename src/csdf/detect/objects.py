@@ -254,6 +254,12 @@ RAY_SPREAD = 0.2
 #: less than this fraction of its surface samples by more than three noise levels
 #: (the turn rests on a small part of it: a lamp's spokes)
 YAW_DOUBT = 0.03
+#: a parameter within this fraction of its range's span of an end is at its bound (a
+#: size no point holds, pushed out by the fit: a bookshelf's depth seen from the front)
+AT_BOUND = 0.02
+#: the fractions of the way from a parameter's bound to its default at which
+#: :meth:`_Run._shrunk` holds it
+SHRINK_STEPS = (0.5, 1.0)
 #: names of the parameters the upright refit adds: the turn about the model's z axis
 #: and the shift along its x and y axes
 UPRIGHT_PARAMS = ("_upright_yaw", "_upright_dx", "_upright_dy")
@@ -851,16 +857,20 @@ class _Run:
         keep = _joined(self.label, self.label[inside], idx, self.sizes)
         return np.flatnonzero(inside & np.isin(self.label, keep))
 
-    def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | dict | None
-                   ) -> FitResult | None:
+    def _candidate(self, m: _Model, idx: np.ndarray, init: FitResult | dict | None,
+                   held: tuple[str, ...] = ()) -> FitResult | None:
         """Step 5: the refined fit of model ``m`` to the points ``idx`` from the placed
         hypothesis ``init`` (a result or a dict of ``rotation``, ``translation`` and
-        ``params``; None: :func:`csdf.fit`'s multistart search)."""
+        ``params``; None: :func:`csdf.fit`'s multistart search); the parameters named
+        in ``held`` stay at their values in ``init``."""
         if init is not None:
             idx = self._gather(m, idx, init)
         F = self._subsample(idx, FIT_POINTS)
+        free = [p.name for p in m.fld.program.params if p.name not in held] \
+            if held else None
         try:
             res = fit(m.shape, self.P[F], init=init, estimate=("pose", "params"),
+                      params=free,
                       loss="cauchy", f_scale=max(self.sigma, 0.005 * m.radius),
                       viewpoint=self.vp, multistart=init is None,
                       seed=self.fit_seed, max_iter=40, escape=False,
@@ -869,13 +879,14 @@ class _Run:
             return None
         if init is None or self.plane is None:
             return res
-        return self._upright_fit(m, F, res)
+        return self._upright_fit(m, F, res, free)
 
-    def _upright_fit(self, m: _Model, F: np.ndarray, res: FitResult) -> FitResult | None:
+    def _upright_fit(self, m: _Model, F: np.ndarray, res: FitResult,
+                     free: list[str] | None = None) -> FitResult | None:
         """``res`` stood on the support (upright, the model's floor on the plane), then
-        its parameters fitted again with that pose held. None when ``res`` tilts more
-        than ``UPRIGHT_SNAP`` degrees (it fell over: not an object standing on the
-        support)."""
+        its parameters (those named in ``free``; None: all) fitted again with that pose
+        held. None when ``res`` tilts more than ``UPRIGHT_SNAP`` degrees (it fell over:
+        not an object standing on the support)."""
         nrm, off = self.plane
         R = res.rotation
         if R[:, 2] @ nrm < math.cos(math.radians(UPRIGHT_SNAP)):
@@ -885,10 +896,13 @@ class _Run:
         R = np.stack([x, np.cross(nrm, x), nrm], axis=1)
         t = np.asarray(res.translation, float)
         t = t - (t @ nrm - off + m.bounds[0, 2]) * nrm
+        if free is not None and not free:
+            return dataclasses.replace(res, rotation=R, translation=t)
         try:
             return fit(m.shape, self.P[F], init={"rotation": R, "translation": t,
                                                  "params": res.params},
-                       estimate=("params",), loss="cauchy", f_scale=res.quality.get(
+                       estimate=("params",), params=free, loss="cauchy",
+                       f_scale=res.quality.get(
                            "noise_level", self.sigma), viewpoint=self.vp, max_iter=30,
                        escape=False, debias=False, backend=m.backend, check_ranges=False)
         except CsdfError:
@@ -1089,6 +1103,8 @@ class _Run:
                                                           RETRY_EXPLAINED * len(idx)):
                     # explained most of the points but failed: other parameter starts
                     self._other_params(m, idx, res, init, found)
+                    if not found:
+                        self._shrunk(m, idx, res, found)
             done.append((m, init, res, found))
         if self.plane is not None and self.upright:
             # the winner's best other yaws, and those of the placements of models the
@@ -1248,6 +1264,44 @@ class _Run:
                     found.append((gain, sc, r, il, ch))
             if tried >= RETRY_STARTS:
                 break
+
+    def _shrunk(self, m: _Model, idx: np.ndarray, res: FitResult, found: list) -> None:
+        """A fit ``res`` of ``m`` to the points ``idx`` with parameters at an end of their
+        ranges (within ``AT_BOUND`` of the span): a size no point holds (the side of a
+        bookshelf the sensor does not see), which the fit pushes out until the model
+        reaches into space the sensor saw empty (seen through: verification fails).
+        Fits again from ``res``'s pose with those parameters set ``SHRINK_STEPS`` of the
+        way back to their defaults and every parameter held (the pose alone refitted,
+        then stood upright) and appends those that pass verification to ``found``
+        (items as :meth:`_turns`'), where explained mass, which counts the surface seen
+        through, judges them against the rest. Two pose fits, only for failed fits with
+        a parameter at a bound."""
+        names, ends = [], []
+        for p in m.fld.program.params:
+            v, lo, hi = float(res.params[p.name]), float(p.lo), float(p.hi)
+            span = hi - lo
+            if not (math.isfinite(span) and span > 0):
+                continue
+            end = hi if v >= hi - AT_BOUND * span else lo if v <= lo + AT_BOUND * span \
+                else None
+            if end is not None and abs(float(p.default) - end) > AT_BOUND * span:
+                names.append(p.name)
+                ends.append((end, float(p.default)))
+        if not names:
+            return
+        # every parameter held, not only those at a bound: the sizes a single view does
+        # not hold trade against each other (a bookshelf seen side-on, its depth held at
+        # the default, grew its width instead: 0.112 d, a false positive)
+        held = tuple(p.name for p in m.fld.program.params)
+        for frac in SHRINK_STEPS:
+            pv = dict(res.params)
+            pv.update({n: e + frac * (d - e) for n, (e, d) in zip(names, ends)})
+            start = {"rotation": res.rotation, "translation": res.translation, "params": pv}
+            r = self._candidate(m, idx, start, held=held)
+            if r is not None:
+                ok, sc, il, ch, gain = self._verify(m, r)
+                if ok:
+                    found.append((gain, sc, r, il, ch))
 
     def _ray_set(self, m: _Model, res: FitResult) -> np.ndarray:
         """Indices of the scan points whose rays score the turns of the fit ``res`` of

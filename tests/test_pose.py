@@ -103,3 +103,21 @@ def test_fit_result_pose_matches_its_transform():
     assert isinstance(res.pose, Pose)
     np.testing.assert_allclose(res.pose.matrix, res.transform, atol=1e-12)
     assert res.pose.allclose(truth, atol=1e-4)
+
+
+def test_exact_identity_test_agrees_with_the_tolerant_one():
+    """``is_identity()`` (exact: compared without temporaries) answers as the general
+    test with ``tol`` 0 does, signed zeros and one-ulp changes included."""
+
+    def general(p: Pose) -> bool:
+        return bool(np.max(np.abs(p.rotation - np.eye(3))) <= 0.0
+                    and np.max(np.abs(p.translation)) <= 0.0 and abs(p.scale - 1.0) <= 0.0)
+
+    tiny = np.nextafter(0.0, 1.0)
+    poses = [Pose(), Pose(np.eye(3), [-0.0, 0.0, -0.0]), Pose(np.eye(3), [0.0, tiny, 0.0]),
+             Pose(None, None, np.nextafter(1.0, 2.0)), Pose.from_rotvec([0.0, 0.0, 1e-12]),
+             Pose.from_rotvec([0.1, 0.2, 0.3], [1.0, 2.0, 3.0], 1.5),
+             Pose.from_rotvec([0.0, 0.0, np.pi])]
+    for p in poses:
+        assert p.is_identity() == general(p)
+    assert [p.is_identity() for p in poses[:4]] == [True, True, False, False]

@@ -25,6 +25,8 @@ __all__ = ["Pose", "as_pose", "check_rotation"]
 
 _ORTHO_TOL = 1e-6   # |R^T R - I| allowed in a given rotation
 _ROW_TOL = 1e-9     # |last row - (0, 0, 0, 1)| allowed in a 4x4 matrix
+_EYE3 = np.eye(3)  # compared with, never written
+_EYE3.setflags(write=False)
 
 
 def _vec3(v: Any, what: str) -> np.ndarray:
@@ -191,6 +193,11 @@ class Pose:
 
     def is_identity(self, tol: float = 0.0) -> bool:
         """True when this is the identity to ``tol`` (exactly, by default)."""
+        if tol == 0.0:
+            # the exact test without the temporaries (fields ask on every evaluation);
+            # NaN entries fail it as they fail the general one
+            return bool(self.scale == 1.0 and (self.rotation == _EYE3).all()
+                        and not (self.translation != 0.0).any())
         return bool(np.max(np.abs(self.rotation - np.eye(3))) <= tol
                     and np.max(np.abs(self.translation)) <= tol
                     and abs(self.scale - 1.0) <= tol)

@@ -7,6 +7,8 @@
 * :func:`shapes`: random shapes built through the public modelling API (primitives,
   CSG with and without blends, domain operations, deformations, 2D sweeps), with
   parameters sometimes in place of numbers.
+* :func:`random_csg_tree`: a random union / intersection / difference tree of leaf
+  labels (``csdf.infer``'s tree form), from a NumPy generator.
 * :func:`points` and :func:`param_values`: evaluation inputs, including the special
   values (signed zeros, huge numbers, infinities, NaN).
 
@@ -29,7 +31,7 @@ from csdf.ops import OPS
 __all__ = [
     "UNARY_OPS", "BINARY_OPS", "ALL_OPS", "SPECIAL_FLOATS", "PARAM_NAMES", "constants",
     "param_sets", "positive_param_sets", "expr_dags", "shapes", "shapes_2d", "points",
-    "param_values",
+    "param_values", "random_csg_tree",
 ]
 
 UNARY_OPS = tuple(sorted(name for name, info in OPS.items() if info.arity == 1))
@@ -409,3 +411,14 @@ def param_values(draw, params, allow_nan: bool = True) -> dict[str, float]:
             specials = (0.0, -0.0, 1e300, math.inf, -math.inf)
             out[p.name] = draw(st.sampled_from(specials + ((math.nan,) if allow_nan else ())))
     return out
+
+
+def random_csg_tree(rng: np.random.Generator, labels: list[int]):
+    """A random binary CSG tree over the leaf ``labels`` (each once, in order), in
+    ``csdf.infer``'s form: an int leaf or ``(op, left, right)`` with ``op`` one of
+    union, intersection, difference."""
+    if len(labels) == 1:
+        return int(labels[0])
+    k = int(rng.integers(1, len(labels)))
+    op = ("union", "intersection", "difference")[int(rng.integers(3))]
+    return (op, random_csg_tree(rng, labels[:k]), random_csg_tree(rng, labels[k:]))

@@ -21,14 +21,7 @@ from csdf.infer.pool import (
 )
 from csdf.infer.refine import refine_params
 from csdf.infer.search import Scorer, consistent, grow, parities
-
-
-def _random_tree(rng, labels: list[int]):
-    if len(labels) == 1:
-        return int(labels[0])
-    k = int(rng.integers(1, len(labels)))
-    op = ("union", "intersection", "difference")[int(rng.integers(3))]
-    return (op, _random_tree(rng, labels[:k]), _random_tree(rng, labels[k:]))
+from strategies import random_csg_tree
 
 
 def test_normal_form_merges_only_trees_of_one_field():
@@ -43,7 +36,7 @@ def test_normal_form_merges_only_trees_of_one_field():
     vals = rng.normal(size=(5, 2000))
     fields: dict[str, np.ndarray] = {}
     for _ in range(1500):
-        t = _random_tree(rng, list(rng.permutation(5)[: int(rng.integers(1, 6))]))
+        t = random_csg_tree(rng, list(rng.permutation(5)[: int(rng.integers(1, 6))]))
         key = T.normal_form(t)
         f = T.evaluate(t, vals)
         if key in fields:
@@ -82,7 +75,7 @@ def test_relocations_scope_and_cuts_last():
     vals = rng.normal(size=(6, 500))
     signs = rng.integers(-1, 2, 6)
     for _ in range(300):
-        t = _random_tree(rng, list(rng.permutation(6)[: int(rng.integers(2, 7))]))
+        t = random_csg_tree(rng, list(rng.permutation(6)[: int(rng.integers(2, 7))]))
         for r in T.relocations(t):
             assert sorted(T.leaves(r)) == sorted(T.leaves(t))
             if consistent(t, signs) and parities(r) == parities(t):
@@ -114,7 +107,7 @@ def test_grow_keeps_every_leaf_on_its_side():
     checked = 0
     for _ in range(600):
         signs = rng.integers(-1, 2, 7)
-        t = _random_tree(rng, list(rng.permutation(6)[: int(rng.integers(1, 5))]))
+        t = random_csg_tree(rng, list(rng.permutation(6)[: int(rng.integers(1, 5))]))
         if not consistent(t, signs):
             continue
         want = []

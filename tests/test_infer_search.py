@@ -12,14 +12,7 @@ import pytest
 from csdf.infer import search as S
 from csdf.infer import tree as T
 from csdf.infer.search import Scorer, beam_search, polish
-
-
-def _random_tree(rng, labels: list[int]):
-    if len(labels) == 1:
-        return int(labels[0])
-    k = int(rng.integers(1, len(labels)))
-    op = ("union", "intersection", "difference")[int(rng.integers(3))]
-    return (op, _random_tree(rng, labels[:k]), _random_tree(rng, labels[k:]))
+from strategies import random_csg_tree
 
 
 def _scorer(seed: int, n: int = 9, m: int = 3000) -> Scorer:
@@ -46,7 +39,7 @@ def test_score_below_is_none_exactly_when_the_total_reaches_the_bound():
     rng = np.random.default_rng(1)
     pruned = kept = 0
     for _ in range(300):
-        t = _random_tree(rng, list(rng.permutation(9)[: int(rng.integers(1, 7))]))
+        t = random_csg_tree(rng, list(rng.permutation(9)[: int(rng.integers(1, 7))]))
         full = sc.score(t)
         for bound in (full.total - 0.05, full.total - 1e-6, full.total, full.total + 1e-6,
                       full.total + 0.05, math.inf):
@@ -110,7 +103,7 @@ def test_memoised_normal_forms_are_the_forms():
     rng = np.random.default_rng(4)
     T._NF_MEMO.clear()
     for _ in range(2000):
-        t = _random_tree(rng, list(rng.permutation(8)[: int(rng.integers(1, 8))]))
+        t = random_csg_tree(rng, list(rng.permutation(8)[: int(rng.integers(1, 8))]))
         fresh = T._nf_text(T._nf(t, str))
         assert T.normal_form(t) == fresh
         assert T.normal_form(t) == T.normal_form(t, lambda i: str(i))
@@ -122,11 +115,11 @@ def test_kept_subtree_fields_change_no_score():
     those computed afresh, for trees built around those subtrees and for others."""
     sc = _scorer(5)
     rng = np.random.default_rng(6)
-    base = _random_tree(rng, [0, 1, 2, 3, 4, 5])
+    base = random_csg_tree(rng, [0, 1, 2, 3, 4, 5])
     fresh = {}
     trees = [base] + [T.replace(base, path, (op, sub, c)) for path, sub in T.subtrees(base)
                       for op in ("union", "difference") for c in (6, 7)]
-    trees += [_random_tree(rng, list(rng.permutation(9)[:5])) for _ in range(50)]
+    trees += [random_csg_tree(rng, list(rng.permutation(9)[:5])) for _ in range(50)]
     for t in trees:
         s = sc.score(t)
         fresh[t] = (s.data, s.free, s.total)

@@ -351,25 +351,35 @@ def other_kind(lf: Leaf, Q: np.ndarray, rmse: float, eps: float) -> Leaf | None:
     else:
         r1, r2, h = lf.vals["r1"], lf.vals["r2"], lf.vals["height"]
         kind, vals = "cylinder", {"radius": 0.5 * (r1 + r2), "height": h}
-    if len(Q) > OTHER_KIND_POINTS:
-        Q = Q[np.linspace(0, len(Q) - 1, OTHER_KIND_POINTS).astype(int)]
     t0 = lf.t - lf.R[:, 2] * (0.5 * lf.vals["height"]) if kind == "cone" else \
         lf.t + lf.R[:, 2] * (0.5 * lf.vals["height"])
+    return _fitted_as(kind, Q, lf.R, t0, vals, lf.sign, eps, "other-kind",
+                      OTHER_KIND_GAIN * rmse)
+
+
+def _fitted_as(kind: str, Q: np.ndarray, R: np.ndarray, t: np.ndarray, vals: dict,
+               sign: int, eps: float, origin: str, below: float) -> Leaf | None:
+    """A ``kind`` solid fitted to the points ``Q`` ``(K, 3)`` (at most
+    :data:`OTHER_KIND_POINTS` of them, evenly spaced) from the pose ``R`` ``(3, 3)``,
+    ``t`` ``(3,)`` and sizes ``vals``, as a leaf of ``sign`` and ``origin``, when its
+    sizes are finite and positive and its rmse over those points is below ``below``
+    (scene units); else None. ``eps``: the noise level of the robust loss."""
+    if len(Q) > OTHER_KIND_POINTS:
+        Q = Q[np.linspace(0, len(Q) - 1, OTHER_KIND_POINTS).astype(int)]
     shape, _ = canonical(kind)
     try:
-        res = fit(shape, Q, init={"rotation": lf.R, "translation": t0, "scale": 1.0,
+        res = fit(shape, Q, init={"rotation": R, "translation": t, "scale": 1.0,
                                   "params": vals},
                   estimate=("pose", "params"), loss="huber", f_scale=eps / 3.0,
                   escape=False, debias=False, backend=SOLID_BACKEND, max_iter=60)
     except CsdfError:
         return None
     new = Leaf(kind, np.asarray(res.rotation, float), np.asarray(res.translation, float),
-               {k: float(res.params[k]) for k in SOLID_PARAMS[kind]}, lf.sign,
-               origin="other-kind")
+               {k: float(res.params[k]) for k in SOLID_PARAMS[kind]}, sign, origin=origin)
     if not all(np.isfinite(v) and v > 0 for v in new.vals.values()):
         return None
     d, _ = new.values(Q)
-    return new if float(np.sqrt(np.mean(d * d))) < OTHER_KIND_GAIN * rmse else None
+    return new if float(np.sqrt(np.mean(d * d))) < below else None
 
 
 def straight_torus(lf: Leaf, Q: np.ndarray, rmse: float, eps: float) -> Leaf | None:
@@ -392,24 +402,8 @@ def straight_torus(lf: Leaf, Q: np.ndarray, rmse: float, eps: float) -> Leaf | N
         return None
     centre = lf.t + major * u + (c @ a) * a + 0.5 * (along.max() + along.min()) * axis
     vals = {"radius": minor, "height": max(float(np.ptp(along)), 2.0 * eps)}
-    if len(Q) > OTHER_KIND_POINTS:
-        Q = Q[np.linspace(0, len(Q) - 1, OTHER_KIND_POINTS).astype(int)]
-    shape, _ = canonical("cylinder")
-    try:
-        res = fit(shape, Q, init={"rotation": orient_matrix(axis), "translation": centre,
-                                  "scale": 1.0, "params": vals},
-                  estimate=("pose", "params"), loss="huber", f_scale=eps / 3.0,
-                  escape=False, debias=False, backend=SOLID_BACKEND, max_iter=60)
-    except CsdfError:
-        return None
-    new = Leaf("cylinder", np.asarray(res.rotation, float),
-               np.asarray(res.translation, float),
-               {k: float(res.params[k]) for k in SOLID_PARAMS["cylinder"]}, lf.sign,
-               origin="straight-torus")
-    if not all(np.isfinite(v) and v > 0 for v in new.vals.values()):
-        return None
-    d, _ = new.values(Q)
-    return new if float(np.sqrt(np.mean(d * d))) < STRAIGHT_TORUS_RMSE * rmse else None
+    return _fitted_as("cylinder", Q, orient_matrix(axis), centre, vals, lf.sign, eps,
+                      "straight-torus", STRAIGHT_TORUS_RMSE * rmse)
 
 
 @dataclass

@@ -95,26 +95,51 @@ def test_mesh_stops_promptly_and_cleans_up(tmp_path, model, sig, status, ignore_
     assert list(out_dir.iterdir()) == []  # neither the mesh nor a temporary file
 
 
-def test_sigterm_during_an_atomic_write_removes_the_temporary_file(tmp_path):
-    target = tmp_path / "out.bin"
-    script = textwrap.dedent(f"""
+def _run_go(go_body: str, cwd: Path) -> tuple[subprocess.Popen, str, float]:
+    """Run ``def go(): <go_body>`` through the CLI's ``_run`` in a fresh process: the
+    process, its stderr and the seconds it took."""
+    script = textwrap.dedent("""
         import os, signal, sys, time
         import typer
         from csdf.cli import _run
         from csdf.io import atomic_path
 
         def go():
-            with atomic_path({str(target)!r}) as tmp:
-                tmp.write_bytes(b"partial")
-                os.kill(os.getpid(), signal.SIGTERM)
-                time.sleep(30)
-
+    """) + textwrap.indent(textwrap.dedent(go_body), "    ") + textwrap.dedent("""
         try:
             _run(go)
         except typer.Exit as exc:
             sys.exit(exc.exit_code)
     """)
-    proc = _start([sys.executable, "-c", script], tmp_path)
+    proc = _start([sys.executable, "-c", script], cwd)
+    t0 = time.monotonic()
     _, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 143, stderr.decode(errors="replace")
+    return proc, stderr.decode(errors="replace"), time.monotonic() - t0
+
+
+def test_sigterm_during_an_atomic_write_removes_the_temporary_file(tmp_path):
+    target = tmp_path / "out.bin"
+    proc, stderr, _ = _run_go(f"""
+        with atomic_path({str(target)!r}) as tmp:
+            tmp.write_bytes(b"partial")
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(30)
+    """, tmp_path)
+    assert proc.returncode == 143, stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_swallowed_stop_is_sent_again(tmp_path):
+    # code that takes the stop for some other failure (trimesh imports its optional
+    # packages under ``except BaseException``) must not keep the command running
+    proc, stderr, took = _run_go("""
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)
+        except BaseException:
+            pass  # swallowed
+        time.sleep(60)
+    """, tmp_path)
+    assert proc.returncode == 143, stderr
+    assert "SIGTERM" in stderr
+    assert took < 30.0  # (the resend is after 1 s; 60 s without it)

@@ -13,6 +13,7 @@ status 2; outputs are written atomically. SIGINT and SIGTERM stop a command prom
 from __future__ import annotations
 
 import math
+import os
 import signal
 import sys
 import threading
@@ -29,7 +30,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from . import __version__
-from .errors import CsdfError, MeshWarning
+from .errors import CsdfError, MeshWarning, interrupt_in
 
 app = typer.Typer(
     add_completion=False,
@@ -155,6 +156,46 @@ class Stopped(KeyboardInterrupt):
         return 128 + self.signum
 
 
+#: seconds between re-deliveries of a stop request that some code swallowed (a library
+#: that imports its optional dependencies under ``except BaseException``, as trimesh
+#: does, takes a ``Stopped`` raised during that import for a missing package)
+RESEND_S = 1.0
+#: set by :func:`main`: the process is the ``csdf`` command, which exits at once after
+#: a stop (its own clean-up done) instead of waiting for worker threads to finish
+_AS_SCRIPT = False
+
+
+class _StopRequest:
+    """The stop request of one command run: the signal, and a daemon thread that sends
+    it again every :data:`RESEND_S` seconds to the main thread until the command's
+    :func:`_signals` block is left (by the ``Stopped`` exception, the normal way)."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.done = False
+        self.lock = threading.Lock()
+        self.main = threading.main_thread().ident
+
+    def received(self, signum: int) -> None:
+        with self.lock:
+            first = self.signum is None
+            self.signum = signum
+        if first:
+            threading.Thread(target=self._resend, name="csdf-stop", daemon=True).start()
+
+    def _resend(self) -> None:
+        while True:
+            time.sleep(RESEND_S)
+            with self.lock:  # (so the handlers are not restored between test and send)
+                if self.done or self.signum is None:
+                    return
+                signal.pthread_kill(self.main, self.signum)
+
+    def finish(self) -> None:
+        with self.lock:
+            self.done = True
+
+
 @contextmanager
 def _signals() -> Iterator[None]:
     """While a command runs, SIGINT and SIGTERM raise :class:`Stopped` on the main
@@ -162,13 +203,18 @@ def _signals() -> Iterator[None]:
     background jobs: a long ``csdf mesh`` must stop when asked), so that the work in
     progress stops at the main thread's next Python instruction (the mesher then drops
     the work queued on its threads), temporary files are removed, and the exit status
-    says which signal it was. Off the main thread (tests, embedding) nothing is installed."""
+    says which signal it was. Where some code swallows the ``Stopped`` (it is raised
+    wherever the main thread happens to be), the signal is sent again every
+    :data:`RESEND_S` seconds until it stops the command. Off the main thread (tests,
+    embedding) nothing is installed."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     wanted = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
+    request = _StopRequest()
 
     def stop(signum: int, _frame: Any) -> None:
+        request.received(signum)
         raise Stopped(signum)
 
     old = {}
@@ -177,6 +223,7 @@ def _signals() -> Iterator[None]:
             old[sig] = signal.signal(sig, stop)
         yield
     finally:
+        request.finish()
         for sig, handler in old.items():
             signal.signal(sig, handler)
 
@@ -210,14 +257,8 @@ def _run(fn: Callable[[], None]) -> None:
 
 def _stopped_by(exc: BaseException) -> Stopped | None:
     """The :class:`Stopped` in ``exc``'s chain of causes, or None."""
-    seen: set[int] = set()
-    cur: BaseException | None = exc
-    while cur is not None and id(cur) not in seen:
-        if isinstance(cur, Stopped):
-            return cur
-        seen.add(id(cur))
-        cur = cur.__cause__ or cur.__context__
-    return None
+    stop = interrupt_in(exc)
+    return stop if isinstance(stop, Stopped) else None
 
 
 def _report_stop(stop: Stopped) -> None:
@@ -225,6 +266,13 @@ def _report_stop(stop: Stopped) -> None:
     name = signal.Signals(stop.signum).name
     err.print(f"[bold red]stopped:[/] {name} received; no partial output file was left",
               highlight=False, markup=True, soft_wrap=True)
+    if _AS_SCRIPT:
+        # the command's own clean-up is done (temporary files removed on the way out);
+        # exit now rather than wait at shutdown for jobs already running on worker
+        # threads, which may take many seconds (or a kernel's compilation)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(stop.status)
     raise typer.Exit(stop.status) from None
 
 
@@ -1455,6 +1503,8 @@ def edit(
 
 def main() -> None:
     """Entry point of the ``csdf`` script."""
+    global _AS_SCRIPT
+    _AS_SCRIPT = True
     app()
 
 

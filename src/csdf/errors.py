@@ -7,7 +7,26 @@ was wrong and where (argument name, byte offset, line number, ...).
 from __future__ import annotations
 
 __all__ = ["CsdfError", "BytecodeError", "ParamError", "ShapeError", "ModelError",
-           "MeshWarning"]
+           "MeshWarning", "interrupt_in"]
+
+
+def interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """The ``KeyboardInterrupt`` (Ctrl-C, or a signal a command turned into one) in
+    ``exc``'s chain of causes and contexts, or None.
+
+    A signal handler that raises while a compiled (Numba) function is being called or
+    loaded comes out as a ``SystemError`` ("returned a result with an exception set")
+    whose context is the interrupt; code that falls back to another way on an
+    ``Exception`` calls this first and re-raises the interrupt, so a stop request is
+    never taken for a failed kernel."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt):
+            return cur
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return None
 
 
 class CsdfError(ValueError):

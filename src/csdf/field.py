@@ -53,7 +53,7 @@ from .backends.glsl import albedo_functions, glsl_float, glsl_params, shadertoy,
 from .backends.interval_eval import evaluate_intervals
 from .cache import memo
 from .compiler.program import Program, as_program
-from .errors import CsdfError
+from .errors import CsdfError, interrupt_in
 from .interval import check_boxes
 from .pose import as_pose
 
@@ -472,7 +472,10 @@ class Field:
             return fn(p, self.params, backend=self.backend, check_ranges=False)
         except CsdfError:
             raise
-        except Exception:  # a kernel the fast backend cannot build: same values elsewhere
+        except Exception as exc:  # a kernel the fast backend cannot build: same values elsewhere
+            stop = interrupt_in(exc)
+            if stop is not None:  # (a stop request during a kernel's build, not a failure)
+                raise stop from None
             if not self._auto or self.backend != "fast":
                 raise
             self.backend = "interp"

@@ -59,7 +59,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CsdfError
+from ..errors import CsdfError, interrupt_in
 from ..pose import Pose
 from .lm import State, damped_step, linearise, normal_equations
 from .problem import jacobian, loss_weights, make_result, prepare, residuals
@@ -308,7 +308,10 @@ def _value_function(prog, pv: dict, backend: str):
     if backend in ("auto", "fast"):
         try:
             fn = as_field(prog, pv, backend="fast", check_ranges=False).serial_values()
-        except Exception:  # no Numba, or a program the compiled backend cannot take
+        except Exception as exc:  # no Numba, or a program the compiled backend cannot take
+            stop = interrupt_in(exc)
+            if stop is not None:
+                raise stop from None
             fn = None
         if fn is not None:
             return fn

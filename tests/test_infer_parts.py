@@ -696,3 +696,76 @@ def test_a_material_cylinder_s_pointless_cap_is_trimmed_to_its_side():
     assert cc is not None and cc.vals["height"] == pytest.approx(0.4, abs=0.005)
     assert cc.vals["r2"] == pytest.approx(0.2, abs=0.003)
     assert cc.vals["r1"] == pytest.approx(0.4, abs=0.003)
+
+
+def test_the_refinement_asks_for_spatial_gradients_once(monkeypatch):
+    """The joint refinement needs the gradients only at the start (which points'
+    normals agree with the tree): every later Jacobian is of the parameters alone (one
+    forward pass fewer per spatial axis), and the values of an accepted step are
+    reused. The result is the one every Jacobian with gradients gives, to the bit."""
+    from csdf.expr import param
+    from csdf.field import Field
+
+    shape = csdf.box((1.2, 0.8, 0.6)) - csdf.cylinder(0.25, 1.0).translate((0.2, 0.0, 0.0))
+    P, N = csdf.sample_surface(shape, 3000, seed=3)
+    names = {"bx": 1.1, "by": 0.85, "bz": 0.55, "cr": 0.2, "ch": 1.0, "cx": 0.25}
+    p = {k: param(k, v) for k, v in names.items()}
+    model = csdf.box((p["bx"], p["by"], p["bz"])) - \
+        csdf.cylinder(p["cr"], p["ch"]).translate((p["cx"], 0.0, 0.0))
+    sizes = {"bx", "by", "bz", "cr", "ch"}
+    calls = {"all": 0, "jac": 0}
+    full, jac = Field.value_grad_param_jacobian, Field.param_jacobian
+
+    def counted_full(self, pts):
+        calls["all"] += 1
+        return full(self, pts)
+
+    def counted_jac(self, pts):
+        calls["jac"] += 1
+        return jac(self, pts)
+
+    monkeypatch.setattr(Field, "value_grad_param_jacobian", counted_full)
+    monkeypatch.setattr(Field, "param_jacobian", counted_jac)
+    out = refine_params(model, dict(names), sizes, P, N, None, 0.01, "interp")
+    assert calls["all"] == 1 and calls["jac"] >= 2
+    # every Jacobian through the pass with gradients: the same parameters, bit for bit
+    monkeypatch.setattr(Field, "param_jacobian", lambda self, pts: full(self, pts)[2])
+    assert refine_params(model, dict(names), sizes, P, N, None, 0.01, "interp") == out
+
+
+def test_a_cylinder_with_one_pointless_cap_is_offered_trimmed_in_its_place():
+    """A material cylinder of the cloud's detection 0.2 too long at its top, where no
+    point lies (the detection's height taken from another operand's points): with
+    :data:`TRIM`, the candidates hold it with that cap moved in to its side's points
+    *in place of* the detected one (its moved-out variant stays); residual detections'
+    candidates (``trim`` off) keep it as detected; a cylinder too long at both caps is
+    not trimmed (not one cap hidden in another operand)."""
+    from types import SimpleNamespace
+
+    from csdf.infer import api as A
+    from csdf.infer.candidates import trimmed
+
+    rng = np.random.default_rng(5)
+    ang = rng.uniform(0.0, 2 * math.pi, 2000)
+    z = rng.uniform(-0.5, 0.4, 2000)
+    side = np.stack([0.3 * np.cos(ang), 0.3 * np.sin(ang), z], axis=1)
+    nside = np.stack([np.cos(ang), np.sin(ang), np.zeros(2000)], axis=1)
+    rr = 0.28 * np.sqrt(rng.random(300))
+    a2 = rng.uniform(0.0, 2 * math.pi, 300)
+    base = np.stack([rr * np.cos(a2), rr * np.sin(a2), np.full(300, -0.5)], axis=1)
+    P = np.concatenate([side, base])
+    N = np.concatenate([nside, np.tile([0.0, 0.0, -1.0], (300, 1))])
+    prob = SimpleNamespace(P=P, N=N, ks=("cylinder",))
+    det = SimpleNamespace(kind="cylinder", solid=("cylinder", np.eye(3), np.array([0.0, 0.0, 0.05]),
+                                                  {"radius": 0.3, "height": 1.1}),
+                          inliers=np.arange(len(P)), rmse=0.001, params={})
+    sub = np.arange(len(P))
+    got = A._candidates(prob, [det], sub, 0.005, corners=False, trim=A.TRIM)
+    heights = {c.origin: c.vals["height"] for c in got}
+    assert heights.get("detected+trimmed") == pytest.approx(0.9, abs=0.005)
+    assert "detected" not in heights  # in its place, not beside it
+    assert "detected+through" in heights
+    kept = A._candidates(prob, [det], sub, 0.005, corners=False)  # as _residual calls it
+    assert {c.origin: c.vals["height"] for c in kept}.get("detected") == pytest.approx(1.1)
+    both = Leaf("cylinder", np.eye(3), np.zeros(3), {"radius": 0.3, "height": 1.3}, 1)
+    assert trimmed(both, P, 0.005) is None

@@ -4,9 +4,10 @@
    cylinders, cones, tori, boxes and planes; boxes are also assembled from the planes
    (a box cut or hidden in part shows as a few faces), a cylinder is also offered as a
    cone and a cone as a cylinder when that fits their points better, and boxes and
-   cylinders also with their faces that hold no points moved out beyond the cloud
-   (and, with :data:`TRIM`, material cylinders and cones with their caps that hold
-   none moved in to their side's points); each curved detection is detected again on
+   cylinders also with their faces that hold no points moved out beyond the cloud,
+   and a material cylinder or cone of the cloud's detection whose one cap holds no
+   points with that cap moved in to its side's points, in place of itself
+   (:data:`TRIM`); each curved detection is detected again on
    the points near it (:func:`_redetected`: a band seen from one side fits several
    axes); a small curved detection is also tried as planes (:func:`_corner_planes`).
    Each candidate knows from the points' normals whether it is material or a cut.
@@ -127,11 +128,14 @@ REFINE_PER_SECOND = 0.3
 #: whether each curved detection of the cloud is detected again on the points near it
 #: (:func:`_redetected`)
 REDETECT = True
-#: whether each material cylinder and cone is also offered with its point-less caps
-#: moved in to its side's points (:func:`.candidates.trimmed`). Off: one view 2-5, it
-#: made trees 11 right and 33 closer (IoU 0.896 -> 0.968) but lost 72 and 74 (more
-#: near-duplicate candidates; benchmarks/INFER_RESULTS.md, session 19 part 2)
-TRIM = False
+#: whether a material cylinder or cone of the whole cloud's detection whose one cap
+#: holds no points is offered with that cap moved in to where its side's points end
+#: (:func:`.candidates.trimmed`), in place of the detected one (its moved-out variant
+#: stays). Session 19 offered it beside the detected one, for residual detections too
+#: and with both caps moved: one view 2-5 lost 72 and 74. This way: 11 and 33 right,
+#: 74 lost (an unseen tree the score prefers wrong); benchmarks/INFER_RESULTS.md,
+#: session 21
+TRIM = True
 #: rounds of detection on the points the best tree leaves unexplained
 RESIDUAL_ROUNDS = 2
 #: the fewest unexplained points a residual detection looks at
@@ -367,16 +371,17 @@ class _Problem:
 
 
 def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
-                corners: bool = True, redetect: bool = False) -> list[Leaf]:
+                corners: bool = True, redetect: bool = False, trim: bool = False
+                ) -> list[Leaf]:
     """Candidate leaves from detections ``dets`` made on the points ``P[sub]``: the solids
     (and a cylinder's cone, a cone's cylinder), boxes from the planes, each box and
-    cylinder also with its point-less faces moved out, each material cylinder and cone
-    also with its point-less caps moved in (:func:`.candidates.trimmed`, with
-    :data:`TRIM`). ``eps``: the detections' inlier
+    cylinder also with its point-less faces moved out. ``eps``: the detections' inlier
     distance; ``corners``: whether small curved detections are also tried as planes
     (:func:`_corner_planes`); ``redetect``: whether each curved solid's kind is also
-    detected again on the points of ``sub`` within ``eps`` of it (:func:`_redetected`;
-    the whole cloud's detection only)."""
+    detected again on the points of ``sub`` within ``eps`` of it (:func:`_redetected`);
+    ``trim``: whether a material cylinder or cone whose one cap holds no points comes
+    with that cap moved in to its side's points (:func:`.candidates.trimmed`) in place
+    of itself (the whole cloud's detection only, both: :data:`TRIM`)."""
     P, N = prob.P, prob.N
     out: list[tuple[Leaf, Leaf | None]] = []  # (leaf, its variant moved out)
 
@@ -398,12 +403,12 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
         alt = other_kind(lf, P[inl], d.rmse, eps)
         for c in (lf, alt):
             if c is not None and c.kind in prob.ks:
-                out.append((snap(c), _snapped(extended(c, P, P[inl]))))
-                if TRIM and c.sign > 0 and c.kind in ("cylinder", "cone"):
+                cut = None
+                if trim and c.sign > 0 and c.kind in ("cylinder", "cone"):
                     near = sub[np.abs(c.values(P[sub])[0]) <= eps]
                     cut = trimmed(c, P[near], eps)
-                    if cut is not None:
-                        out.append((snap(cut), None))
+                out.append((snap(c if cut is None else cut),
+                            _snapped(extended(c, P, P[inl]))))
         if redetect:
             near = sub[np.abs(lf.values(P[sub])[0]) <= eps]
             for c, ci in _redetected(prob, lf, near, eps):
@@ -551,7 +556,7 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
                     tau, diag,
                     nb.spacing, pool, rng, seed)
     eps = max(3.0 * float(np.median(rmse)), 1e-4 * diag)
-    leaves = _candidates(prob, dets, np.arange(len(P)), eps, redetect=REDETECT)
+    leaves = _candidates(prob, dets, np.arange(len(P)), eps, redetect=REDETECT, trim=TRIM)
     if not leaves:
         raise CsdfError("infer: no primitive of the kinds "
                         f"{', '.join(ks)} found in the cloud")

@@ -12,9 +12,9 @@ points the best tree found so far leaves unexplained):
 * each box and cylinder also with its faces that hold no points moved out to the
   cloud's extent (:func:`extended`): a cutter's ends are outside the object, a trimmed
   solid's are beyond the trimming operand;
-* with ``api.TRIM`` (off by default), each material cylinder and cone also with its
-  caps that hold no points moved in to where its side's points end (:func:`trimmed`):
-  a cap hidden in another operand;
+* a material cylinder or cone of the whole cloud's detection whose one cap holds no
+  points with that cap moved in to where its side's points end, in place of the
+  detected one (:func:`trimmed`, ``api.TRIM``): a cap hidden in another operand;
 * each curved solid of the whole cloud's detection also as detected again on the
   points near it alone (``api._redetected``): a band seen from one side fits solids of
   several axes.
@@ -164,8 +164,9 @@ def trimmed(lf: Leaf, Q: np.ndarray, eps: float) -> Leaf | None:
     the points on its side end, when that is more than ``eps`` (scene units, the inlier
     distance) in: detection sets the height from its inliers, which near a cap hidden
     in another operand include that operand's points within ``eps`` of the side's
-    extension (origin ``'...+trimmed'``). None when no cap moves, or for other
-    kinds."""
+    extension (origin ``'...+trimmed'``). None when no cap moves, when both would
+    (the side's points end short of both caps: not one cap hidden in another operand),
+    or for other kinds."""
     if lf.kind not in ("cylinder", "cone") or len(Q) < 20:
         return None
     r1, r2, z0, _, _, _ = _frustum(lf)
@@ -181,6 +182,11 @@ def trimmed(lf: Leaf, Q: np.ndarray, eps: float) -> Leaf | None:
     if np.sum((np.abs(z - hi) <= eps) & (rad < r2 - eps)) < EXTEND_BELOW:
         hi = min(hi, float(z[on_side].max()))
     if (lo - z0 <= eps and z0 + h - hi <= eps) or hi - lo <= 2 * eps:
+        return None
+    if lo - z0 > eps and z0 + h - hi > eps:
+        # both caps: not a cap hidden in another operand, but a solid detected on
+        # something else (a long cone over a flat stretch; benchmarks/INFER_RESULTS.md,
+        # session 21)
         return None
     vals = dict(lf.vals)
     vals["height"] = hi - lo

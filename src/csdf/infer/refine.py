@@ -96,6 +96,11 @@ def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarra
             f, g, J = f2.value(pts), None, None
         return np.asarray(f, float), g, J
 
+    def jacobian(th: np.ndarray) -> np.ndarray:
+        # the parameter tangents alone (no spatial ones: the gradients are needed only
+        # at the start); each tangent is its own forward pass, so J is the same
+        return fld.replace(params=dict(zip(names, th)), check_ranges=False).param_jacobian(pts)
+
     def cost(f: np.ndarray, keep: np.ndarray) -> float:
         data = np.log1p((f[:m] / c) ** 2)[keep].sum()
         free = wq * np.minimum(f[m:], 0.0) ** 2 / c ** 2
@@ -107,7 +112,7 @@ def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarra
         keep = np.einsum("ij,ij->i", np.asarray(g)[:m], NX) > 0.0
     best = cost(f, keep)
     lam = 1e-3
-    for _ in range(ITERATIONS):
+    for it in range(ITERATIONS):
         r = f[:m] / c
         w = np.where(keep, 1.0 / (1.0 + r * r), 0.0)  # IRLS weights of the Cauchy loss
         inside = f[m:] < 0.0
@@ -131,9 +136,9 @@ def refine_params(shape, values: dict[str, float], sizes: set[str], X: np.ndarra
         if not improved:
             break
         gain = (best - c2) / max(best, 1e-300)
-        theta, best = cand, c2
+        theta, best, f = cand, c2, f2
         lam = max(lam / 10.0, 1e-9)
-        f, g, J = evaluate(theta, True)
-        if gain < 1e-6:
-            break
+        if gain < 1e-6 or it == ITERATIONS - 1:
+            break  # (no Jacobian for a step that will not be taken)
+        J = jacobian(theta)
     return dict(zip(names, theta.tolist()))

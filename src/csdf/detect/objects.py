@@ -790,6 +790,11 @@ class _Run:
     def _fs_wide(self, m: _Model) -> float:
         return max(3.0 * self.sigma, 0.02 * m.radius)
 
+    def _fs_fit(self, m: _Model) -> float:
+        """The residual scale (scene units) of the fits of ``m``'s candidates and
+        refits, and of the cost that compares them (:meth:`_cauchy_cost`)."""
+        return max(self.sigma, 0.005 * m.radius)
+
     def _placed(self, m: _Model, idx: np.ndarray, S: np.ndarray
                 ) -> tuple[float, FitResult | None]:
         """Step 4 for model ``m``: the best upright hypothesis after pose-only steps,
@@ -878,7 +883,7 @@ class _Run:
         try:
             res = fit(m.shape, self.P[F], init=init, estimate=("pose", "params"),
                       params=free,
-                      loss="cauchy", f_scale=max(self.sigma, 0.005 * m.radius),
+                      loss="cauchy", f_scale=self._fs_fit(m),
                       viewpoint=self.vp, multistart=init is None,
                       seed=self.fit_seed, max_iter=40, escape=False,
                       debias=False, backend=m.backend, check_ranges=False)
@@ -913,7 +918,7 @@ class _Run:
     def _cauchy_cost(self, m: _Model, res: FitResult, F: np.ndarray) -> float:
         """The mean Cauchy cost (scale: the fit's ``f_scale``) of ``m`` at ``res``'s
         pose and parameters at the points ``F`` ``(K,)`` (indices)."""
-        fs = max(self.sigma, 0.005 * m.radius)
+        fs = self._fs_fit(m)
         fld = as_field(m.shape, res.params, pose=res.pose, backend=m.backend,
                        what="detect", check_ranges=False)
         d = np.asarray(fld.value(self.P[F]), dtype=float) / fs
@@ -1266,7 +1271,7 @@ class _Run:
             r = fit(aug, self.P[F], init={"rotation": res.rotation,
                                           "translation": res.translation, "params": pv},
                     estimate=("params",), loss="cauchy",
-                    f_scale=max(self.sigma, 0.005 * m.radius), viewpoint=self.vp,
+                    f_scale=self._fs_fit(m), viewpoint=self.vp,
                     max_iter=POLISH_ITER, escape=False, debias=False, backend=m.backend,
                     check_ranges=False)
         except CsdfError:

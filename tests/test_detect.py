@@ -924,11 +924,10 @@ def test_a_detection_claims_its_own_clusters_not_a_neighbours_points():
     assert _Run._own_inliers(run, inl, idx).tolist() == inl.tolist()
 
 
-def test_a_size_grown_to_its_bound_is_fitted_again_held_back():
-    """A bookshelf seen from the front: no point holds its depth, and a fit that pushed
-    it to the range's top reaches into space the sensor saw empty. Fitted again with
-    the depth held back towards its default (the other sizes held too, the pose
-    refitted), it explains the scan better, and that fit wins by explained mass."""
+def _front_of_a_bookshelf():
+    """A bookshelf seen from the front, and a fit of it whose depth grew to its range's
+    top (the box pushed back so its front stays where it was seen): the prepared run,
+    the model, the shelf's points, the grown fit and its start."""
     from csdf.detect.objects import AT_BOUND
 
     scene = _floor_scene()
@@ -945,11 +944,21 @@ def test_a_size_grown_to_its_bound_is_fitted_again_held_back():
     # the depth at its bound, the box pushed back so its front stays where it was seen
     grown = float(depth.hi)
     back = gt.rotation @ np.array([0.0, 0.5 * (grown - 0.32), 0.0])
-    res = run._candidate(m, idx, {"rotation": gt.rotation,
-                                  "translation": gt.translation + back,
-                                  "params": {"depth": grown}}, held=("depth",))
+    start = {"rotation": gt.rotation, "translation": gt.translation + back,
+             "params": {"depth": grown}}
+    res = run._candidate(m, idx, start, held=("depth",))
     assert res is not None and res.params["depth"] >= depth.hi - AT_BOUND * (
         depth.hi - depth.lo)
+    return run, m, idx, res, start
+
+
+def test_a_size_grown_to_its_bound_is_fitted_again_held_back():
+    """A bookshelf seen from the front: no point holds its depth, and a fit that pushed
+    it to the range's top reaches into space the sensor saw empty. Fitted again with
+    the depth held back towards its default (the other sizes held too, the pose
+    refitted), it explains the scan better, and that fit wins by explained mass."""
+    run, m, idx, res, _ = _front_of_a_bookshelf()
+    grown = res.params["depth"]
     gain0 = run._verify(m, res)[4]
     found: list = []
     run._shrunk(m, idx, res, found)
@@ -1028,3 +1037,90 @@ def test_a_fallen_fit_that_stands_no_better_is_dropped():
     assert stood is not None
     # ... but no better than the fallen fit: dropped
     assert run._candidate(m, idx, init, stand=True) is None
+
+
+@pytest.fixture(scope="module")
+def long_table_scan():
+    """A 2.1 m x 1.05 m table on the floor (its top spans more than the largest model's
+    diameter at its defaults), scanned from above one end."""
+    scene = _floor_scene()
+    pose = _yawed(0.55, (0.0, 0.3, 0.0))
+    params = {"length": 2.1, "width": 1.05, "height": 0.85}
+    scene.add("table", pose=pose, params=params, name="table")
+    cam = csdf.Camera.look_at(eye=(0.4, -2.6, 2.0), target=(0.0, 0.3, 0.5), fov=55,
+                              width=200, height=150)
+    P, _, inst = csdf.scan(scene, cam, noise=0.006, outliers=0.0, seed=4)
+    return P, inst, _camera_pose(cam, pose), params
+
+
+def test_a_large_table_top_is_not_a_support(long_table_scan):
+    """A plane above the floor and parallel to it is a support only if it spans more than
+    any model could at its largest sizes (``_Model.reach``): a 2.1 m table's top is the
+    table's, not a second floor (a 1.94 m table's top was taken for a support in a
+    benchmark scene, and the table was fitted to its legs alone)."""
+    from csdf.detect import objects as O
+
+    P, inst, gt, params = long_table_scan
+    top = inst == 1
+    run = _prepared(P, ["table", "stool"])
+    assert run.models[0].reach > 1.4 * run.models[0].radius
+    assert np.mean(run.support[top]) < 0.05
+    dets = csdf.detect(P, ["table", "stool"], viewpoint=(0, 0, 0), seed=0)
+    assert [d.model for d in dets] == ["table"]
+    table = csdf.zoo.load("table")
+    pts = csdf.metrics.model_points(table, 300, params=params)
+    syms = csdf.metrics.symmetries(table, params=params)
+    # found: within the benchmark's tenth of its diameter (the legs alone gave 1.3)
+    assert csdf.metrics.mssd(pts, dets[0].pose, gt, syms) < 0.1 * csdf.metrics.diameter(pts)
+    assert dets[0].params["width"] == pytest.approx(1.05, abs=0.05)
+    # at the defaults' radius, the top would be a support (the old rule)
+    ms = [dataclasses.replace(m, reach=m.radius) for m in O._models_arg(["table", "stool"])]
+    run = O._prepare(P, ms, None, np.zeros(3), 0, None, None, True)
+    assert np.mean(run.support[top]) > 0.3
+
+
+@pytest.mark.parametrize("shrink", [True, False])
+def test_a_passing_winner_grown_to_its_bound_is_held_back(monkeypatch, shrink):
+    """A winner that passes verification with a size at its bound and part of its
+    visible surface unexplained (``_refit_unexplained``) also competes with fits held
+    back from the bound (``SHRINK_PASSED``): a bookshelf grown over a chair beside it
+    passed with 12 % unexplained in a benchmark scene."""
+    from csdf.detect import objects as O
+
+    run, m, idx, res, start = _front_of_a_bookshelf()
+    ok, score, inl, checked, gain = run._verify(m, res)
+    assert ok and 1.0 - score > O.REFIT_UNEXPLAINED  # passes, part unexplained
+    monkeypatch.setattr(O, "SHRINK_PASSED", shrink)
+    # other parameter starts off: here they find the right depth too, but not in the
+    # benchmark's scene
+    monkeypatch.setattr(O, "RETRY_STARTS", 0)
+    top = run._refit_unexplained(m, idx, (gain, score, res, inl, checked), start)
+    if shrink:
+        assert top[0] > gain and top[2].params["depth"] < res.params["depth"] - 0.05
+    else:
+        assert top[2] is res
+
+
+@pytest.mark.parametrize("stand", [True, False])
+def test_the_screens_own_fit_is_asked_to_stand(monkeypatch, stand):
+    """With ``STAND_FIRST`` the fit from each model's screened placement is made with
+    ``stand`` (:meth:`_candidate` stands a fit that falls over, as the turns' refits
+    are: a benchmark bookshelf seen from behind fell from its own, right placement and
+    was missed when only the refits at other yaws stood); the stand-up itself is tested
+    above."""
+    from csdf.detect import objects as O
+
+    run, m, idx, gt, pts = _back_of_a_bookshelf()
+    calls = []
+    orig = O._Run._candidate
+
+    def spy(self, m, idx, init, held=(), stand=False):
+        calls.append((init is not None, stand))
+        return orig(self, m, idx, init, held=held, stand=stand)
+
+    monkeypatch.setattr(O._Run, "_candidate", spy)
+    monkeypatch.setattr(O, "STAND_FIRST", stand)
+    monkeypatch.setattr(O, "TURN_MODELS", 0)
+    monkeypatch.setattr(O, "YAW_REFITS", 0)
+    run.best_for(idx)
+    assert calls and calls[0] == (True, stand)

@@ -118,8 +118,11 @@ YAWS = 16
 #: hypotheses refined by pose-only steps before the full fit
 REFINE_TOP = 3
 #: a plane is a support when its points span at least this times the largest model's
-#: diameter
+#: diameter (at its defaults; for a plane above the first support and parallel to it,
+#: which may be a model's top, at its largest sizes: ``_Model.reach``)
 SUPPORT_SPAN = 1.2
+#: degrees within which a plane counts as parallel to the first support
+SUPPORT_PARALLEL = 15.0
 #: planes holding fewer than this fraction of the points are not searched as supports
 SUPPORT_MIN_FRACTION = 0.05
 #: largest fraction of a detection's visible surface where the sensor saw through it
@@ -154,6 +157,8 @@ SCREEN_POINTS = 200
 SCREEN_BATCH = 32
 #: mesh resolution of the models' surface extent (tight bounds, centre, radius)
 MODEL_RESOLUTION = 48
+#: mesh resolution of a model at its largest parameters (:func:`_reach`)
+REACH_RESOLUTION = 24
 #: surface samples per model for the screen's model-to-scan term
 SURFACE_SAMPLES = 300
 #: weight of the model-to-scan term of the screening cost
@@ -267,6 +272,14 @@ UPRIGHT_PARAMS = ("_upright_yaw", "_upright_dx", "_upright_dy")
 #: fitted again held upright, and kept when that explains its points better
 #: (:meth:`_Run._candidate`)
 HELD_UPRIGHT = True
+#: the fit from the screen's placement is stood up too when it falls over (as the turns'
+#: refits are, :data:`HELD_UPRIGHT`): a bookshelf seen from behind fell from its own,
+#: right placement
+STAND_FIRST = True
+#: a winner that passes with over ``REFIT_UNEXPLAINED`` of its visible surface
+#: unexplained also competes with fits held back from the ends of its ranges
+#: (:meth:`_Run._refit_unexplained`)
+SHRINK_PASSED = True
 
 
 @dataclass
@@ -327,6 +340,7 @@ class _Model:
     starts: list  # parameter sets the hypotheses start from (None: the defaults)
     foot: float  # radius of the footprint (model xy) about the centre, at the defaults
     heights: np.ndarray  # (S,) the model's top (model z) at each of ``starts``
+    reach: float  # its radius at the defaults or at every ranged parameter near its top
     upright_shape: Any = None  # built by _Run._upright_shape (False: not possible)
 
 
@@ -354,9 +368,30 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
             starts.append({p.name: float(p.lo + (p.hi - p.lo) * (BANK_MARGIN + (
                 1 - 2 * BANK_MARGIN) * u[i, k])) for i, p in enumerate(ranged)})
     heights = _heights(fld, starts, b)
-    return _Model(name, shape, source, b, c, float(np.linalg.norm(v - c, axis=1).max()),
-                  fld, fld.backend, surf, g, starts,
-                  float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights)
+    radius = float(np.linalg.norm(v - c, axis=1).max())
+    return _Model(name, shape, source, b, c, radius, fld, fld.backend, surf, g, starts,
+                  float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights,
+                  max(radius, _reach(fld, ranged)))
+
+
+def _reach(fld: Any, ranged: list) -> float:
+    """The radius (about the centre of its bounds, model units) of the model with every
+    parameter of ``ranged`` (those with finite ranges) at the top of the middle of its
+    range that the parameter bank covers (``1 - BANK_MARGIN`` of the way up): how large
+    the model's sizes can make it (a 2.24 m table's top spans 2.5 m, over twice its
+    default radius); 0 without ranged parameters or when that model cannot be
+    meshed."""
+    from ..metrics import model_points
+
+    if not ranged:
+        return 0.0
+    pv = {p.name: float(p.lo + (1.0 - BANK_MARGIN) * (p.hi - p.lo)) for p in ranged}
+    try:
+        v = model_points(fld, params=pv, resolution=REACH_RESOLUTION, check_ranges=False)
+    except CsdfError:
+        return 0.0
+    c = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    return float(np.linalg.norm(v - c, axis=1).max())
 
 
 def _heights(fld: Any, starts: list, b: np.ndarray) -> np.ndarray:
@@ -643,6 +678,10 @@ class _Run:
             self.P, self.N, kinds=("plane",), epsilon=3.0 * self.sigma,
             min_points=max(self.mp, int(SUPPORT_MIN_FRACTION * n)),
             seed=self.support_seed, viewpoint=self.vp, max_primitives=4)
+        # a plane above the first support and parallel to it may be a model's top (a
+        # 1.94 m table's spans 2.3 m, over the largest default diameter): it is a
+        # support only if no model could be that large
+        span_top = SUPPORT_SPAN * 2.0 * max(m.reach for m in self.models)
         for pl in planes:
             Q = self.P[pl.inliers]
             nrm = np.asarray(pl.params["normal"])
@@ -650,6 +689,10 @@ class _Run:
             uv = Q @ R[:, :2]
             span = float(np.max(uv.max(axis=0) - uv.min(axis=0)))
             if span < span_min:
+                continue
+            if self.plane is not None and span < span_top and abs(
+                    nrm @ self.plane[0]) >= math.cos(math.radians(SUPPORT_PARALLEL)) and \
+                    np.median(Q @ self.plane[0]) - self.plane[1] > 3.0 * self.sigma:
                 continue
             off = float(pl.params["offset"])
             d = self.P @ nrm - off
@@ -1144,7 +1187,7 @@ class _Run:
         done = []  # per model tried: (model, init, base result or None, verified fits)
         for m, init in tries:
             found = []
-            res = self._candidate(m, idx, init)
+            res = self._candidate(m, idx, init, stand=STAND_FIRST and init is not None)
             if res is not None:
                 ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
@@ -1184,12 +1227,7 @@ class _Run:
         m, top, init = best
         if self.plane is not None and self.upright and self.vp is not None:
             if 1.0 - top[1] > REFIT_UNEXPLAINED and init is not None:
-                # part of its visible surface unexplained: its parameters may have
-                # grown where nothing holds them (a bookshelf's depth at its bound);
-                # other parameter starts compete by explained mass, which counts that
-                found = [top]
-                self._other_params(m, idx, top[2], init, found)
-                top = max(found, key=lambda f: f[0])
+                top = self._refit_unexplained(m, idx, top, init)
             top = self._resolve_yaw(m, idx, top)
         _, score, res, inl, checked = top
         if self.vp is not None:
@@ -1204,6 +1242,23 @@ class _Run:
         return Detection(model=m.name, pose=Pose(res.rotation, res.translation),
                          params=dict(res.params), score=score, inliers=inl, shape=m.shape,
                          source=m.source, fit=checked)
+
+    def _refit_unexplained(self, m: _Model, idx: np.ndarray, top: tuple,
+                           init: FitResult | dict) -> tuple:
+        """The winner ``top`` (an item of ``found``, as :meth:`_turns`') of model ``m``
+        on the points ``idx``, fitted from the screen's start ``init``, leaves over
+        ``REFIT_UNEXPLAINED`` of its visible surface unexplained (the sensor saw
+        through it or nothing there): its parameters may have grown where nothing holds
+        them (a bookshelf's depth at its bound). Fits from other parameter starts
+        (:meth:`_other_params`) and, with ``SHRINK_PASSED``, fits held back from the
+        ends of the ranges (:meth:`_shrunk`: a bookshelf grown 0.27 m wider and to its
+        full depth over a chair beside it passed with 12 % unexplained) compete with it
+        by explained mass, which counts that; returns the best."""
+        found = [top]
+        self._other_params(m, idx, top[2], init, found)
+        if SHRINK_PASSED:
+            self._shrunk(m, idx, top[2], found)
+        return max(found, key=lambda f: f[0])
 
     def _own_inliers(self, inl: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """The inliers ``inl`` ``(K,)`` (point indices) of a detection on the points
@@ -1299,6 +1354,8 @@ class _Run:
         defaults = {p.name: float(p.default) for p in m.fld.program.params}
         tried = 0
         for k in [0, *order.tolist()]:
+            if tried >= RETRY_STARTS:
+                break
             pv = m.starts[k]
             full = {**defaults, **(pv or {})}
             if all(abs(float(full[n]) - float(used.get(n, defaults[n]))) <= 1e-12
@@ -1312,8 +1369,6 @@ class _Run:
                 ok, sc, il, ch, gain = self._verify(m, r)
                 if ok:
                     found.append((gain, sc, r, il, ch))
-            if tried >= RETRY_STARTS:
-                break
 
     def _shrunk(self, m: _Model, idx: np.ndarray, res: FitResult, found: list) -> None:
         """A fit ``res`` of ``m`` to the points ``idx`` with parameters at an end of their
@@ -1326,19 +1381,11 @@ class _Run:
         (items as :meth:`_turns`'), where explained mass, which counts the surface seen
         through, judges them against the rest. Two pose fits, only for failed fits with
         a parameter at a bound."""
-        names, ends = [], []
-        for p in m.fld.program.params:
-            v, lo, hi = float(res.params[p.name]), float(p.lo), float(p.hi)
-            span = hi - lo
-            if not (math.isfinite(span) and span > 0):
-                continue
-            end = hi if v >= hi - AT_BOUND * span else lo if v <= lo + AT_BOUND * span \
-                else None
-            if end is not None and abs(float(p.default) - end) > AT_BOUND * span:
-                names.append(p.name)
-                ends.append((end, float(p.default)))
-        if not names:
+        at = _at_bound(m, res.params)
+        if not at:
             return
+        names = [n for n, _, _ in at]
+        ends = [(e, d) for _, e, d in at]
         # every parameter held, not only those at a bound: the sizes a single view does
         # not hold trade against each other (a bookshelf seen side-on, its depth held at
         # the default, grew its width instead: 0.112 d, a false positive)
@@ -1716,6 +1763,23 @@ class _Run:
             if ok:
                 found.append((gain, sc, r, il, ch))
         return found
+
+
+def _at_bound(m: _Model, params: dict) -> list[tuple[str, float, float]]:
+    """The parameters of ``m`` whose values in ``params`` lie within ``AT_BOUND`` of
+    its span from an end of their range that their default is not at: ``(name, that
+    end, default)`` each (a size the fit pushed until the range stopped it)."""
+    out = []
+    for p in m.fld.program.params:
+        v, lo, hi = float(params[p.name]), float(p.lo), float(p.hi)
+        span = hi - lo
+        if not (math.isfinite(span) and span > 0):
+            continue
+        end = hi if v >= hi - AT_BOUND * span else lo if v <= lo + AT_BOUND * span \
+            else None
+        if end is not None and abs(float(p.default) - end) > AT_BOUND * span:
+            out.append((p.name, end, float(p.default)))
+    return out
 
 
 def _band_fraction(d: np.ndarray, lab: np.ndarray, off: np.ndarray, sigma: float,

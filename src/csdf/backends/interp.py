@@ -66,15 +66,16 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
             res["grad"] = grad
         if wrt_params:
             res["jac"] = jac
-        code = low.flagged_code(zero_uniform)
         B = _block_size(low.n_rows, T, dtype.itemsize)
         n_jac = P if wrt_params else 0
         if T == 0:  # no parameters: the Jacobian is empty
             utans = np.zeros((utans.shape[0], 0), dtype)
+        # each instruction's tangents on the parameter columns it may touch
+        code, cols = low.tangent_plan(utans, zero_uniform, 3 if spatial else 0)
 
         def job(r):
-            K.tangent_kernel(code, uvals, utans, pts, res["value"], grad, jac, r[0], r[1], B,
-                             low.n_rows, low.out_row, spatial, n_jac)
+            K.tangent_kernel(code, cols, uvals, utans, pts, res["value"], grad, jac, r[0],
+                             r[1], B, low.n_rows, low.out_row, spatial, n_jac)
 
     run_parallel(job, n, B)
     if np.isnan(pvals).any():  # NaN points are handled inside the kernels

@@ -888,3 +888,37 @@ def test_data_costs_from_each_leafs_parity_rows_are_the_oriented_fields():
     sc.keep(trees[:20])
     for t in trees:
         assert np.array_equal(sc._costs(t).view(np.int64), oriented(t).view(np.int64))
+
+
+def test_a_plane_whose_outline_is_in_part_an_arc_is_offered_as_a_cylinders_cap():
+    """A cylinder cut by a box and seen end-on shows its cap, a disk clipped by two
+    straight edges, and almost none of its side: :func:`cap_cylinder` offers the
+    cylinder of the disk's circle (axis the plane's normal, reaching to the cloud
+    behind it). A square plane's outline holds no arc, and a whole disk's is an arc
+    of more than half a turn (an end whose side the sensor sees too): neither is
+    offered."""
+    from csdf.infer.candidates import cap_cylinder
+
+    rng = np.random.default_rng(0)
+    spacing = 0.01
+    g = np.arange(-0.6, 0.6, spacing)
+    X, Y = np.meshgrid(g, g)
+    xy = np.stack([X.ravel(), Y.ravel()], axis=1) + rng.normal(0, 0.001, (X.size, 2))
+    disk = xy[(np.hypot(xy[:, 0], xy[:, 1]) <= 0.5) & (np.abs(xy[:, 0]) <= 0.25)]
+    Q = np.column_stack([disk, np.full(len(disk), 0.8)])
+    behind = np.column_stack([rng.uniform(-0.3, 0.3, (500, 2)), rng.uniform(-0.4, 0.8, 500)])
+    P = np.concatenate([Q, behind])
+    c = cap_cylinder(np.array([0.0, 0.0, 1.0]), Q, P, spacing)
+    assert c is not None and c.kind == "cylinder" and c.sign == 1
+    assert abs(c.vals["radius"] - 0.5) < 0.01 and abs(abs(c.R[2, 2]) - 1.0) < 1e-9
+    assert abs(c.t[2] + c.vals["height"] / 2 - 0.8) < 1e-9  # the cap on the plane
+    assert c.t[2] - c.vals["height"] / 2 <= -0.4  # down to the cloud behind it
+    assert np.hypot(c.t[0], c.t[1]) < 0.01
+    square = xy[(np.abs(xy[:, 0]) <= 0.35) & (np.abs(xy[:, 1]) <= 0.45)]
+    Qs = np.column_stack([square, np.full(len(square), 0.8)])
+    assert cap_cylinder(np.array([0.0, 0.0, 1.0]), Qs, np.concatenate([Qs, behind]),
+                        spacing) is None
+    whole = xy[np.hypot(xy[:, 0], xy[:, 1]) <= 0.5]
+    Qw = np.column_stack([whole, np.full(len(whole), 0.8)])
+    assert cap_cylinder(np.array([0.0, 0.0, 1.0]), Qw, np.concatenate([Qw, behind]),
+                        spacing) is None

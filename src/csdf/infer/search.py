@@ -227,13 +227,15 @@ class Scorer:
                                          np.where(-d > 0.0, sq, 1.0))
         return got[1 if odd else 0]
 
-    def _field_cost(self, tree: Tree, odd: bool) -> tuple[np.ndarray, np.ndarray]:
-        """``tree``'s field ``(M,)`` at the sample (with normals) and each point's
-        data cost ``(M,)`` with the tree at parity ``odd``: at each point that of the
-        active leaf (:meth:`_leaf_cost`) at the parity it has there, as a point's cost
-        from the tree's field and oriented cosine (:func:`evaluate_oriented`) would
-        be: the same leaf is active, and negating its field and cosine is what an odd
-        parity does to them."""
+    def _field_cost(self, tree: Tree, odd: bool, field: bool = True
+                    ) -> tuple[np.ndarray | None, np.ndarray]:
+        """``tree``'s field ``(M,)`` at the sample (with normals; None without
+        ``field``, where it is not kept: the costs alone) and each point's data cost
+        ``(M,)`` with the tree at parity ``odd``: at each point that of the active
+        leaf (:meth:`_leaf_cost`) at the parity it has there, as a point's cost from
+        the tree's field and oriented cosine (:func:`evaluate_oriented`) would be: the
+        same leaf is active, and negating its field and cosine is what an odd parity
+        does to them."""
         if isinstance(tree, (int, np.integer)):
             return self.at_points[int(tree)], self._leaf_cost(int(tree), odd)
         got = self._kept[0].get(tree)
@@ -248,7 +250,7 @@ class Scorer:
         else:
             fb, cb = self._field_cost(b, odd)
             pick_a = fa <= fb if op == "union" else fa >= fb
-        return np.where(pick_a, fa, fb), np.where(pick_a, ca, cb)
+        return np.where(pick_a, fa, fb) if field else None, np.where(pick_a, ca, cb)
 
     def _keep_costs(self, tree: Tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(field, costs at even parity, at odd)`` of ``tree`` (:meth:`_field_cost`),
@@ -275,7 +277,7 @@ class Scorer:
     def _costs(self, tree: Tree) -> np.ndarray:
         """``(M,)`` each sample point's data cost under ``tree``."""
         if self.dots is not None:
-            return self._field_cost(tree, False)[1]
+            return self._field_cost(tree, False, False)[1]
         f, _ = evaluate_oriented(tree, self.at_points, None, self._kept[0])
         return np.minimum((f / self.tau) ** 2, 1.0)
 

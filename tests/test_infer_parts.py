@@ -769,3 +769,156 @@ def test_a_cylinder_with_one_pointless_cap_is_offered_trimmed_in_its_place():
     assert {c.origin: c.vals["height"] for c in kept}.get("detected") == pytest.approx(1.1)
     both = Leaf("cylinder", np.eye(3), np.zeros(3), {"radius": 0.3, "height": 1.3}, 1)
     assert trimmed(both, P, 0.005) is None
+
+
+def _three_leaf_field():
+    """A refinement's field: three posed, turnable leaves in a CSG tree (as
+    ``api._shape`` builds them), on the interpreter."""
+    from csdf.infer import api as A
+
+    leaves = [Leaf("cylinder", np.eye(3), np.zeros(3), {"radius": 0.5, "height": 1.2}),
+              Leaf("box", np.eye(3), np.array([0.3, 0.0, 0.2]),
+                   {"size_x": 1.0, "size_y": 0.8, "size_z": 0.6}),
+              Leaf("torus", np.eye(3), np.array([0.0, 0.1, -0.4]), {"major": 0.6,
+                                                                     "minor": 0.15})]
+    shape, _ = A._shape(("union", ("difference", 0, 1), 2), leaves, True)
+    return csdf.as_field(shape, backend="interp", check_ranges=False)
+
+
+@pytest.mark.parametrize("spatial", [False, True])
+def test_interp_tangents_on_each_instructions_columns_are_the_dense_kernels(spatial):
+    """The interpreter computes an instruction's parameter tangents on the columns of
+    the parameters it depends on (:meth:`.lowering.Lowered.tangent_plan`): a
+    refinement's Jacobian of a three-leaf tree is the kernel's over every column
+    (the plan of one range for all), value for value (zeros of either sign), at a
+    third of the tangent work or less."""
+    from csdf.backends import interp, interp_kernels
+    from csdf.backends.lowering import lowered
+
+    fld = _three_leaf_field()
+    X = np.random.default_rng(0).uniform(-1.2, 1.2, (3000, 3))
+    prog = fld.program
+    low = lowered(prog)
+    pvals = np.array([p.default for p in prog.params], dtype=np.float64)
+    P = len(pvals)
+    off = 3 if spatial else 0
+    T_ = off + P
+    uvals, utans, zero_uniform = low.uniform(pvals, np.float64, spatial, True)
+    code, cols = low.tangent_plan(utans, zero_uniform, off)
+    dense = cols.copy()
+    dense[:, 0], dense[:, 1], dense[:, 2], dense[:, 3] = off, T_, 0, 0
+    width = (cols[:, 1] - cols[:, 0]).sum()
+    assert width <= (T_ - off) * len(code) / 3
+    B = interp._block_size(low.n_rows, T_, 8)
+    outs = []
+    for plan in (cols, dense):
+        out, grad, jac = np.empty(len(X)), np.empty((len(X), 3)), np.empty((len(X), P))
+        interp_kernels.tangent_kernel(code, plan, uvals, utans, X, out, grad, jac, 0,
+                                      len(X), B, low.n_rows, low.out_row, spatial, P)
+        outs.append((out, grad, jac))
+    (f1, g1, j1), (f2, g2, j2) = outs
+    assert np.array_equal(f1.view(np.int64), f2.view(np.int64))
+    assert np.array_equal(j1, j2) and np.abs(j1).max() > 0
+    if spatial:
+        assert np.array_equal(g1.view(np.int64), g2.view(np.int64))
+    # and through the public call
+    J = fld.param_jacobian(X)
+    assert np.array_equal(np.asarray(J), j1)
+
+
+def test_the_pools_surface_table_filled_on_demand_scores_as_the_whole_table():
+    """The pool evaluates a candidate at another's surface points only when a tree of
+    both is scored (:meth:`Pool.surface_block`): the scores are those of a scorer
+    over the whole table, every candidate evaluated at every surface point, bit for
+    bit, and after a few trees most of the table was never evaluated."""
+    shape = csdf.box((2.0, 2.0, 0.6)) - csdf.cylinder(0.3, 1.0) | \
+        csdf.sphere(0.5).translate((0.9, 0.9, 0.3))
+    P, N = csdf.sample_surface(shape, 8000, seed=3)
+    leaves = [
+        Leaf("box", np.eye(3), np.zeros(3), {"size_x": 2.0, "size_y": 2.0, "size_z": 0.6}, 1),
+        Leaf("cylinder", np.eye(3), np.zeros(3), {"radius": 0.3, "height": 1.0}, -1),
+        Leaf("sphere", np.eye(3), np.array([0.9, 0.9, 0.3]), {"radius": 0.5}, 1),
+        Leaf("box", np.eye(3), np.array([0.1, 0.0, 0.0]),
+             {"size_x": 1.6, "size_y": 2.2, "size_z": 0.5}, 1),
+        Leaf("cylinder", np.eye(3), np.array([0.5, 0.0, 0.0]), {"radius": 0.2, "height": 2.0},
+             -1),
+        Leaf("sphere", np.eye(3), np.array([-0.9, 0.9, 0.3]), {"radius": 0.4}, 1)]
+    pool = _pool(P, N, leaves[:4])
+    pool.add(leaves[4:])  # a second batch of surface points
+    trees = [0, ("difference", 0, 1), ("union", ("difference", 0, 1), 2),
+             ("union", 2, ("difference", 0, 1)), ("difference", 3, 4),
+             ("intersection", ("difference", 0, 1), 3)]
+    lazy = [pool.scorer().score(t) for t in trees]
+    assert pool.filled() < 0.6
+    whole = np.array([lf.values(pool.surf)[0] for lf in pool.leaves])
+    assert np.array_equal(pool.at_surface.view(np.int64), whole.view(np.int64))
+    assert pool.filled() == 1.0
+    signs = np.array([lf.sign for lf in pool.leaves])
+    eager = Scorer(pool.at_points, pool.dots, pool.at_free, pool.tau, pool.penalty, whole,
+                   pool.owner, pool.weight / pool.area, pool.unsupported, signs)
+    for t, got in zip(trees, lazy):
+        want = eager.score(t)
+        assert (got.data, got.free, got.total) == (want.data, want.free, want.total)
+    assert max(s.free for s in lazy) > 0  # the made-up surface counted
+
+
+def test_data_costs_from_each_leafs_parity_rows_are_the_oriented_fields():
+    """The scorer's data costs from each leaf's cost rows at even and odd parity
+    (:meth:`Scorer._field_cost`) are those of the tree's oriented field
+    (:func:`.search.evaluate_oriented`), bit for bit, with kept subtrees too."""
+    from csdf.infer.search import evaluate_oriented
+
+    rng = np.random.default_rng(7)
+    n, m = 7, 2500
+    at_points = rng.normal(size=(n, m)) * rng.uniform(0.05, 1.0, (n, 1))
+    at_points[:, :50] = 0.0  # ties, and zeros of both signs below
+    at_points[:3, 50:100] = -0.0
+    dots = rng.uniform(-1.0, 1.0, (n, m))
+    dots[:, 100:150] = 0.0
+    sc = Scorer(at_points, dots, None, 0.1, 0.004)
+    trees = [random_csg_tree(rng, list(rng.permutation(n)[: int(rng.integers(1, 7))]))
+             for _ in range(300)]
+
+    def oriented(t):
+        f, d = evaluate_oriented(t, at_points, dots)
+        return np.where(d > 0.0, np.minimum((f / 0.1) ** 2, 1.0), 1.0)
+
+    for t in trees:
+        assert np.array_equal(sc._costs(t).view(np.int64), oriented(t).view(np.int64))
+    sc.keep(trees[:20])
+    for t in trees:
+        assert np.array_equal(sc._costs(t).view(np.int64), oriented(t).view(np.int64))
+
+
+def test_a_plane_whose_outline_is_in_part_an_arc_is_offered_as_a_cylinders_cap():
+    """A cylinder cut by a box and seen end-on shows its cap, a disk clipped by two
+    straight edges, and almost none of its side: :func:`cap_cylinder` offers the
+    cylinder of the disk's circle (axis the plane's normal, reaching to the cloud
+    behind it). A square plane's outline holds no arc, and a whole disk's is an arc
+    of more than half a turn (an end whose side the sensor sees too): neither is
+    offered."""
+    from csdf.infer.candidates import cap_cylinder
+
+    rng = np.random.default_rng(0)
+    spacing = 0.01
+    g = np.arange(-0.6, 0.6, spacing)
+    X, Y = np.meshgrid(g, g)
+    xy = np.stack([X.ravel(), Y.ravel()], axis=1) + rng.normal(0, 0.001, (X.size, 2))
+    disk = xy[(np.hypot(xy[:, 0], xy[:, 1]) <= 0.5) & (np.abs(xy[:, 0]) <= 0.25)]
+    Q = np.column_stack([disk, np.full(len(disk), 0.8)])
+    behind = np.column_stack([rng.uniform(-0.3, 0.3, (500, 2)), rng.uniform(-0.4, 0.8, 500)])
+    P = np.concatenate([Q, behind])
+    c = cap_cylinder(np.array([0.0, 0.0, 1.0]), Q, P, spacing)
+    assert c is not None and c.kind == "cylinder" and c.sign == 1
+    assert abs(c.vals["radius"] - 0.5) < 0.01 and abs(abs(c.R[2, 2]) - 1.0) < 1e-9
+    assert abs(c.t[2] + c.vals["height"] / 2 - 0.8) < 1e-9  # the cap on the plane
+    assert c.t[2] - c.vals["height"] / 2 <= -0.4  # down to the cloud behind it
+    assert np.hypot(c.t[0], c.t[1]) < 0.01
+    square = xy[(np.abs(xy[:, 0]) <= 0.35) & (np.abs(xy[:, 1]) <= 0.45)]
+    Qs = np.column_stack([square, np.full(len(square), 0.8)])
+    assert cap_cylinder(np.array([0.0, 0.0, 1.0]), Qs, np.concatenate([Qs, behind]),
+                        spacing) is None
+    whole = xy[np.hypot(xy[:, 0], xy[:, 1]) <= 0.5]
+    Qw = np.column_stack([whole, np.full(len(whole), 0.8)])
+    assert cap_cylinder(np.array([0.0, 0.0, 1.0]), Qw, np.concatenate([Qw, behind]),
+                        spacing) is None

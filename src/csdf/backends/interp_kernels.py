@@ -167,57 +167,58 @@ def _nan_rows(R, out, s, m):
 
 
 @njit(**_OPTS)
-def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
-    """Tangents ``D[d]`` (T, B) of ``V[0] = op(R[ia], R[ib])`` from ``D[ia]``, ``D[ib]``;
-    ``flags``: ``FLAG_B_ZERO``/``FLAG_A_ZERO``: ``b``'s/``a``'s tangent is zero,
-    ``FLAG_OUT_ZERO``: the result's tangent is structurally zero, ``FLAG_TIE_STRICT``:
-    ``min``/``max`` take ``a``'s tangent only where ``a`` wins strictly. ``d`` may
-    equal ``ia`` or ``ib``."""
+def _tangent(op, flags, R, ia, ib, V, D, d, t0, t1, B):
+    """Tangents ``D[d, t0:t1]`` (columns ``t0 .. t1 - 1`` of ``T``, B points) of
+    ``V[0] = op(R[ia], R[ib])`` from ``D[ia]``, ``D[ib]``; ``flags``:
+    ``FLAG_B_ZERO``/``FLAG_A_ZERO``: ``b``'s/``a``'s tangent is zero, ``FLAG_OUT_ZERO``:
+    the result's tangent is structurally zero, ``FLAG_TIE_STRICT``: ``min``/``max``
+    take ``a``'s tangent only where ``a`` wins strictly. ``d`` may equal ``ia`` or
+    ``ib``."""
     if flags & FLAG_OUT_ZERO:
-        for t in range(T):
+        for t in range(t0, t1):
             for j in range(B):
                 D[d, t, j] = 0.0
     elif op == ADD:
         if flags & FLAG_B_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j]
         elif flags & FLAG_A_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ib, t, j]
         else:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] + D[ib, t, j]
     elif op == SUB:
         if flags & FLAG_B_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j]
         elif flags & FLAG_A_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = -D[ib, t, j]
         else:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] - D[ib, t, j]
     elif op == MUL:
         if flags & FLAG_B_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] * R[ib, j]
         elif flags & FLAG_A_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = R[ia, j] * D[ib, t, j]
         else:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j] * R[ib, j] + R[ia, j] * D[ib, t, j]
     elif op == SQUARE:
-        for t in range(T):
+        for t in range(t0, t1):
             for j in range(B):
                 D[d, t, j] = 2.0 * R[ia, j] * D[ia, t, j]
     elif op == MIN or op == MAX:
@@ -229,57 +230,57 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
             else:
                 pick_a = a <= b if op == MIN else a >= b
             if not pick_a:
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = D[ib, t, j]
             else:
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = D[ia, t, j]
     elif op == SQRT:
         for j in range(B):
             v = V[0, j]
             f = 0.5 / v if v > 0 else 0.0
-            for t in range(T):
+            for t in range(t0, t1):
                 D[d, t, j] = f * D[ia, t, j]
     elif op == ABS:
         for j in range(B):
             a = R[ia, j]
             f = 1.0 if a > 0 else (-1.0 if a < 0 else (0.0 if a == 0 else a))
-            for t in range(T):
+            for t in range(t0, t1):
                 D[d, t, j] = f * D[ia, t, j]
     elif op == NEG:
-        for t in range(T):
+        for t in range(t0, t1):
             for j in range(B):
                 D[d, t, j] = -D[ia, t, j]
     elif op == DIV:
         if flags & FLAG_B_ZERO:
             for j in range(B):
                 f = 1.0 / R[ib, j]
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = f * D[ia, t, j]
         else:
             for j in range(B):
                 f = 1.0 / R[ib, j]
                 v = V[0, j]
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = f * (D[ia, t, j] - v * D[ib, t, j])
     elif op == STEP or op == SIGN or op == FLOOR:
-        for t in range(T):
+        for t in range(t0, t1):
             for j in range(B):
                 D[d, t, j] = 0.0
     elif op == MOD:
         if flags & FLAG_B_ZERO:
-            for t in range(T):
+            for t in range(t0, t1):
                 for j in range(B):
                     D[d, t, j] = D[ia, t, j]
         elif flags & FLAG_A_ZERO:
             for j in range(B):
                 q = np.floor(R[ia, j] / R[ib, j])
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = -(q * D[ib, t, j])
         else:
             for j in range(B):
                 q = np.floor(R[ia, j] / R[ib, j])
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = D[ia, t, j] - q * D[ib, t, j]
     elif op == ATAN2:
         for j in range(B):
@@ -289,13 +290,13 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
             fy = x / r2 if r2 > 0 else 0.0
             fx = -y / r2 if r2 > 0 else 0.0
             if flags & FLAG_B_ZERO:
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = fy * D[ia, t, j]
             elif flags & FLAG_A_ZERO:
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = fx * D[ib, t, j]
             else:
-                for t in range(T):
+                for t in range(t0, t1):
                     D[d, t, j] = fy * D[ia, t, j] + fx * D[ib, t, j]
     else:
         for j in range(B):
@@ -317,16 +318,20 @@ def _tangent(op, flags, R, ia, ib, V, D, d, T, B):
                 f = -1.0 / np.sqrt(1.0 - a * a)
             else:  # ATAN
                 f = 1.0 / (1.0 + a * a)
-            for t in range(T):
+            for t in range(t0, t1):
                 D[d, t, j] = f * D[ia, t, j]
 
 
 @njit(**_OPTS)
-def tangent_kernel(code, uvals, utans, pts, out, grad, jac, start, stop, B, n_rows, out_row,
-                   spatial, n_jac):
+def tangent_kernel(code, cols, uvals, utans, pts, out, grad, jac, start, stop, B, n_rows,
+                   out_row, spatial, n_jac):
     """Values and forward-mode tangents of points ``[start, stop)``.
 
     Args:
+        cols: ``(K, 4)`` per instruction the parameter tangent columns ``[lo, hi)`` it
+            computes and ``[clo, chi)`` its destination held before, cleared outside
+            ``[lo, hi)`` (:meth:`csdf.backends.lowering.Lowered.tangent_plan`: every
+            row is zero outside its support); the spatial columns are always computed.
         utans: ``(U, T)`` tangents of the uniform rows.
         grad: ``(N, 3)`` written when ``spatial``; jac: ``(N, n_jac)``.
         spatial: whether tangents 0-2 are d/dx, d/dy, d/dz; the parameter tangents follow.
@@ -356,8 +361,20 @@ def tangent_kernel(code, uvals, utans, pts, out, grad, jac, start, stop, B, n_ro
             d = code[k, 1]
             a = code[k, 2]
             b = code[k, 3]
+            lo = cols[k, 0]
+            hi = cols[k, 1]
             _exec(op, R, a, b, tmp, 0, B)
-            _tangent(op, code[k, 4], R, a, b, tmp, D, d, T, B)
+            if off > 0:
+                _tangent(op, code[k, 4], R, a, b, tmp, D, d, 0, off, B)
+            if lo < hi:
+                _tangent(op, code[k, 4], R, a, b, tmp, D, d, lo, hi, B)
+            # the destination's columns of its previous support outside the new one
+            for t in range(cols[k, 2], min(cols[k, 3], lo)):
+                for j in range(B):
+                    D[d, t, j] = 0.0
+            for t in range(max(cols[k, 2], hi), cols[k, 3]):
+                for j in range(B):
+                    D[d, t, j] = 0.0
             for j in range(B):
                 R[d, j] = tmp[0, j]
         for j in range(m):

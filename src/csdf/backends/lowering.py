@@ -201,6 +201,88 @@ class Lowered:
             zero[d] = zd
         return code
 
+    def tangent_plan(self, utans: np.ndarray, zero_uniform: np.ndarray, off: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The flagged instructions (:meth:`flagged_code` of ``zero_uniform``, the
+        uniform rows whose tangents are all zero) and, per instruction, the parameter
+        tangent columns it computes and those it clears, for the uniform rows'
+        tangents ``utans`` ``(U, T)`` whose parameter columns start at ``off`` (3 after
+        the spatial ones, else 0). Kept per pattern of zero tangents (a fit repeats
+        it).
+
+        A row's *support* is the hull ``[lo, hi)`` of the parameter columns where its
+        tangent may be non-zero: a uniform row's non-zero columns; an instruction's the
+        hull of its operands' that are not structurally zero (empty when its result's
+        tangent is structurally zero). The kernel computes an instruction's tangents on
+        its support only (and on the spatial columns ``[0, off)``, always), then
+        clears the columns of the register's previous support outside it (its previous
+        support: that of the register's previous write, or of its last one in the tape
+        for the first write: the block before), so that every row is zero outside its
+        support: a tree of many leaves carries each leaf's parameter tangents through
+        that leaf's instructions alone. Within the support the arithmetic is the dense
+        kernel's on the same operands, so the tangents are the same; outside it they
+        are exact zeros (where the dense kernel could make ``0 * inf``).
+
+        Returns:
+            ``(code (K, 5), cols (K, 4))``: ``cols[k] = (lo, hi, clo, chi)``, the
+            support ``[lo, hi)`` and previous support ``[clo, chi)`` of instruction
+            ``k``'s destination, in tangent columns (``off`` added).
+        """
+        zero_uniform = np.asarray(zero_uniform, dtype=bool)
+        nz = utans[:, off:] != 0
+        any_nz = nz.any(axis=1)
+        if nz.shape[1]:
+            lo = np.where(any_nz, np.argmax(nz, axis=1), 0)
+            hi = np.where(any_nz, nz.shape[1] - np.argmax(nz[:, ::-1], axis=1), 0)
+        else:
+            lo = hi = np.zeros(len(nz), dtype=np.int64)
+        key = (zero_uniform.tobytes(), lo.astype(np.int64).tobytes(),
+               hi.astype(np.int64).tobytes(), int(off))
+        return memo(self, "_tangent_plans", key,
+                    lambda: self._tangent_plan(zero_uniform, lo, hi, off), 16)
+
+    def _tangent_plan(self, zero_uniform: np.ndarray, ulo: np.ndarray, uhi: np.ndarray,
+                      off: int) -> tuple[np.ndarray, np.ndarray]:
+        code = self.flagged_code(zero_uniform)
+        K = len(code)
+        cols = np.zeros((K, 4), dtype=np.int32)
+        if K == 0:
+            return code, cols
+        sup_lo = np.zeros(self.n_rows, dtype=np.int64)
+        sup_hi = np.zeros(self.n_rows, dtype=np.int64)
+        U = len(ulo)
+        sup_lo[UNIFORM_BASE:UNIFORM_BASE + U] = ulo
+        sup_hi[UNIFORM_BASE:UNIFORM_BASE + U] = uhi
+        last: dict[int, tuple[int, int]] = {}
+        for k in range(K):
+            op, d, a, b, flags = (int(v) for v in code[k])
+            binary = OPS_BY_CODE[op].arity == 2
+            spans = []
+            if not flags & FLAG_OUT_ZERO:
+                if not flags & FLAG_A_ZERO:
+                    spans.append((sup_lo[a], sup_hi[a]))
+                if binary and not flags & FLAG_B_ZERO:
+                    spans.append((sup_lo[b], sup_hi[b]))
+            spans = [(s, e) for s, e in spans if s < e]
+            if spans:
+                lo, hi = min(s for s, _ in spans), max(e for _, e in spans)
+            else:
+                lo = hi = 0
+            cols[k, 0], cols[k, 1] = lo + off, hi + off
+            cols[k, 2], cols[k, 3] = sup_lo[d] + off, sup_hi[d] + off
+            sup_lo[d], sup_hi[d] = lo, hi
+            last[d] = (lo, hi)
+        # a register's first write follows its last one of the block before
+        first: set[int] = set()
+        for k in range(K):
+            d = int(code[k, 1])
+            if d in first:
+                continue
+            first.add(d)
+            s, e = last[d]
+            cols[k, 2], cols[k, 3] = s + off, e + off
+        return code, cols
+
 
 def _src_row(code, k: int, slot: int, n_fixed: int) -> int:
     """Row holding ``slot`` as read by prefix instruction ``k`` (prefix rows are numbered

@@ -69,6 +69,7 @@ from ..shapes.domain import orient_matrix
 from . import tree as T
 from .candidates import (
     Leaf,
+    cap_cylinder,
     extended,
     face_moves,
     orientation,
@@ -136,6 +137,9 @@ REDETECT = True
 #: 74 lost (an unseen tree the score prefers wrong); benchmarks/INFER_RESULTS.md,
 #: session 21
 TRIM = True
+#: whether a detected plane of the whole cloud whose outline is in part a circle's arc
+#: is also offered as the cap of a cylinder (:func:`.candidates.cap_cylinder`)
+CAP_CYLINDERS = True
 #: rounds of detection on the points the best tree leaves unexplained
 RESIDUAL_ROUNDS = 2
 #: the fewest unexplained points a residual detection looks at
@@ -413,6 +417,13 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
             near = sub[np.abs(lf.values(P[sub])[0]) <= eps]
             for c, ci in _redetected(prob, lf, near, eps):
                 out.append((snap(c), _snapped(extended(c, P, P[ci]))))
+    caps: list[Leaf] = []
+    if trim and CAP_CYLINDERS and "cylinder" in prob.ks and N is not None:
+        cyls = [lf for lf, _ in out if lf.kind == "cylinder"]
+        for nrm, _, Q in planes:
+            c = cap_cylinder(nrm, Q, P, prob.spacing, prob.seed)
+            if c is not None and not any(_same_cylinder(c, o) for o in cyls + caps):
+                caps.append(snap(c))
     if "box" in prob.ks:
         for d in dets if corners else ():
             if d.kind in ("sphere", "cylinder", "cone", "torus"):
@@ -423,7 +434,20 @@ def _candidates(prob: _Problem, dets: list, sub: np.ndarray, eps: float,
         leaves.append(lf)
         if v is not None:
             leaves.append(v)
-    return leaves
+    return leaves + caps
+
+
+def _same_cylinder(a: Leaf, b: Leaf) -> bool:
+    """Whether two cylinders share their axis (within 5 degrees and a fifth of the
+    radius) and radius (15 %)."""
+    if abs(float(a.R[:, 2] @ b.R[:, 2])) < math.cos(math.radians(5.0)):
+        return False
+    ra, rb = a.vals["radius"], b.vals["radius"]
+    if abs(ra - rb) > 0.15 * max(ra, rb):
+        return False
+    d = b.t - a.t
+    off = d - (d @ a.R[:, 2]) * a.R[:, 2]
+    return float(np.linalg.norm(off)) <= 0.2 * max(ra, rb)
 
 
 #: curved detections (cylinder, cone, torus) with at least this many points within the

@@ -266,7 +266,13 @@ class Pool:
         self._owner = np.zeros(1024, dtype=int)
         self._weight = np.zeros(1024)
         self._uns = np.zeros((2, 1024), dtype=bool)
-        self._at_surf = np.zeros((16, 1024))
+        # the candidates' values at the surface points, evaluated on demand, one
+        # candidate at one candidate's points at a time (:meth:`surface_block`): a
+        # tree's score needs its own leaves' values at its own leaves' points only,
+        # and most pairs of candidates never meet in a tree scored
+        self._span = np.zeros((16, 2), dtype=int)  # each one's points: columns [lo, hi)
+        self._have = np.zeros((16, 16), dtype=bool)  # [i, j]: i's values at j's points
+        self._srows: list[np.ndarray] = []  # [i]: i's values (S,) where _have says
         self._scorer: Scorer | None = None
 
     # views of the buffers: ``(L, M)``, ``(L, M)``, ``(L, Q)``, ``(L, S)``, ``(S, 3)``,
@@ -290,8 +296,53 @@ class Pool:
 
     @property
     def at_surface(self) -> np.ndarray:
-        """``(L, S)`` each candidate's signed distance at the surface points."""
-        return self._at_surf[:len(self.leaves), :self._ns]
+        """``(L, S)`` each candidate's signed distance at the surface points: the whole
+        table, every entry evaluated now (the search asks for blocks of it,
+        :meth:`surface_block`)."""
+        everyone = list(range(len(self.leaves)))
+        return self.surface_block(everyone, np.arange(self._ns))
+
+    def surface_block(self, rows: list[int], idx: np.ndarray) -> np.ndarray:
+        """``(len(rows), len(idx))`` the candidates ``rows``' signed distances at the
+        surface points ``idx`` (column indices), which must lie on the surfaces of
+        ``rows`` (as a tree's score needs them): the values of one candidate at
+        another's points are evaluated the first time they are asked for, at all of
+        that candidate's points (:meth:`filled`). The values are those evaluating
+        every candidate at every surface point gives (a leaf's value at a point does
+        not depend on the other points evaluated with it)."""
+        self._fill(rows)
+        out = np.empty((len(rows), len(idx)))
+        for r, i in enumerate(rows):
+            out[r] = self._srows[i][idx]
+        return out
+
+    def _fill(self, rows: list[int]) -> None:
+        """Evaluate each candidate of ``rows`` at the surface points of those of
+        ``rows`` where it has not been yet."""
+        have = self._have
+        for i in rows:
+            miss = [j for j in rows if not have[i, j]]
+            if not miss:
+                continue
+            spans = self._span[miss]
+            cols = np.concatenate([np.arange(lo, hi) for lo, hi in spans])
+            if len(cols):
+                row = self._srows[i]
+                if len(row) < self._ns:  # room for every surface point held
+                    grown = np.zeros(max(self._ns, 2 * len(row)))
+                    grown[:len(row)] = row
+                    row = self._srows[i] = grown
+                row[cols] = self.leaves[i].values(self._surf[cols])[0]
+            have[i, miss] = True
+
+    def filled(self) -> float:
+        """The share of the ``(L, S)`` table of the candidates' values at the surface
+        points evaluated so far (:meth:`surface_block`)."""
+        if not self._ns:
+            return 1.0
+        n = len(self.leaves)
+        width = (self._span[:n, 1] - self._span[:n, 0]).astype(float)
+        return float((self._have[:n, :n] * width).sum() / (n * self._ns))
 
     @property
     def surf(self) -> np.ndarray:
@@ -407,9 +458,13 @@ class Pool:
         if self.kd is not None:
             q, far, own, wt = self._draw(fresh)
             s0, s1 = self._ns, self._ns + len(q)
-            self._at_surf = _fit(self._at_surf, n1, s1)
-            self._at_surf[n0:n1, :s0] = self._values(fresh, self._surf[:s0])
-            self._at_surf[:n1, s0:s1] = self._values(self.leaves, q)
+            # own is grouped by leaf, in order: each new leaf's points are one run
+            k = np.arange(len(fresh))
+            self._span = _fit(self._span, n1)
+            self._span[n0:n1, 0] = s0 + np.searchsorted(own, k, "left")
+            self._span[n0:n1, 1] = s0 + np.searchsorted(own, k, "right")
+            self._have = _fit(self._have, n1, n1)
+            self._srows += [np.zeros(0) for _ in fresh]
             self._surf = _fit(self._surf, s1)
             self._surf[s0:s1] = q
             self._owner = _fit(self._owner, s1)
@@ -464,7 +519,7 @@ class Pool:
                 if len(old_q):
                     at_old[j] = v.values(old_q)[0]
             at_surface = np.block([
-                [self.at_surface[used][:, cols], self._values(mine, q)],
+                [self.surface_block(used, cols), self._values(mine, q)],
                 [at_old, own_vals]])
             owner = np.concatenate([np.array([sub[int(i)] for i in self.owner[cols]],
                                              dtype=int), u + own])
@@ -508,8 +563,9 @@ class Pool:
                                       self.penalty, signs=signs)
             else:
                 self._scorer = Scorer(self.at_points, self.dots, self.at_free, self.tau,
-                                      self.penalty, self.at_surface, self.owner,
-                                      self.weight / self.area, self.unsupported, signs)
+                                      self.penalty, None, self.owner,
+                                      self.weight / self.area, self.unsupported, signs,
+                                      surface=self.surface_block)
         return self._scorer
 
     @property

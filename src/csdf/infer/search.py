@@ -38,6 +38,7 @@ from __future__ import annotations
 import heapq
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,19 +152,29 @@ class Scorer:
         unsupported: ``(2, S)`` which surface points have no measured point near them
             facing their way: row 0 on a material leaf, row 1 on a cut one.
         signs: ``(L,)`` the leaves' orientations (+1, -1, 0).
+        surface: in place of ``at_surface``, a callable that gives ``(len(rows),
+            len(idx))`` the leaves ``rows``' distances at the surface points ``idx``
+            (points on those leaves' own surfaces): a table evaluated as the trees
+            scored need it (:meth:`.pool.Pool.surface_block`).
     """
 
     def __init__(self, at_points: np.ndarray, dots: np.ndarray | None,
                  at_free: np.ndarray | None, tau: float, penalty: float,
                  at_surface: np.ndarray | None = None, owner: np.ndarray | None = None,
                  weight: np.ndarray | None = None, unsupported: np.ndarray | None = None,
-                 signs: np.ndarray | None = None):
+                 signs: np.ndarray | None = None,
+                 surface: Callable[[list[int], np.ndarray], np.ndarray] | None = None):
         self.at_points = at_points
         self.dots = dots
         self.at_free = at_free
         self.tau = float(tau)
         self.penalty = float(penalty)
         self.at_surface = at_surface
+        if surface is None and at_surface is not None:
+            def surface(rows: list[int], idx: np.ndarray) -> np.ndarray:
+                return at_surface[np.ix_(rows, idx)]
+        #: the made-up-surface term's values (None: no such term)
+        self.surface = surface
         self.owner = owner
         self.weight = weight
         self.unsupported = unsupported
@@ -171,10 +182,13 @@ class Scorer:
         self.signs = np.zeros(n, dtype=int) if signs is None else np.asarray(signs, int)
         self.count = 0
         self._cache: dict[tuple, tuple] = {}
-        # the fields of the subtrees :meth:`keep` was given: at the points, at the
-        # free-space points
+        # the subtrees :meth:`keep` was given: at the points (with normals: their
+        # field and data costs at even and odd parity, :meth:`_field_cost`; without:
+        # their field and None), at the free-space points (their field and None)
         self._kept: tuple[dict, dict] = ({}, {})
-        if at_surface is not None:
+        # {leaf: its data costs (M,) at even and odd parity} (with normals)
+        self._leaf_costs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        if surface is not None:
             order = np.argsort(owner, kind="stable")
             self._order = order
             starts = np.searchsorted(owner[order], np.arange(n + 1))
@@ -188,7 +202,10 @@ class Scorer:
         evaluates only the nodes the move made (the same arrays: the same score)."""
         self._kept = ({}, {})
         for t in trees:
-            evaluate_oriented(t, self.at_points, self.dots, self._kept[0], True)
+            if self.dots is None:
+                evaluate_oriented(t, self.at_points, None, self._kept[0], True)
+            else:
+                self._keep_costs(t)
             if self.at_free is not None:
                 evaluate_oriented(t, self.at_free, None, self._kept[1], True)
 
@@ -196,11 +213,73 @@ class Scorer:
     def n_leaves(self) -> int:
         return self.at_points.shape[0]
 
+    def _leaf_cost(self, i: int, odd: bool) -> np.ndarray:
+        """``(M,)`` the data cost of each sample point explained by leaf ``i`` (with
+        normals): at even parity ``min((f / tau)^2, 1)`` where the cosine of its
+        gradient and the point's normal is positive, else 1; at odd parity (under
+        the right operand of a difference) the same of ``-f`` and the negated cosine
+        (computed once per leaf)."""
+        got = self._leaf_costs.get(i)
+        if got is None:
+            f, d = self.at_points[i], self.dots[i]
+            sq = np.minimum((f / self.tau) ** 2, 1.0)
+            got = self._leaf_costs[i] = (np.where(d > 0.0, sq, 1.0),
+                                         np.where(-d > 0.0, sq, 1.0))
+        return got[1 if odd else 0]
+
+    def _field_cost(self, tree: Tree, odd: bool, field: bool = True
+                    ) -> tuple[np.ndarray | None, np.ndarray]:
+        """``tree``'s field ``(M,)`` at the sample (with normals; None without
+        ``field``, where it is not kept: the costs alone) and each point's data cost
+        ``(M,)`` with the tree at parity ``odd``: at each point that of the active
+        leaf (:meth:`_leaf_cost`) at the parity it has there, as a point's cost from
+        the tree's field and oriented cosine (:func:`evaluate_oriented`) would be: the
+        same leaf is active, and negating its field and cosine is what an odd parity
+        does to them."""
+        if isinstance(tree, (int, np.integer)):
+            return self.at_points[int(tree)], self._leaf_cost(int(tree), odd)
+        got = self._kept[0].get(tree)
+        if got is not None:
+            return got[0], got[2 if odd else 1]
+        op, a, b = tree
+        fa, ca = self._field_cost(a, odd)
+        if op == "difference":
+            fb, cb = self._field_cost(b, not odd)
+            fb = -fb
+            pick_a = fa >= fb
+        else:
+            fb, cb = self._field_cost(b, odd)
+            pick_a = fa <= fb if op == "union" else fa >= fb
+        return np.where(pick_a, fa, fb) if field else None, np.where(pick_a, ca, cb)
+
+    def _keep_costs(self, tree: Tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(field, costs at even parity, at odd)`` of ``tree`` (:meth:`_field_cost`),
+        kept for it and each of its subtrees (:meth:`keep`)."""
+        if isinstance(tree, (int, np.integer)):
+            i = int(tree)
+            return self.at_points[i], self._leaf_cost(i, False), self._leaf_cost(i, True)
+        got = self._kept[0].get(tree)
+        if got is not None:
+            return got
+        op, a, b = tree
+        fa, ea, oa = self._keep_costs(a)
+        fb, eb, ob = self._keep_costs(b)
+        if op == "difference":
+            fb = -fb
+            eb, ob = ob, eb
+            pick_a = fa >= fb
+        else:
+            pick_a = fa <= fb if op == "union" else fa >= fb
+        out = (np.where(pick_a, fa, fb), np.where(pick_a, ea, eb), np.where(pick_a, oa, ob))
+        self._kept[0][tree] = out
+        return out
+
     def _costs(self, tree: Tree) -> np.ndarray:
         """``(M,)`` each sample point's data cost under ``tree``."""
-        f, d = evaluate_oriented(tree, self.at_points, self.dots, self._kept[0])
-        cost = np.minimum((f / self.tau) ** 2, 1.0)
-        return cost if d is None else np.where(d > 0.0, cost, 1.0)
+        if self.dots is not None:
+            return self._field_cost(tree, False, False)[1]
+        f, _ = evaluate_oriented(tree, self.at_points, None, self._kept[0])
+        return np.minimum((f / self.tau) ** 2, 1.0)
 
     def useful(self, tree: Tree, candidates: list[int], free: float, share: float = 0.5
                ) -> list[int]:
@@ -234,16 +313,16 @@ class Scorer:
         floating-point addition of terms of one sign is monotone)."""
         self.count += 1
         pen = self.penalty * size(tree)
-        data = float(np.mean(self._costs(tree)))
+        data = _mean(self._costs(tree))
         if data + pen >= bound:
             return None
         free = 0.0
         if self.at_free is not None and self.at_free.shape[1]:
             g, _ = evaluate_oriented(tree, self.at_free, None, self._kept[1])
-            free = float(np.mean(np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0)))
+            free = _mean(np.minimum((np.maximum(-g, 0.0) / self.tau) ** 2, 1.0))
             if data + free + pen >= bound:
                 return None
-        if self.at_surface is not None:
+        if self.surface is not None:
             # the share of the tree's own surface where no point was measured: a
             # leaf's surface point counts where the tree's field is near 0 there
             # (ON_SURFACE)
@@ -265,12 +344,19 @@ class Scorer:
             rows = [i for i, _ in key]
             idx = np.concatenate([self._slices[i][self.unsupported[int(odd), self._slices[i]]]
                                   for i, odd in key])
-            got = (self.at_surface[np.ix_(rows, idx)], self.weight[idx],
+            got = (self.surface(rows, idx), self.weight[idx],
                    {i: k for k, i in enumerate(rows)})
             if len(self._cache) >= BARE_CACHE:
                 self._cache.clear()
             self._cache[key] = got
         return got
+
+
+def _mean(x: np.ndarray) -> float:
+    """``float(np.mean(x))`` of a 1-D float64 array, without its checks: the same
+    sum (``np.add.reduce``, pairwise) divided by the same count, so the same value
+    bit for bit."""
+    return float(np.add.reduce(x) / len(x))
 
 
 def _paths(tree: Tree, path: tuple = (), odd: bool = False
@@ -357,6 +443,8 @@ def beam_search(scorer: Scorer, candidates: list[int], max_primitives: int, beam
         heapq.heapify(top)
         for st in level:
             used = set(leaves(st.tree))
+            # the trees grown from it are built around its subtrees (Scorer.keep)
+            scorer.keep([st.tree])
             for c in scorer.useful(st.tree, candidates, st.free):
                 if c in used:
                     continue
@@ -393,6 +481,7 @@ def beam_search(scorer: Scorer, candidates: list[int], max_primitives: int, beam
             stale += 1
         if stale >= 2:
             break
+    scorer.keep([])
     uniq: dict[str, Scored] = {}
     for s in sorted(kept, key=lambda s: s.total):
         uniq.setdefault(normal_form(s.tree), s)

@@ -56,7 +56,9 @@ def relabel(tree: Tree, mapping: dict[int, int]) -> Tree:
 
 def size(tree: Tree) -> int:
     """The number of leaves."""
-    return len(leaves(tree))
+    if isinstance(tree, (int, np.integer)):
+        return 1
+    return size(tree[1]) + size(tree[2])
 
 
 def subtrees(tree: Tree, path: tuple = ()) -> Iterator[tuple[tuple, Tree]]:

@@ -557,7 +557,7 @@ def run_lanes_grad(code, imm, start, K, R, D, tmp, B):
             a = code[row, 2]
             b = code[row, 3]
             _exec_inline(op, R, a, b, tmp, 0, B)
-            _tangent_inline(op, code[row, 4], R, a, b, tmp, D, d, 3, B)
+            _tangent_inline(op, code[row, 4], R, a, b, tmp, D, d, 0, 3, B)
             for j in range(B):
                 R[d, j] = tmp[0, j]
 

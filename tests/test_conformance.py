@@ -156,6 +156,10 @@ def test_random_expression_dags(backend):
             nudged = prog(q, backend="numpy")
             with np.errstate(invalid="ignore"):
                 stable &= ~(np.abs(nudged - ref[0]) > 1e-11 * (1 + np.abs(ref[0])))
+            # a value that turns NaN or infinite under a nudge is on an edge too (exp
+            # overflowing at the last ulp of its argument, then mod(a, inf))
+            stable &= (np.isnan(nudged) == np.isnan(ref[0])) & (
+                np.isinf(nudged) == np.isinf(ref[0]))
         ref = tuple(r[stable] for r in ref)
         got = tuple(g[stable] for g in got)
         finite = np.isfinite(ref[0])

@@ -28,9 +28,17 @@ diagonal), **IoU** of the signs on a 64^3 grid over the truth's box padded by 10
 **primitive count** against the truth's, and **seconds** per shape.
 
 Run: ``python benchmarks/bench_infer.py [--trees 100] [--time-limit 30] [--effort S]
-[--seed 0] [--views full,scan] [--bands 2-3,4-5] [--verbose]``; ``--zoo [--out DIR]``
-for the zoo parts. ``--effort 30 --time-limit 300`` gives the effort of a 30 s limit
-with results that do not depend on the machine's load (its seconds do).
+[--seed 0] [--views full,scan] [--bands 2-3,4-5] [--only 5,72] [--verbose]``;
+``--zoo [--out DIR]`` for the zoo parts. ``--effort 30 --time-limit 300`` gives the
+effort of a 30 s limit with results that do not depend on the machine's load (its
+seconds do).
+
+Two revisions side by side: ``--verbose`` prints each tree's cost to the last digit and
+its CPU seconds, so the same command run from a checkout of each revision (``git
+worktree add``), alternating or at the same time under the same load, shows whether a
+speed change left every result as it was and what it saved in CPU time, which wall
+seconds on a shared machine do not. ``--only`` runs the listed trees alone (every
+cloud is still drawn, so each tree keeps its cloud).
 """
 
 from __future__ import annotations
@@ -449,8 +457,17 @@ def main() -> None:
     ap.add_argument("--zoo", action="store_true", help="only the zoo parts")
     ap.add_argument("--out", default=None, help="a folder for the zoo parts' inferred "
                     ".csdf models")
-    ap.add_argument("--verbose", action="store_true", help="a line for every tree")
+    ap.add_argument("--only", default=None, help="comma-separated tree numbers: run only "
+                    "these (their clouds are the same as in a full run)")
+    ap.add_argument("--verbose", action="store_true", help="a line for every tree, with "
+                    "its cost to the last digit and its CPU seconds")
     a = ap.parse_args()
+    only = None
+    if a.only:
+        try:
+            only = {int(k) for k in a.only.split(",")}
+        except ValueError:
+            ap.error(f"--only: expected comma-separated tree numbers, got {a.only!r}")
     if a.zoo:
         bench_zoo(a.time_limit, a.seed, a.out, a.effort)
         return
@@ -468,16 +485,16 @@ def main() -> None:
             pts, nrm, eye = cloud(shape, view, 0.002 * diag, rng, box)
             n = len(leaves)
             band = "2-3" if n <= 3 else ("4-5" if n <= 5 else "6-8")
-            if band not in a.bands.split(","):
+            if band not in a.bands.split(",") or (only is not None and k not in only):
                 continue
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             try:
                 res = infer(pts, nrm, viewpoint=eye, time_limit=a.time_limit, seed=a.seed,
                             effort=a.effort)
             except csdf.CsdfError as exc:
                 print(f"{view} tree {k}: {exc}")
                 continue
-            dt = time.perf_counter() - t0
+            dt, cpu = time.perf_counter() - t0, time.process_time() - c0
             st = structure(res, tree, leaves, box)
             ex = exact_structure(res, tree, leaves)
             exw = exact_structure(res, tree, leaves, preferred(res, "global"))
@@ -494,7 +511,8 @@ def main() -> None:
                     f"view {vst}"
                 kinds = [f"{lf[0]}{i}" for i, lf in enumerate(leaves)]
                 print(f"{view} tree {k} ({n}): structure {st}, as written {ex} (global "
-                      f"{exw}){one}, Chamfer {row[3]:.2%}, IoU {row[4]:.3f}, {dt:.1f} s, "
+                      f"{exw}){one}, Chamfer {row[3]:.2%}, IoU {row[4]:.3f}, {dt:.1f} s "
+                      f"({cpu:.1f} CPU s), cost {res.cost!r}, "
                       f"truth {T.to_text(tree, kinds.__getitem__)}, "
                       f"inferred {res.tree}", flush=True)
         print(f"\n## {view}\n")

@@ -280,6 +280,18 @@ STAND_FIRST = True
 #: unexplained also competes with fits held back from the ends of its ranges
 #: (:meth:`_Run._refit_unexplained`)
 SHRINK_PASSED = True
+#: a fit of a model whose width and depth are two parameters (:func:`_extents`) with
+#: one of them at its bound is also refitted a quarter turn either way with the two
+#: sizes traded, so that the turned model covers the same footprint
+#: (:meth:`_Run._swapped`): seen side-on, a bookshelf's or a table's width and depth
+#: are easily taken for each other, and the yaw scan, made at the fit's own sizes,
+#: does not see that turn
+SWAP_TURNS = True
+#: a parameter is a width (a depth) when raising it grows the model's bounds along its
+#: x (y) axis by at least this much a unit, and along y (x) by at most
+#: ``EXTENT_CROSS`` times that
+EXTENT_SLOPE = 0.5
+EXTENT_CROSS = 0.05
 
 
 @dataclass
@@ -341,6 +353,7 @@ class _Model:
     foot: float  # radius of the footprint (model xy) about the centre, at the defaults
     heights: np.ndarray  # (S,) the model's top (model z) at each of ``starts``
     reach: float  # its radius at the defaults or at every ranged parameter near its top
+    extents: tuple | None  # (width name, depth name, their slopes): see _extents
     upright_shape: Any = None  # built by _Run._upright_shape (False: not possible)
 
 
@@ -371,7 +384,43 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
     radius = float(np.linalg.norm(v - c, axis=1).max())
     return _Model(name, shape, source, b, c, radius, fld, fld.backend, surf, g, starts,
                   float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights,
-                  max(radius, _reach(fld, ranged)))
+                  max(radius, _reach(fld, ranged)), _extents(fld, ranged))
+
+
+def _extents(fld: Any, ranged: list) -> tuple[str, str, float, float] | None:
+    """``(x name, y name, x slope, y slope)``: the parameters of ``ranged`` that set
+    the model's width (its extent along the model's x axis) and depth (along y), each
+    the one whose rise grows the bounds along that axis the most (at least
+    ``EXTENT_SLOPE`` a unit) and along the other axis at most ``EXTENT_CROSS`` times as
+    much, with those growths (bounds per parameter unit, from ``fld``'s interval
+    bounds at the defaults and a tenth of the range above); None when the model has no
+    such pair (a stool's seat radius widens it both ways)."""
+    b0 = np.asarray(fld.bounds, dtype=float)
+    e0 = b0[1] - b0[0]
+    best: list = [None, None]
+    for p in ranged:
+        step = 0.1 * (float(p.hi) - float(p.lo))
+        if not step > 0:
+            continue
+        b = fld.replace(params={p.name: float(p.default) + step}, check_ranges=False).bounds
+        if b is None:
+            continue
+        g = ((np.asarray(b, dtype=float)[1] - np.asarray(b, dtype=float)[0]) - e0) / step
+        for a in (0, 1):
+            if (g[a] >= EXTENT_SLOPE and abs(g[1 - a]) <= EXTENT_CROSS * g[a]
+                    and (best[a] is None or g[a] > best[a][1])):
+                best[a] = (p.name, float(g[a]))
+    if best[0] is None or best[1] is None or best[0][0] == best[1][0]:
+        return None
+    return best[0][0], best[1][0], best[0][1], best[1][1]
+
+
+def _yaw_matrix(nrm: np.ndarray, th: float) -> np.ndarray:
+    """``(3, 3)`` the rotation by ``th`` radians about the unit axis ``nrm`` ``(3,)``
+    (Rodrigues' formula)."""
+    X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
+    return math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
+        nrm, nrm)
 
 
 def _reach(fld: Any, ranged: list) -> float:
@@ -1363,12 +1412,8 @@ class _Run:
                 continue
             start = {"rotation": res.rotation, "translation": res.translation,
                      "params": dict(pv or {})}
-            r = self._candidate(m, idx, start)
+            self._add_verified(m, idx, start, found)
             tried += 1
-            if r is not None:
-                ok, sc, il, ch, gain = self._verify(m, r)
-                if ok:
-                    found.append((gain, sc, r, il, ch))
 
     def _shrunk(self, m: _Model, idx: np.ndarray, res: FitResult, found: list) -> None:
         """A fit ``res`` of ``m`` to the points ``idx`` with parameters at an end of their
@@ -1394,11 +1439,7 @@ class _Run:
             pv = dict(res.params)
             pv.update({n: e + frac * (d - e) for n, (e, d) in zip(names, ends)})
             start = {"rotation": res.rotation, "translation": res.translation, "params": pv}
-            r = self._candidate(m, idx, start, held=held)
-            if r is not None:
-                ok, sc, il, ch, gain = self._verify(m, r)
-                if ok:
-                    found.append((gain, sc, r, il, ch))
+            self._add_verified(m, idx, start, found, held=held)
 
     def _ray_set(self, m: _Model, res: FitResult) -> np.ndarray:
         """Indices of the scan points whose rays score the turns of the fit ``res`` of
@@ -1748,21 +1789,54 @@ class _Run:
             chosen.append(i)
             if len(chosen) >= refits:
                 break
-        X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
         for i in chosen:
-            th = float(angles[i])
-            Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
-                nrm, nrm)
+            Rt = _yaw_matrix(nrm, float(angles[i]))
             init = {"rotation": Rt @ base.rotation,
                     "translation": Rt @ (base.translation - cw) + cw,
                     "params": dict(base.params)}
-            r = self._candidate(m, idx, init, stand=True)
-            if r is None:
-                continue
+            self._add_verified(m, idx, init, found, stand=True)
+        if SWAP_TURNS:
+            self._swapped(m, idx, base, found)
+        return found
+
+    def _swapped(self, m: _Model, idx: np.ndarray, base: FitResult, found: list) -> None:
+        """When ``m`` has a width and a depth parameter (:func:`_extents`) and the fit
+        ``base`` holds one of them at its bound, ``base`` refitted a quarter turn either
+        way about the support's normal through its centre, with the width set to give
+        the extent its depth gave and the depth the extent its width gave (clipped to
+        their ranges); appends the refits that pass verification to ``found`` (items
+        as :meth:`_turns`'), where explained mass judges them against the rest. A
+        bookshelf seen from the side was fitted to it as its front, a quarter turn off,
+        its width and depth both at their bounds."""
+        if m.extents is None:
+            return
+        px, py, sx, sy = m.extents
+        if not {n for n, _, _ in _at_bound(m, base.params)} & {px, py}:
+            return
+        surf, _ = self._surface_at(m, base.params)
+        lo, hi = surf.min(axis=0), surf.max(axis=0)
+        ext = hi - lo
+        rng = {p.name: (float(p.lo), float(p.hi)) for p in m.fld.program.params}
+        pv = dict(base.params)
+        pv[px] = float(np.clip(pv[px] + (ext[1] - ext[0]) / sx, *rng[px]))
+        pv[py] = float(np.clip(pv[py] + (ext[0] - ext[1]) / sy, *rng[py]))
+        cw = base.rotation @ (0.5 * (lo + hi)) + base.translation
+        for th in (0.5 * math.pi, -0.5 * math.pi):
+            Rt = _yaw_matrix(self.plane[0], th)
+            init = {"rotation": Rt @ base.rotation,
+                    "translation": Rt @ (base.translation - cw) + cw, "params": pv}
+            self._add_verified(m, idx, init, found, stand=True)
+
+    def _add_verified(self, m: _Model, idx: np.ndarray, start: dict, found: list,
+                      **kw: Any) -> None:
+        """Fits ``m`` to the points ``idx`` from ``start`` (:meth:`_candidate`, with its
+        keywords ``kw``) and appends the fit to ``found`` as ``(explained mass, score,
+        result, inliers, checked)`` when it passes verification."""
+        r = self._candidate(m, idx, start, **kw)
+        if r is not None:
             ok, sc, il, ch, gain = self._verify(m, r)
             if ok:
                 found.append((gain, sc, r, il, ch))
-        return found
 
 
 def _at_bound(m: _Model, params: dict) -> list[tuple[str, float, float]]:

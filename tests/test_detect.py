@@ -1138,12 +1138,15 @@ def test_width_and_depth_parameters_are_found_from_the_bounds():
     its y axis alone; none for a stool, whose seat radius widens it both ways."""
     from csdf.detect import objects as O
 
-    got = {n: O._model(n, csdf.zoo.load(n), None).extents for n in
-           ("bookshelf", "table", "chair", "stool")}
-    assert got["bookshelf"][:2] == ("width", "depth")
-    assert got["table"][:2] == ("length", "width")
-    assert got["chair"][:2] == ("seat_width", "seat_depth")
-    assert got["stool"] is None
+    ms = {n: O._model(n, csdf.zoo.load(n), None) for n in
+          ("bookshelf", "table", "chair", "stool")}
+    assert O._extents(ms["bookshelf"])[:2] == ("width", "depth")
+    assert O._extents(ms["table"])[:2] == ("length", "width")
+    assert O._extents(ms["chair"])[:2] == ("seat_width", "seat_depth")
+    assert O._extents(ms["stool"]) is None
+    # asked about parameters that are neither, it stops there
+    assert O._extents(ms["bookshelf"], ["board", "plinth"]) is None
+    assert O._extents(ms["bookshelf"], ["board", "depth"])[:2] == ("width", "depth")
 
 
 def test_a_quarter_turned_fit_with_sizes_at_their_bounds_is_refitted_swapped():

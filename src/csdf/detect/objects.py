@@ -86,6 +86,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -353,8 +354,9 @@ class _Model:
     foot: float  # radius of the footprint (model xy) about the centre, at the defaults
     heights: np.ndarray  # (S,) the model's top (model z) at each of ``starts``
     reach: float  # its radius at the defaults or at every ranged parameter near its top
-    extents: tuple | None  # (width name, depth name, their slopes): see _extents
     upright_shape: Any = None  # built by _Run._upright_shape (False: not possible)
+    #: each parameter's growth of the bounds (see _growth), filled on first use
+    growth: dict = field(default_factory=dict)
 
 
 def _model(name: str, shape: Any, source: Any) -> _Model:
@@ -384,35 +386,68 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
     radius = float(np.linalg.norm(v - c, axis=1).max())
     return _Model(name, shape, source, b, c, radius, fld, fld.backend, surf, g, starts,
                   float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights,
-                  max(radius, _reach(fld, ranged)), _extents(fld, ranged))
+                  max(radius, _reach(fld, ranged)))
 
 
-def _extents(fld: Any, ranged: list) -> tuple[str, str, float, float] | None:
-    """``(x name, y name, x slope, y slope)``: the parameters of ``ranged`` that set
-    the model's width (its extent along the model's x axis) and depth (along y), each
-    the one whose rise grows the bounds along that axis the most (at least
-    ``EXTENT_SLOPE`` a unit) and along the other axis at most ``EXTENT_CROSS`` times as
-    much, with those growths (bounds per parameter unit, from ``fld``'s interval
-    bounds at the defaults and a tenth of the range above); None when the model has no
-    such pair (a stool's seat radius widens it both ways)."""
-    b0 = np.asarray(fld.bounds, dtype=float)
-    e0 = b0[1] - b0[0]
-    best: list = [None, None]
-    for p in ranged:
+def _growth(m: _Model, name: str) -> np.ndarray:
+    """``(3,)`` how fast the bounds of ``m`` grow along the model's x, y and z axes as
+    its parameter ``name`` rises (bounds per parameter unit, from the interval bounds at
+    the defaults and with ``name`` a tenth of its range higher; zeros for a parameter
+    without a finite range). Computed on first use and kept on ``m``."""
+    if name not in m.growth:
+        p = next(q for q in m.fld.program.params if q.name == name)
         step = 0.1 * (float(p.hi) - float(p.lo))
-        if not step > 0:
-            continue
-        b = fld.replace(params={p.name: float(p.default) + step}, check_ranges=False).bounds
-        if b is None:
-            continue
-        g = ((np.asarray(b, dtype=float)[1] - np.asarray(b, dtype=float)[0]) - e0) / step
+        g = np.zeros(3)
+        b0 = m.fld.bounds
+        if math.isfinite(step) and step > 0 and b0 is not None:
+            b = m.fld.replace(params={name: float(p.default) + step},
+                              check_ranges=False).bounds
+            if b is not None:
+                b0, b = np.asarray(b0, dtype=float), np.asarray(b, dtype=float)
+                g = ((b[1] - b[0]) - (b0[1] - b0[0])) / step
+        m.growth[name] = g
+    return m.growth[name]
+
+
+def _extents(m: _Model, names: Iterable[str] | None = None
+             ) -> tuple[str, str, float, float] | None:
+    """``(x name, y name, x slope, y slope)``: the parameters of ``m`` that set its
+    width (its extent along the model's x axis) and depth (along y), each the one whose
+    rise grows the bounds along that axis the most (at least ``EXTENT_SLOPE`` a unit,
+    :func:`_growth`) and along the other axis at most ``EXTENT_CROSS`` times as much,
+    with those growths; None when the model has no such pair (a stool's seat radius
+    widens it both ways), or when ``names`` is given and none of them is the width or
+    the depth (looked at first: each parameter's growth costs a bounds search)."""
+    def axis(n: str) -> int | None:
+        g = _growth(m, n)
         for a in (0, 1):
-            if (g[a] >= EXTENT_SLOPE and abs(g[1 - a]) <= EXTENT_CROSS * g[a]
-                    and (best[a] is None or g[a] > best[a][1])):
-                best[a] = (p.name, float(g[a]))
+            if g[a] >= EXTENT_SLOPE and abs(g[1 - a]) <= EXTENT_CROSS * g[a]:
+                return a
+        return None
+
+    if names is not None and all(axis(n) is None for n in names):
+        return None
+    best: list = [None, None]
+    for p in m.fld.program.params:
+        a = axis(p.name)
+        if a is not None and (best[a] is None or _growth(m, p.name)[a] > best[a][1]):
+            best[a] = (p.name, float(_growth(m, p.name)[a]))
     if best[0] is None or best[1] is None or best[0][0] == best[1][0]:
         return None
     return best[0][0], best[1][0], best[0][1], best[1][1]
+
+
+def _moved_surface(fld: Any, surf: np.ndarray, params: dict
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The surface samples ``surf`` ``(K, 3)`` of ``fld`` at its defaults moved onto the
+    model at ``params`` (one projection step along the gradient; model frame), and
+    their unit normals ``(K, 3)`` there."""
+    f = fld.replace(params=params, check_ranges=False)
+    g = np.asarray(f.gradient(surf), dtype=float)
+    moved = surf - np.asarray(f.value(surf), dtype=float)[:, None] * g
+    g = np.asarray(f.gradient(moved), dtype=float)
+    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    return moved, g
 
 
 def _yaw_matrix(nrm: np.ndarray, th: float) -> np.ndarray:
@@ -1690,12 +1725,7 @@ class _Run:
         """The model's surface samples ``(K, 3)`` and their unit normals ``(K, 3)`` moved
         onto the model at ``params`` (one projection step along the gradient; model
         frame)."""
-        fld = m.fld.replace(params=params, check_ranges=False)
-        g = np.asarray(fld.gradient(m.surface), dtype=float)
-        surf = m.surface - np.asarray(fld.value(m.surface), dtype=float)[:, None] * g
-        g = np.asarray(fld.gradient(surf), dtype=float)
-        g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-        return surf, g
+        return _moved_surface(m.fld, m.surface, params)
 
     def _ray_index(self) -> tuple[Any, float, np.ndarray]:
         """``(tree, tolerance, ranges)``: a KD-tree of the scan's unit ray directions,
@@ -1808,18 +1838,20 @@ class _Run:
         as :meth:`_turns`'), where explained mass judges them against the rest. A
         bookshelf seen from the side was fitted to it as its front, a quarter turn off,
         its width and depth both at their bounds."""
-        if m.extents is None:
+        at = [n for n, _, _ in _at_bound(m, base.params)]
+        ext = _extents(m, at) if at else None
+        if ext is None:
             return
-        px, py, sx, sy = m.extents
-        if not {n for n, _, _ in _at_bound(m, base.params)} & {px, py}:
+        px, py, sx, sy = ext
+        if not set(at) & {px, py}:
             return
         surf, _ = self._surface_at(m, base.params)
         lo, hi = surf.min(axis=0), surf.max(axis=0)
-        ext = hi - lo
+        size = hi - lo
         rng = {p.name: (float(p.lo), float(p.hi)) for p in m.fld.program.params}
         pv = dict(base.params)
-        pv[px] = float(np.clip(pv[px] + (ext[1] - ext[0]) / sx, *rng[px]))
-        pv[py] = float(np.clip(pv[py] + (ext[0] - ext[1]) / sy, *rng[py]))
+        pv[px] = float(np.clip(pv[px] + (size[1] - size[0]) / sx, *rng[px]))
+        pv[py] = float(np.clip(pv[py] + (size[0] - size[1]) / sy, *rng[py]))
         cw = base.rotation @ (0.5 * (lo + hi)) + base.translation
         for th in (0.5 * math.pi, -0.5 * math.pi):
             Rt = _yaw_matrix(self.plane[0], th)

@@ -922,3 +922,77 @@ def test_a_plane_whose_outline_is_in_part_an_arc_is_offered_as_a_cylinders_cap()
     Qw = np.column_stack([whole, np.full(len(whole), 0.8)])
     assert cap_cylinder(np.array([0.0, 0.0, 1.0]), Qw, np.concatenate([Qw, behind]),
                         spacing) is None
+
+
+def _groove_arc(theta: tuple[float, float], phi: tuple[float, float], n: int, seed: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` noisy points ``(n, 3)`` of a torus groove (major 0.24, minor 0.077, axis
+    tilted 30 degrees from z about x, centre (0.1, -0.2, 0.3)) over ring angles
+    ``theta`` and tube angles ``phi`` (degrees; 180 is the tube's inner side), with
+    the object's outward normals ``(n, 3)``: into the tube, a cut, 3 degrees of noise."""
+    rng = np.random.default_rng(seed)
+    th = np.radians(rng.uniform(*theta, n))
+    ph = np.radians(rng.uniform(*phi, n))
+    radial = np.stack([np.cos(th), np.sin(th), np.zeros(n)], axis=1)
+    out = np.cos(ph)[:, None] * radial + np.sin(ph)[:, None] * np.array([0.0, 0.0, 1.0])
+    q = 0.24 * radial + 0.077 * out
+    a = math.radians(30.0)
+    R = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(a), -math.sin(a)],
+                  [0.0, math.sin(a), math.cos(a)]])
+    P = q @ R.T + np.array([0.1, -0.2, 0.3]) + rng.normal(0.0, 0.002, (n, 3))
+    N = -out @ R.T + rng.normal(0.0, 0.05, (n, 3))
+    return P, N / np.linalg.norm(N, axis=1, keepdims=True)
+
+
+def test_two_arcs_of_a_torus_groove_are_joined_into_its_torus():
+    """A torus groove seen as two short arcs on opposite sides of its ring (as across a
+    ball): the first arc alone fits tori of other axes as well (detection on it alone
+    finds tori 73-89 degrees off, within the noise), the tube centres of both lie on
+    the ring, and :func:`joined_torus` gives that torus (a cut); an arc with a
+    patch of a plane, or of a sphere, gives none. :func:`api._joined` offers one torus
+    for the two places, across rounds, and none for one place detected twice."""
+    from types import SimpleNamespace
+
+    from csdf.infer.api import _joined
+    from csdf.infer.candidates import joined_torus
+
+    Pa, Na = _groove_arc((160.0, 200.0), (135.0, 225.0), 120, 1)
+    Pb, Nb = _groove_arc((-20.0, 20.0), (-90.0, 0.0), 50, 2)
+    axis = np.array([0.0, -math.sin(math.radians(30.0)), math.cos(math.radians(30.0))])
+    lf = joined_torus(Pa, Pb, Na, Nb, 0.003, 0.01)
+    assert lf is not None and lf.kind == "torus" and lf.origin == "joined"
+    assert lf.sign == -1
+    assert abs(float(lf.R[:, 2] @ axis)) > math.cos(math.radians(3.0))
+    assert lf.vals["major"] == pytest.approx(0.24, abs=0.01)
+    assert lf.vals["minor"] == pytest.approx(0.077, abs=0.01)
+    assert np.linalg.norm(lf.t - np.array([0.1, -0.2, 0.3])) < 0.02
+    # an arc and a plane's patch; an arc and a sphere's patch
+    rng = np.random.default_rng(3)
+    flat = np.column_stack([rng.uniform(0.5, 0.6, 60), rng.uniform(0.0, 0.1, 60),
+                            np.full(60, 0.2)]) + rng.normal(0.0, 0.002, (60, 3))
+    up = np.tile([0.0, 0.0, 1.0], (60, 1))
+    assert joined_torus(Pa, flat, Na, up, 0.003, 0.01) is None
+    d = rng.normal(size=(60, 3)) * np.array([0.3, 0.3, 1.0]) + np.array([0.0, 0.0, 3.0])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    ball = np.array([0.6, 0.3, 0.0]) + 0.2 * d + rng.normal(0.0, 0.002, (60, 3))
+    assert joined_torus(Pa, ball, Na, d, 0.003, 0.01) is None
+    # two patches of one straight cylinder (radius 0.08 along x): a torus of a huge
+    # ring fits them, but it is the cylinder's straight stretch
+    x = np.concatenate([rng.uniform(0.0, 0.1, 60), rng.uniform(0.4, 0.5, 60)])
+    u = rng.uniform(-0.8, 0.8, 120)
+    out = np.column_stack([np.zeros(120), np.sin(u), np.cos(u)])
+    tube = np.column_stack([x, np.zeros(120), np.zeros(120)]) + 0.08 * out
+    tube += rng.normal(0.0, 0.002, tube.shape)
+    assert joined_torus(tube[:60], tube[60:], out[:60], out[60:], 0.002, 0.01) is None
+    # the residual rounds' pieces: one arc in each round, the first detected twice
+    P = np.concatenate([Pa, Pb])
+    prob = SimpleNamespace(P=P, N=np.concatenate([Na, Nb]), ks=("torus", "cylinder"),
+                           tau=0.01, pieces=[], pool=SimpleNamespace(leaves=[]))
+    a, b = np.arange(120), np.arange(120, 170)
+    assert _joined(prob, [(a, 0.003), (a[5:], 0.003)], []) == []  # one place
+    out = _joined(prob, [(b, 0.003)], [])
+    assert len(out) == 1 and out[0].kind == "torus" and out[0].sign == -1
+    assert len(prob.pieces) == 3
+    # not when a candidate of that ring exists
+    prob.pieces = prob.pieces[:2]
+    assert _joined(prob, [(b, 0.003)], [lf.moved(sign=0)]) == []

@@ -21,7 +21,8 @@
 3. **Residuals**: the points the best tree leaves unexplained are searched for
    primitives again (a small feature the first detection missed, or took for part of
    another surface), all kinds together and each curved kind on its own with every
-   curved detection kept (:func:`_residual`); the beam search resumes with those
+   curved detection kept (:func:`_residual`), and two such detections in different
+   places as arcs of one torus (:func:`_joined`); the beam search resumes with those
    candidates too.
 4. **Parameters**: the best trees' continuous parameters (every primitive's sizes and
    position, named ``cylinder_1_radius``, ``cylinder_1_x``, ..., and its orientation
@@ -72,6 +73,7 @@ from .candidates import (
     cap_cylinder,
     extended,
     face_moves,
+    joined_torus,
     orientation,
     other_kind,
     plane_boxes,
@@ -147,6 +149,9 @@ RESIDUAL_MIN = 30
 #: the most detections of one curved kind on the unexplained points
 #: (:func:`_residual`: each kind on its own, besides all kinds together)
 RESIDUAL_PER_KIND = 3
+#: whether two curved detections among the unexplained points (of one residual round
+#: or of two) are also tried as arcs of one torus (:func:`_joined`)
+JOIN_TORI = True
 #: rounds of dropping each leaf of the best tree and refining the rest
 DROP_ROUNDS = 1
 #: the evaluator of the joint refinement: the interpreter, as every tree refined is a
@@ -349,6 +354,8 @@ class _Problem:
         pool: the candidates and their score tables.
         rng: the seeded generator of the run.
         seed: the run's seed.
+        pieces: the curved detections among the points earlier trees left
+            unexplained (:func:`_residual`), as ``(inlier indices into P (K,), rmse)``.
     """
 
     P: np.ndarray
@@ -364,6 +371,7 @@ class _Problem:
     pool: Pool
     rng: np.random.Generator
     seed: int
+    pieces: list = field(default_factory=list)
 
     def tree_values(self, tree, X: np.ndarray) -> np.ndarray:
         """``(len(X),)`` the tree's field at points ``X`` ``(M, 3)``."""
@@ -750,7 +758,8 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
     ``2 tau`` from its surface, or on it with the normal the other way): by one
     detection of all kinds, and by one of each curved kind alone (at most
     :data:`RESIDUAL_PER_KIND` detections each) that keeps every curved detection
-    (``flat_share=1``)."""
+    (``flat_share=1``); and tori through two of the curved detections of this round
+    and earlier ones (:func:`_joined`)."""
     P, N = prob.P, prob.N
     used = sorted(set(T.leaves(tree)))
     vals = np.zeros((len(prob.pool.leaves), len(P)))
@@ -776,6 +785,7 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
     except CsdfError:
         dets = []
     out = _candidates(prob, dets, sub, prob.tau)
+    pieces = _pieces(dets, sub)
     # each curved kind on its own, every curved detection kept: detection prefers the
     # simpler kind (two cylinders along a torus's groove) and drops a curved patch that
     # one plane explains more than half of (a shallow spherical or conical notch);
@@ -790,7 +800,64 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
         except CsdfError:
             continue
         out += _candidates(prob, dets, sub, prob.tau, corners=False)
-    return out
+        pieces += _pieces(dets, sub)
+    return out + _joined(prob, pieces, out)
+
+
+def _pieces(dets: list, sub: np.ndarray) -> list[tuple[np.ndarray, float]]:
+    """The curved detections of ``dets`` (made on the points ``P[sub]``) as
+    ``(inlier indices into P (K,), rmse)``."""
+    return [(sub[d.inliers], float(d.rmse)) for d in dets
+            if d.kind in ("sphere", "cylinder", "cone", "torus")]
+
+
+#: a joined torus is not offered when this share of its two patches' points is in a
+#: joined torus offered before (of more points): the same two places
+JOIN_SAME = 0.5
+
+
+def _joined(prob: _Problem, new: list[tuple[np.ndarray, float]], others: list[Leaf]
+            ) -> list[Leaf]:
+    """Tori through two separate patches (:func:`.candidates.joined_torus`): each of
+    the curved detections ``new`` (``(inlier indices into P, rmse)``, of one residual
+    round) with each earlier one (:attr:`_Problem.pieces`, which then holds ``new``
+    too) and each other one of ``new``, where they share no point (two detections of
+    one patch, as the kinds on their own give, are not two places). A torus groove
+    across an object shows as separate arcs, each too short to fix its ring, and the
+    detections that take each arc for a cut leave the other unexplained, for a later
+    round. One torus per two places: of those sharing :data:`JOIN_SAME` of their
+    points, the one of the most points; none where a candidate torus of that ring
+    exists (in the pool, or among ``others``: :func:`_same_torus`). Only with outward
+    normals and tori among the kinds (:data:`JOIN_TORI`)."""
+    if not JOIN_TORI or "torus" not in prob.ks or prob.N is None:
+        return []
+    P, N = prob.P, prob.N
+    found: list[tuple[Leaf, np.ndarray]] = []
+    for j, (ib, rb) in enumerate(new):
+        for ia, ra in prob.pieces + new[:j]:
+            if np.intersect1d(ia, ib).size:
+                continue
+            lf = joined_torus(P[ia], P[ib], N[ia], N[ib], max(ra, rb), prob.tau)
+            if lf is not None:
+                found.append((lf, np.union1d(ia, ib)))
+    prob.pieces = prob.pieces + new
+    out: list[tuple[Leaf, np.ndarray]] = []
+    for lf, pts in sorted(found, key=lambda x: -len(x[1])):  # stable: ties as found
+        if all(np.intersect1d(pts, q).size < JOIN_SAME * len(pts) for _, q in out):
+            out.append((lf, pts))
+    tori = [lf for lf in prob.pool.leaves + others if lf.kind == "torus"]
+    return [snap(lf) for lf, _ in out if not any(_same_torus(lf, o) for o in tori)]
+
+
+def _same_torus(a: Leaf, b: Leaf) -> bool:
+    """Whether two tori share their ring and tube: axes within 5 degrees, centres
+    within a fifth of the larger minor radius, major and minor radii within 15 %."""
+    if abs(float(a.R[:, 2] @ b.R[:, 2])) < math.cos(math.radians(5.0)):
+        return False
+    big = {k: max(a.vals[k], b.vals[k]) for k in ("major", "minor")}
+    if any(abs(a.vals[k] - b.vals[k]) > 0.15 * big[k] for k in big):
+        return False
+    return float(np.linalg.norm(a.t - b.t)) <= 0.2 * big["minor"]
 
 
 def _move_faces(prob: _Problem, best: Scored, deadline: float, rounds: int = FACE_ROUNDS

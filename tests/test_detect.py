@@ -1154,6 +1154,8 @@ def test_a_quarter_turned_fit_with_sizes_at_their_bounds_is_refitted_swapped():
     at their bounds (its side taken for its front: a benchmark scene's false positive
     and miss): ``_swapped`` refits it turned back either way with the two sizes traded,
     and the refit that matches the truth explains the points better."""
+    from csdf.detect import objects as O
+
     pose = _yawed(0.2, (0.0, 0.5, 0.0))
     params = {"width": 0.6, "depth": 0.35}
     P, inst, cam = _scanned("bookshelf", pose, params, (2.4, -0.6, 1.3), (0.0, 0.5, 0.7),
@@ -1162,9 +1164,7 @@ def test_a_quarter_turned_fit_with_sizes_at_their_bounds_is_refitted_swapped():
     m = run.models[0]
     gt = _camera_pose(cam, pose)
     idx = np.flatnonzero((inst == 1) & ~run.support)
-    nrm = run.plane[0]
-    K = np.array([[0, -nrm[2], nrm[1]], [nrm[2], 0, -nrm[0]], [-nrm[1], nrm[0], 0]])
-    Rt = np.eye(3) + K @ K + K  # a quarter turn about the support's normal
+    Rt = O._yaw_matrix(run.plane[0], math.pi / 2)  # a quarter turn about the support
     c = gt.rotation @ m.centre + gt.translation
     start = {"rotation": Rt @ gt.rotation, "translation": Rt @ (gt.translation - c) + c,
              "params": {"width": 0.4, "depth": 0.45}}

@@ -32,11 +32,14 @@ def warm() -> bool:
     return _kernels is not None
 
 
-def _block_size(n_rows: int, T: int, itemsize: int) -> int:
-    budget = 32 * 1024  # keep one block's register file in L1
+def _block_size(n_rows: int, T: int, itemsize: int, budget: int = 32 * 1024,
+                most: int = 256) -> int:
+    """Points per block: the most, a power of two from 16 to ``most``, whose registers
+    and ``T`` tangents fit ``budget`` bytes (16 at least; the default keeps one block's
+    register file in L1). Each point is computed alike whatever the block."""
     per_point = n_rows * (1 + T) * itemsize
     B = 16
-    while B < 256 and (2 * B) * per_point <= budget:
+    while B < most and (2 * B) * per_point <= budget:
         B *= 2
     return B
 
@@ -47,17 +50,8 @@ def _block_size(n_rows: int, T: int, itemsize: int) -> int:
 #: of them, and longer blocks pay the dispatch less often (a three-leaf refinement's
 #: Jacobian, 103 rows and 23 parameters: 64 points a block, 1.4x the speed of 16)
 TANGENT_BLOCK_BYTES = 2 << 20
-
-
-def _tangent_block_size(n_rows: int, T: int, itemsize: int) -> int:
-    """Points per block of the derivative kernel: the most, a power of two from 16 to
-    128, whose registers and ``T`` tangents fit :data:`TANGENT_BLOCK_BYTES` (16 at
-    least). Each point is computed alike whatever the block."""
-    per_point = n_rows * (1 + T) * itemsize
-    B = 16
-    while B < 128 and (2 * B) * per_point <= TANGENT_BLOCK_BYTES:
-        B *= 2
-    return B
+#: the most points a block of the derivative kernel holds
+TANGENT_BLOCK_MOST = 128
 
 
 def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
@@ -85,7 +79,8 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
             res["grad"] = grad
         if wrt_params:
             res["jac"] = jac
-        B = _tangent_block_size(low.n_rows, T, dtype.itemsize)
+        B = _block_size(low.n_rows, T, dtype.itemsize, TANGENT_BLOCK_BYTES,
+                        TANGENT_BLOCK_MOST)
         n_jac = P if wrt_params else 0
         if T == 0:  # no parameters: the Jacobian is empty
             utans = np.zeros((utans.shape[0], 0), dtype)

@@ -1576,13 +1576,8 @@ class _Run:
         surface points is off it by the samples' scatter, and a turn about that would
         move the whole model.)"""
         nrm = self.plane[0]
-        X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
         t = np.asarray(res.translation, dtype=float)
-        poses = []
-        for th in angles:
-            Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
-                nrm, nrm)
-            poses.append((Rt @ res.rotation, t))
+        poses = [(_yaw_matrix(nrm, th) @ res.rotation, t) for th in angles]
         return self._ray_scores(m, dict(res.params), poses, rays, own, spread), poses
 
     def _turn_profile(self, m: _Model, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1762,12 +1757,10 @@ class _Run:
             np.linalg.norm(self.P - cw, axis=1) <= 1.1 * rad + 3 * self.sigma))
         near = self._subsample(near, SCAN_POINTS)
         fld = m.fld.replace(params=params, check_ranges=False)
-        X = np.array([[0.0, -nrm[2], nrm[1]], [nrm[2], 0.0, -nrm[0]], [-nrm[1], nrm[0], 0.0]])
         angles = 2.0 * math.pi * np.arange(YAW_STEPS) / YAW_STEPS
         poses = []
         for th in angles:
-            Rt = math.cos(th) * np.eye(3) + math.sin(th) * X + (1 - math.cos(th)) * np.outer(
-                nrm, nrm)
+            Rt = _yaw_matrix(nrm, th)
             poses.append((Rt @ R, Rt @ (t - cw) + cw))
         Q = self.P[near]
         q = np.concatenate([(Q - tt) @ RR for RR, tt in poses])

@@ -39,6 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..detect.solids import SOLID_BACKEND, SOLID_PARAMS, canonical, solid_values
+from ..detect.surfaces import surface_distance
 from ..errors import CsdfError
 from ..fit import fit
 from ..shapes.domain import orient_matrix
@@ -686,11 +687,7 @@ def cap_cylinder(normal: np.ndarray, Q: np.ndarray, P: np.ndarray, spacing: floa
         return None
     _, ctr, r = best
     on = np.abs(np.linalg.norm(B - ctr, axis=1) - r) <= tol
-    # least squares circle through the arc's points (Kasa)
-    A = np.column_stack([2 * B[on], np.ones(int(on.sum()))])
-    sol, *_ = np.linalg.lstsq(A, (B[on] ** 2).sum(axis=1), rcond=None)
-    ctr = sol[:2]
-    r = float(math.sqrt(max(sol[2] + ctr @ ctr, 0.0)))
+    ctr, r = _kasa_circle(B[on])  # least squares circle through the arc's points
     if not 4 * spacing < r < 2.0 * extent:
         return None
     if np.mean(np.linalg.norm(x2 - ctr, axis=1) > r + tol) > 0.01:
@@ -729,26 +726,23 @@ JOIN_SPAN = 1.0
 JOIN_START = 4.0
 
 
-def _circle_3d(C: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """The least-squares circle of points ``C`` ``(K, 3)``: ``(centre (3,), unit axis
-    (3,), radius)`` (the plane by principal components, then Kasa's algebraic circle
-    in it)."""
-    c0 = C.mean(axis=0)
-    _, _, Vt = np.linalg.svd(C - c0, full_matrices=False)
-    x = (C - c0) @ Vt[:2].T
+def _kasa_circle(x: np.ndarray) -> tuple[np.ndarray, float]:
+    """Kasa's algebraic least-squares circle of 2D points ``x`` ``(K, 2)``:
+    ``(centre (2,), radius)``."""
     A = np.column_stack([2.0 * x, np.ones(len(x))])
     sol, *_ = np.linalg.lstsq(A, (x * x).sum(axis=1), rcond=None)
     ctr = sol[:2]
-    return c0 + Vt[:2].T @ ctr, Vt[2], math.sqrt(max(float(sol[2] + ctr @ ctr), 0.0))
+    return ctr, math.sqrt(max(float(sol[2] + ctr @ ctr), 0.0))
 
 
-def _torus_distance(X: np.ndarray, centre: np.ndarray, axis: np.ndarray, major: float,
-                    minor: float) -> np.ndarray:
-    """``(K,)`` signed distances of ``X`` ``(K, 3)`` to a torus (scene units)."""
-    q = X - centre
-    h = q @ axis
-    rho = np.linalg.norm(q - h[:, None] * axis, axis=1)
-    return np.hypot(rho - major, h) - minor
+def _circle_3d(C: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The least-squares circle of points ``C`` ``(K, 3)``: ``(centre (3,), unit axis
+    (3,), radius)`` (the plane by principal components, then :func:`_kasa_circle` in
+    it)."""
+    c0 = C.mean(axis=0)
+    _, _, Vt = np.linalg.svd(C - c0, full_matrices=False)
+    ctr, r = _kasa_circle((C - c0) @ Vt[:2].T)
+    return c0 + Vt[:2].T @ ctr, Vt[2], r
 
 
 def joined_torus(Qa: np.ndarray, Qb: np.ndarray, Na: np.ndarray, Nb: np.ndarray,
@@ -782,7 +776,8 @@ def joined_torus(Qa: np.ndarray, Qb: np.ndarray, Na: np.ndarray, Nb: np.ndarray,
             centre, axis, major = _circle_3d(Q - side * r * NQ)
             if not r < major <= extent / JOIN_SPAN:
                 continue
-            e = float(np.sqrt(np.mean(_torus_distance(Q, centre, axis, major, r) ** 2)))
+            d, _ = surface_distance("torus", np.array([[*centre, *axis, major, r]]), Q)
+            e = float(np.sqrt(np.mean(d[0] ** 2)))
             if best is None or e < best[0]:
                 best = (e, centre, axis, major, r)
     if best is None or best[0] > JOIN_START * JOIN_RMSE * rmse:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .lowering import FLAG_A_ZERO, FLAG_B_ZERO, FLAG_OUT_ZERO, FLAG_TIE_STRICT, UNIFORM_BASE
+from .rows import FLAG_A_ZERO, FLAG_B_ZERO, FLAG_OUT_ZERO, FLAG_TIE_STRICT, UNIFORM_BASE
 
 # opcodes (csdf.ops, checked by tests/test_ops.py); numba folds these module constants
 # (and the imported ones) into the kernels
@@ -397,3 +397,39 @@ def tangent_kernel(code, cols, uvals, utans, pts, out, grad, jac, start, stop, B
                     grad[s + j, 2] = np.nan
                 for c in range(n_jac):
                     jac[s + j, c] = np.nan
+
+
+@njit(**_OPTS)
+def prefix_kernel(code, uvals, n_params, tangents, vals, tans):
+    """Values and parameter tangents of the parameter-only prefix, for one parameter
+    vector (the uniform rows of every kernel here).
+
+    Args:
+        code: ``(K, 5)`` int32 prefix instructions (op, dst, a, b, flags) on local rows:
+            ``0 .. P-1`` the parameters, ``P .. U0-1`` the constants, ``U0 + k`` the
+            result of instruction ``k`` (each its own row).
+        uvals: ``(U0,)`` float64 parameter values, then the constants.
+        n_params: ``P``.
+        tangents: also the tangents (else ``tans`` is not written).
+        vals: ``(K,)`` out: the results.
+        tans: ``(K, P)`` out: their derivatives by the parameters.
+    """
+    n0 = uvals.shape[0]
+    K = code.shape[0]
+    R = np.empty((n0 + K, 1))
+    for i in range(n0):
+        R[i, 0] = uvals[i]
+    T = n_params if tangents else 0
+    D = np.zeros((n0 + K, max(T, 1), 1))
+    for i in range(T):
+        D[i, i, 0] = 1.0
+    for k in range(K):
+        op = code[k, 0]
+        d = code[k, 1]
+        _exec(op, R, code[k, 2], code[k, 3], R, d, 1)
+        if tangents:
+            _tangent(op, code[k, 4], R, code[k, 2], code[k, 3], R[d:d + 1], D, d, 0, T, 1)
+    for k in range(K):
+        vals[k] = R[n0 + k, 0]
+        for t in range(T):
+            tans[k, t] = D[n0 + k, t, 0]

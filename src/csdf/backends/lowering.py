@@ -4,7 +4,8 @@ Per program (cached on the Program) the tape is *lowered*:
 
 * the leading instructions that depend only on parameters and constants (the compiler
   puts them first) are split off; their values, and their derivatives by the
-  parameters, are computed once per call by the NumPy reference on scalars;
+  parameters, are computed once per call by a compiled interpreter of one point
+  (:func:`csdf.backends.interp_kernels.prefix_kernel`: the kernels' own rules);
 * every uniform value (parameter, constant, prefix result) gets its own row, and the
   rest of the tape is renamed to read them, so a block never reloads them;
 * each instruction is flagged when an operand's tangent is structurally zero, so the
@@ -23,18 +24,12 @@ import numpy as np
 from ..cache import memo
 from ..layout import N_COORDS
 from ..ops import OPS_BY_CODE, tie_strict
-from .numpy_backend import prefix_run
+from .interp_kernels import prefix_kernel
+from .rows import FLAG_A_ZERO, FLAG_B_ZERO, FLAG_OUT_ZERO, FLAG_TIE_STRICT, UNIFORM_BASE
 
 __all__ = ["Lowered", "lowered", "numba_available", "UNIFORM_BASE", "FLAG_B_ZERO",
            "FLAG_A_ZERO", "FLAG_OUT_ZERO", "FLAG_TIE_STRICT"]
 
-#: first row of the uniform values (the rows before it hold x, y, z)
-UNIFORM_BASE = N_COORDS
-# flag bits of a lowered instruction (column 4), see Lowered.flagged_code
-FLAG_B_ZERO = 1
-FLAG_A_ZERO = 2
-FLAG_OUT_ZERO = 4
-FLAG_TIE_STRICT = 8
 
 
 def numba_available() -> bool:
@@ -104,14 +99,19 @@ class Lowered:
             deps[row] = ds
             self._prefix_deps[row] = sorted(ds)
         self._prefix_row_of = {k: row for k, row in self.prefix_rows}
-        #: ``(n_prefix, P)`` True where prefix instruction k reads parameter i (directly
-        #: or through earlier prefix results)
-        self._prefix_dep_mask = np.zeros((n_prefix, P), dtype=bool)
-        for k, row in self.prefix_rows:
-            self._prefix_dep_mask[k, self._prefix_deps[row]] = True
-        #: the last prefix run per ``tangents`` flag: ``(pvals (P,), raw values, raw
-        #: tangents)`` (see :func:`csdf.backends.numpy_backend.prefix_run`)
-        self._prefix_last: dict[bool, tuple[np.ndarray, list, list]] = {}
+        # the prefix on local rows (parameters, constants, then one row per result) for
+        # interp_kernels.prefix_kernel; a parameter's tangent is not zero, a constant's is
+        pre = np.zeros((n_prefix, 5), dtype=np.int32)
+        for k in range(n_prefix):
+            op, _dst, a, b = code[k]
+            pre[k, :4] = (op, n_fixed + k - UNIFORM_BASE,
+                          _src_row(code, k, a, n_fixed) - UNIFORM_BASE,
+                          (_src_row(code, k, b, n_fixed) - UNIFORM_BASE)
+                          if OPS_BY_CODE[op].arity == 2 else 0)
+        zero = np.zeros(n_fixed - UNIFORM_BASE + n_prefix, dtype=bool)
+        zero[P:n_fixed - UNIFORM_BASE] = True
+        _flag_code(pre, zero, lambda r: P <= r < n_fixed - UNIFORM_BASE)
+        self._prefix_code = pre
 
     def prefix_param_deps(self) -> dict[int, list[int]]:
         """``row -> sorted parameter indices`` for the prefix rows that depend on any."""
@@ -123,8 +123,8 @@ class Lowered:
     def uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
         """Uniform row values ``(U,)`` and tangents ``(U, T)`` for this call (and the
         rows whose tangents are all zero). The last few answers are kept: a fit or a
-        tracker calls with the same parameter values many times, and the prefix is
-        evaluated in Python (copies are returned)."""
+        tracker calls with the same parameter values many times (copies are
+        returned)."""
         key = (np.asarray(pvals, dtype=np.float64).tobytes(), np.dtype(dtype).str,
                bool(spatial), bool(wrt_params))
         hit = memo(self, "_uniform_cache", key,
@@ -152,24 +152,19 @@ class Lowered:
         with np.errstate(over="ignore"):  # values beyond float32 range become inf
             return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
 
-    def _prefix(self, pvals: np.ndarray, tangents: bool) -> tuple[list, list]:
-        """Values and parameter derivatives of the prefix instructions (as
-        :func:`csdf.backends.numpy_backend.uniform_prefix`), computing again only those
-        that read a parameter whose value changed since the last run (a fit that moves
-        only the pose, or a few parameters, recomputes little; the results are the same
-        bit for bit)."""
-        pv = np.array(pvals, dtype=np.float64).reshape(-1)
-        last = self._prefix_last.get(tangents)
-        keep = previous = None
-        if last is not None and len(last[0]) == len(pv):
-            # bitwise equal (0.0 and -0.0 compare equal but may give other results)
-            same = last[0].view(np.int64) == pv.view(np.int64)
-            keep = ~(self._prefix_dep_mask & ~same).any(axis=1)
-            previous = (last[1], last[2])
-        out_v, out_d, raw_v, raw_t = prefix_run(self.prog, pv, self.n_prefix, tangents,
-                                                keep, previous)
-        self._prefix_last[tangents] = (pv, raw_v, raw_t)
-        return out_v, out_d
+    def _prefix(self, pvals: np.ndarray, tangents: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Values ``(K,)`` and parameter derivatives ``(K, P)`` of the prefix
+        instructions (as :func:`csdf.backends.numpy_backend.uniform_prefix`, computed by
+        :func:`csdf.backends.interp_kernels.prefix_kernel`: the same rules, compiled;
+        the derivatives are not computed, and left undefined, without ``tangents``)."""
+        pv = np.asarray(pvals, dtype=np.float64).reshape(-1)
+        uv = np.concatenate([pv, np.asarray(self.prog.consts, dtype=np.float64)])
+        K = self.n_prefix
+        vals = np.empty(K)
+        tans = np.empty((K, self.n_params if tangents else 0))
+        with np.errstate(all="ignore"):
+            prefix_kernel(self._prefix_code, uv, self.n_params, bool(tangents), vals, tans)
+        return vals, tans
 
     def is_const_row(self, row: int) -> bool:
         """True when ``row`` holds a constant of the program (rows of parameters and
@@ -188,17 +183,7 @@ class Lowered:
             return code
         zero = np.zeros(self.n_rows, dtype=bool)
         zero[UNIFORM_BASE:UNIFORM_BASE + self.n_uniform_rows] = zero_uniform
-        for k in range(len(code)):
-            op, d, a, b, _ = code[k]
-            info = OPS_BY_CODE[int(op)]
-            binary = info.arity == 2
-            za = bool(zero[a])
-            zb = bool(zero[b]) if binary else True
-            zd = (za and zb) or info.derivative.kind == "zero"
-            code[k, 4] = ((FLAG_B_ZERO if (binary and zb) else 0) | (FLAG_A_ZERO if za else 0)
-                          | (FLAG_OUT_ZERO if zd else 0)
-                          | (FLAG_TIE_STRICT if tie_strict(self.is_const_row(int(a))) else 0))
-            zero[d] = zd
+        _flag_code(code, zero, lambda a: self.is_const_row(a))
         return code
 
     def tangent_plan(self, utans: np.ndarray, zero_uniform: np.ndarray, off: int
@@ -282,6 +267,23 @@ class Lowered:
             s, e = last[d]
             cols[k, 2], cols[k, 3] = s + off, e + off
         return code, cols
+
+
+def _flag_code(code: np.ndarray, zero: np.ndarray, is_const) -> None:
+    """Set the flag column of the instructions ``code`` ``(K, 5)`` in place (see
+    :meth:`Lowered.flagged_code`), from ``zero`` (per row: its tangent is structurally
+    zero; updated as the instructions write) and ``is_const(row)``."""
+    for k in range(len(code)):
+        op, d, a, b, _ = code[k]
+        info = OPS_BY_CODE[int(op)]
+        binary = info.arity == 2
+        za = bool(zero[a])
+        zb = bool(zero[b]) if binary else True
+        zd = (za and zb) or info.derivative.kind == "zero"
+        code[k, 4] = ((FLAG_B_ZERO if (binary and zb) else 0) | (FLAG_A_ZERO if za else 0)
+                      | (FLAG_OUT_ZERO if zd else 0)
+                      | (FLAG_TIE_STRICT if tie_strict(is_const(int(a))) else 0))
+        zero[d] = zd
 
 
 def _src_row(code, k: int, slot: int, n_fixed: int) -> int:

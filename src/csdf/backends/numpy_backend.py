@@ -14,13 +14,11 @@ with NumPy (:func:`csdf.ops.chain_tangent`, :func:`csdf.ops.tie_mask`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
 from ..ops import ARG_CODE, MESH_CODE, OPS, OPS_BY_CODE, chain_tangent, numpy_impl, tie_mask
 
-__all__ = ["evaluate", "available", "uniform_prefix", "prefix_run", "CHUNK"]
+__all__ = ["evaluate", "available", "uniform_prefix", "CHUNK"]
 
 CHUNK = 1 << 16
 
@@ -240,36 +238,13 @@ def _mesh_step(prog, vals: list, tans: list | None, ops: tuple[int, int, int], b
 
 def uniform_prefix(prog, pvals: np.ndarray, n_prefix: int, tangents: bool = True):
     """Values and parameter derivatives of the first ``n_prefix`` instructions, which
-    must read only parameters, constants and earlier prefix results (float64).
+    must read only parameters, constants and earlier prefix results (float64). (The
+    Numba backends compute the same with :func:`csdf.backends.interp_kernels.prefix_kernel`,
+    bit for bit on the zoo's models.)
 
     Returns:
         ``(values, dparams)``: lists indexed by instruction; ``dparams[k]`` is ``(P,)``
         (``dparams`` is empty when ``tangents`` is False: values only, faster).
-    """
-    out_v, out_d, _, _ = prefix_run(prog, pvals, n_prefix, tangents)
-    return out_v, out_d
-
-
-def prefix_run(prog, pvals: np.ndarray, n_prefix: int, tangents: bool = True,
-               keep: Sequence[bool] | None = None, previous: tuple | None = None
-               ) -> tuple[list, list, list, list]:
-    """:func:`uniform_prefix`, reusing an earlier run's results where they still hold.
-
-    Args:
-        prog, pvals, n_prefix, tangents: as :func:`uniform_prefix`.
-        keep: ``(n_prefix,)`` True for the instructions whose result is taken from
-            ``previous`` instead of computed: those whose parameters (structurally, see
-            :meth:`csdf.backends.lowering.Lowered.prefix_param_deps`) have the same
-            values as in that run. A result is a function of those values only, so it
-            is the same, bit for bit.
-        previous: ``(raw values, raw tangents)`` of that run (the last two items this
-            function returned, with the same ``tangents``).
-
-    Returns:
-        ``(values, dparams, raw values, raw tangents)``: the first two as
-        :func:`uniform_prefix`; the raw lists (per instruction: the value as computed,
-        a NumPy scalar, and the tangent, ``None`` or ``(P,)``) are what ``previous``
-        takes.
     """
     P = len(prog.params)
     lay = prog.layout
@@ -284,33 +259,17 @@ def prefix_run(prog, pvals: np.ndarray, n_prefix: int, tangents: bool = True,
         vals[lay.const(i)] = np.float64(c)
     out_v: list = []
     out_d: list = []
-    raw_v: list = []
-    raw_t: list = []
-    reuse = keep is not None and previous is not None
     with np.errstate(all="ignore"):
-        for k, (op, dst, a, b) in enumerate(prog.code[:n_prefix].tolist()):
-            if reuse and keep[k]:  # type: ignore[index]
-                v = previous[0][k]  # type: ignore[index]
-                vals[dst] = v
-                raw_v.append(v)
-                out_v.append(float(v))
-                if tangents:
-                    t = previous[1][k]  # type: ignore[index]
-                    tans[dst] = t
-                    raw_t.append(t)
-                    out_d.append(np.zeros(P) if t is None else np.asarray(t, dtype=np.float64))
-                continue
+        for op, dst, a, b in prog.code[:n_prefix].tolist():
             info = OPS_BY_CODE[op]
             va, vb = vals[a], (vals[b] if info.arity == 2 else None)
             v = numpy_impl(info.name)(va, vb) if info.arity == 2 else numpy_impl(info.name)(va)
             vals[dst] = v
-            raw_v.append(v)
             out_v.append(float(v))
             if not tangents:
                 continue
             t = _tangent(info.name, va, vb, v, tans[a], tans[b] if info.arity == 2 else None,
                          1, P, dtype, lay.is_const(a))
             tans[dst] = t
-            raw_t.append(t)
             out_d.append(np.zeros(P) if t is None else np.asarray(t, dtype=np.float64))
-    return out_v, out_d, raw_v, raw_t
+    return out_v, out_d

@@ -293,6 +293,11 @@ SWAP_TURNS = True
 #: ``EXTENT_CROSS`` times that
 EXTENT_SLOPE = 0.5
 EXTENT_CROSS = 0.05
+#: when no model's fit to a cluster passes (nor was any fit rejected by the band
+#: test), the cluster is also tried in two halves (:meth:`_Run.best_in_parts`): a lamp
+#: and a distractor cylinder standing side by side make one cluster, and a lamp fitted
+#: to both falls over
+PARTS_WHEN_UNFIT = True
 
 
 @dataclass
@@ -751,6 +756,10 @@ class _Run:
         self.estimate_noise = True
         self.upright = True
         self.band_rejected = False  # the band test rejected a large fit (best_for)
+        self.unfit = False  # models were fitted and none passed (best_for)
+        #: (N,) True at the other half's points while best_in_parts fits one half of a
+        #: cluster: another object, not the fit's own (the front test)
+        self.foreign: np.ndarray | None = None
         if vp is not None:
             d = P - vp
             self.dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
@@ -1217,9 +1226,10 @@ class _Run:
         own = self._own_clusters(inl)
         if len(own) == 0:
             return 0.0, confirmed
-        front = int(np.count_nonzero(hit & (r < np.where(hit, tm, 0.0) - tol)
-                                     & np.isin(self.label[rays], own)
-                                     & ~self.support[rays] & ~self.claimed[rays]))
+        mine = np.isin(self.label[rays], own) & ~self.support[rays] & ~self.claimed[rays]
+        if self.foreign is not None:
+            mine &= ~self.foreign[rays]
+        front = int(np.count_nonzero(hit & (r < np.where(hit, tm, 0.0) - tol) & mine))
         return (front / (conf + front) if conf + front else 0.0), confirmed
 
     def _intruders(self, m: _Model, res: FitResult, b: np.ndarray) -> float:
@@ -1252,6 +1262,7 @@ class _Run:
     def best_for(self, idx: np.ndarray) -> Detection | None:
         """Steps 4-7 for the points ``idx``: the best verified detection, or None."""
         self.band_rejected = False
+        self.unfit = False
         span = _span(self.P[idx])
         fits = [m for m in self.models if span <= 2.0 * m.radius * SIZE_SLACK + 6 * self.sigma]
         if not fits:
@@ -1307,6 +1318,7 @@ class _Run:
             if best is None or top[0] > best[1][0]:
                 best = (m, top, init)
         if best is None:
+            self.unfit = bool(tries)
             return None
         m, top, init = best
         if self.plane is not None and self.upright and self.vp is not None:
@@ -1680,10 +1692,12 @@ class _Run:
         rejected a fit that explained many of them (two objects side by side, which
         one model stretched to its range limits covers best) and their footprint on
         the support is wider than some model's: :meth:`best_for` of each half of a
-        2-means split of the footprint, the larger first; the first detection found,
-        or None."""
+        2-means split of the footprint, the larger first, the other half's points
+        counted as another object's in the front test (:meth:`_ray_evidence`); the
+        first detection found, or None. With :data:`PARTS_WHEN_UNFIT`, also when
+        models were fitted to the points and none passed."""
         if self.plane is None or not self.upright or len(idx) < 2 * self.mp or \
-                not self.band_rejected:
+                not (self.band_rejected or (PARTS_WHEN_UNFIT and self.unfit)):
             return None
         nrm, off = self.plane
         Q = self.P[idx]
@@ -1693,10 +1707,16 @@ class _Run:
         if reach <= FEET_REACH * min(m.foot for m in self.models):
             return None
         lab = _two_means(F)
-        parts = sorted((idx[lab == j] for j in (0, 1)), key=lambda a: -len(a))
-        for part in parts:
+        parts = sorted(((idx[lab == j], idx[lab != j]) for j in (0, 1)),
+                       key=lambda a: -len(a[0]))
+        for part, other in parts:
             if len(part) >= self.mp:
-                det = self.best_for(part)
+                self.foreign = np.zeros(len(self.P), dtype=bool)
+                self.foreign[other] = True
+                try:
+                    det = self.best_for(part)
+                finally:
+                    self.foreign = None
                 if det is not None:
                     return det
         return None

@@ -17,9 +17,18 @@ rotations by angles incommensurate with ``2 pi`` (the golden angle and 1 radian)
 than ``continuous_step`` times the diameter (a multiple of 12 steps), together with one
 180-degree flip about a perpendicular axis where there is one.
 
+The mesh that gives the samples, the centre and the axes is :func:`csdf.mesh`'s own
+choice of resolution by default: 128 voxels, finer where the grid would lose thin
+parts (up to :data:`MAX_RESOLUTION`). A grid that loses a part gives samples without
+it (a bookshelf's 6 mm back panel unsampled made its half turn a symmetry; a table top
+thinner than a voxel left no surface at all) and a centre of mass off the true centre
+(a table's half turn about it failed). A centre that fails from the centre of mass is
+tried again from the model's origin and from the samples' mean.
+
 Limits: axes other than the frame's and the principal axes are not tried (a rotated
 hexagonal prism's flips about axes in its degenerate principal plane are missed: give
-such symmetries yourself); parts thinner than a mesh voxel may go unsampled.
+such symmetries yourself); parts thinner than a voxel of the finest grid may go
+unsampled.
 """
 
 from __future__ import annotations
@@ -38,10 +47,12 @@ from ..sample import sample_surface
 from .inputs import positive
 from .model import diameter
 
-__all__ = ["symmetries", "MAX_GROUP"]
+__all__ = ["symmetries", "MAX_GROUP", "MAX_RESOLUTION"]
 
 #: the most symmetries a finite group found by :func:`symmetries` may have
 MAX_GROUP = 120
+#: the finest mesh :func:`symmetries` chooses by default (voxels along the longest side)
+MAX_RESOLUTION = 512
 #: angles incommensurate with 2 pi: an axis about which both pass is continuous
 _IRRATIONAL = (math.pi * (3.0 - math.sqrt(5.0)), 1.0)
 _SAME_AXIS = 1e-2      # |a x b| under which two axes are one
@@ -54,18 +65,25 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 class _Tester:
-    """The field, the surface samples and the first guess of the centre that candidate
-    rotations turn about."""
+    """The field, the surface samples and the first guesses ``(G, 3)`` of the centre
+    that candidate rotations turn about."""
 
-    def __init__(self, fld: Field, x: np.ndarray, centre: np.ndarray, tol: float):
-        self.fld, self.x, self.c, self.tol = fld, x, centre, tol
+    def __init__(self, fld: Field, x: np.ndarray, centres: np.ndarray, tol: float):
+        self.fld, self.x, self.centres, self.tol = fld, x, centres, tol
 
     def fit(self, R: np.ndarray) -> np.ndarray | None:
         """The centre ``c`` about which ``R`` maps the samples onto the surface within
-        the tolerance, or None. From the first guess, a few Gauss-Newton steps on
-        ``sum f(R x + (I - R) c)^2`` correct it (the mesh's centre of mass is only
-        as exact as the mesh); a rotation far from a symmetry is not refined."""
-        c = self.c
+        the tolerance, or None: :meth:`_fit_from` each first guess in turn."""
+        for c in self.centres:
+            out = self._fit_from(R, c)
+            if out is not None:
+                return out
+        return None
+
+    def _fit_from(self, R: np.ndarray, c: np.ndarray) -> np.ndarray | None:
+        """From the guess ``c``, a few Gauss-Newton steps on ``sum f(R x + (I - R)
+        c)^2`` correct it (the mesh's centre of mass is only as exact as the mesh); a
+        rotation far from a symmetry is not refined."""
         A0 = np.eye(3) - R
         for it in range(4):
             f, g = self.fld.value_and_grad((self.x - c) @ R.T + c)
@@ -108,12 +126,20 @@ def _candidate_axes(m) -> list[np.ndarray]:
     return _unit_axes(frame + [p for p in principal if np.all(np.isfinite(p))])
 
 
-def _centre(m, tol: float) -> np.ndarray:
-    """The mesh's centre of mass, or the model origin when it is that to ``tol / 10``."""
+def _centres(m, x: np.ndarray, tol: float) -> np.ndarray:
+    """``(G, 3)`` first guesses of the centre: the mesh's centre of mass (the model
+    origin when it is that to ``tol / 10``), then the origin and the samples ``x``'s
+    mean where they differ from it by more than ``tol / 10``."""
     c = np.asarray(m.center_mass, dtype=np.float64) if m.volume > 0 else None
     if c is None or not np.all(np.isfinite(c)):
         c = np.asarray(m.vertices, dtype=np.float64).mean(axis=0)
-    return np.zeros(3) if np.linalg.norm(c) <= 0.1 * tol else c
+    if np.linalg.norm(c) <= 0.1 * tol:
+        c = np.zeros(3)
+    out = [c]
+    for g in (np.zeros(3), x.mean(axis=0)):
+        if all(np.linalg.norm(g - o) > 0.1 * tol for o in out):
+            out.append(g)
+    return np.asarray(out)
 
 
 def _closure(gens: list[np.ndarray], tester: _Tester) -> list[np.ndarray]:
@@ -172,7 +198,7 @@ def _continuous_group(axis: np.ndarray, c: np.ndarray, axes: list[np.ndarray],
 
 def symmetries(shape: Any, *, params: dict | None = None, tol: float = 1e-3,
                max_order: int = 12, continuous_step: float = 0.01, samples: int = 2000,
-               seed: int = 0, resolution: int = 48, check_ranges: bool = True
+               seed: int = 0, resolution: int | None = None, check_ranges: bool = True
                ) -> np.ndarray:
     """The discrete rotational symmetries of a model (continuous ones discretised), as
     the transforms BOP's MSSD and MSPD minimise over.
@@ -194,6 +220,8 @@ def symmetries(shape: Any, *, params: dict | None = None, tol: float = 1e-3,
         seed: the samples' seed.
         resolution: resolution of the meshes that give the samples (parts thinner than
             a voxel may go unsampled) and the centre of mass and principal axes.
+            Default: :func:`csdf.mesh`'s choice, finer where it has thin parts (up to
+            :data:`MAX_RESOLUTION`).
         check_ranges: refuse a parameter value outside its declared range.
 
     Returns:
@@ -207,7 +235,7 @@ def symmetries(shape: Any, *, params: dict | None = None, tol: float = 1e-3,
     rel = positive(tol, "tol")
     step = positive(continuous_step, "continuous_step")
     for v, name, lo in ((max_order, "max_order", 2), (samples, "samples", 10),
-                        (resolution, "resolution", 8)):
+                        (8 if resolution is None else resolution, "resolution", 8)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
             raise CsdfError(f"{name} must be an integer >= {lo}, got {v!r}")
     fld = as_field(shape, params, work=samples, what="symmetries", check_ranges=check_ranges)
@@ -215,10 +243,15 @@ def symmetries(shape: Any, *, params: dict | None = None, tol: float = 1e-3,
         raise CsdfError("symmetries needs a 3D shape")
     with warnings.catch_warnings():  # thin parts: said in the docs, not per call
         warnings.simplefilter("ignore", MeshWarning)
+        if resolution is None:
+            m = mesh(fld, method="dc", progress=False, max_resolution=MAX_RESOLUTION)
+            resolution = int(m.metadata["csdf"]["resolution"])
+        else:
+            m = mesh(fld, resolution=resolution, method="dc", progress=False,
+                     check_thin=False)
         x, _ = sample_surface(fld, samples, seed=seed, resolution=resolution)
-        m = mesh(fld, resolution=resolution, method="dc", progress=False, check_thin=False)
     size = diameter(x)
-    tester = _Tester(fld, x, _centre(m, rel * size), rel * size)
+    tester = _Tester(fld, x, _centres(m, x, rel * size), rel * size)
     axes = _candidate_axes(m)
     continuous = []
     for a in axes:

@@ -293,10 +293,10 @@ SWAP_TURNS = True
 #: ``EXTENT_CROSS`` times that
 EXTENT_SLOPE = 0.5
 EXTENT_CROSS = 0.05
-#: when no model's fit to a cluster passes (nor was any fit rejected by the band
-#: test), the cluster is also tried in two halves (:meth:`_Run.best_in_parts`): a lamp
-#: and a distractor cylinder standing side by side make one cluster, and a lamp fitted
-#: to both falls over
+#: when no model's fit to a cluster passes (not only when the band test rejected a
+#: large one), the cluster is also tried in two halves (:meth:`_Run.best_in_parts`): a
+#: lamp and a distractor cylinder standing side by side make one cluster, and a lamp
+#: fitted to both falls over
 PARTS_WHEN_UNFIT = True
 
 

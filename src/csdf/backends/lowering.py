@@ -31,7 +31,6 @@ __all__ = ["Lowered", "lowered", "numba_available", "UNIFORM_BASE", "FLAG_B_ZERO
            "FLAG_A_ZERO", "FLAG_OUT_ZERO", "FLAG_TIE_STRICT"]
 
 
-
 def numba_available() -> bool:
     """True when Numba can be imported."""
     try:

@@ -147,7 +147,6 @@ def _cached_scene(seed: int, cache: str | None) -> dict:
         np.savez(tmp, **arrays, truth=json.dumps(truth), symmetry_version=SYMMETRY_VERSION)
         tmp.replace(path)
         z = np.load(path)
-        truth = json.loads(str(z["truth"]))
     for t in truth:
         m = np.asarray(t["pose"])
         t["pose"] = csdf.Pose(m[:3, :3], m[:3, 3])

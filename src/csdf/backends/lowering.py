@@ -87,26 +87,22 @@ class Lowered:
         self.n_consts = lay.n_consts
         self.layout = lay
         self.prog = prog
-        # parameters each prefix result depends on (structurally)
+        # per prefix result: the parameters it depends on (structurally); and the prefix
+        # on local rows (parameters, constants, then one row per result) for
+        # interp_kernels.prefix_kernel, where a parameter's tangent is not zero and a
+        # constant's is
         deps: dict[int, set[int]] = {lay.param(i): {i} for i in range(P)}
         self._prefix_deps: dict[int, list[int]] = {}
+        pre = np.zeros((n_prefix, 5), dtype=np.int32)
         for k, row in self.prefix_rows:
             op, _dst, a, b = code[k]
-            ds = set(deps.get(_src_row(code, k, a, n_fixed), set()))
+            src = [_src_row(code, k, a, n_fixed)]
             if OPS_BY_CODE[op].arity == 2:
-                ds |= deps.get(_src_row(code, k, b, n_fixed), set())
-            deps[row] = ds
-            self._prefix_deps[row] = sorted(ds)
-        self._prefix_row_of = {k: row for k, row in self.prefix_rows}
-        # the prefix on local rows (parameters, constants, then one row per result) for
-        # interp_kernels.prefix_kernel; a parameter's tangent is not zero, a constant's is
-        pre = np.zeros((n_prefix, 5), dtype=np.int32)
-        for k in range(n_prefix):
-            op, _dst, a, b = code[k]
-            pre[k, :4] = (op, n_fixed + k - UNIFORM_BASE,
-                          _src_row(code, k, a, n_fixed) - UNIFORM_BASE,
-                          (_src_row(code, k, b, n_fixed) - UNIFORM_BASE)
-                          if OPS_BY_CODE[op].arity == 2 else 0)
+                src.append(_src_row(code, k, b, n_fixed))
+            deps[row] = set().union(*(deps.get(r, set()) for r in src))
+            self._prefix_deps[row] = sorted(deps[row])
+            local = [r - UNIFORM_BASE for r in src] + [0]
+            pre[k, :4] = (op, row - UNIFORM_BASE, local[0], local[1])
         zero = np.zeros(n_fixed - UNIFORM_BASE + n_prefix, dtype=bool)
         zero[P:n_fixed - UNIFORM_BASE] = True
         _flag_code(pre, zero, lambda r: P <= r < n_fixed - UNIFORM_BASE)
@@ -138,15 +134,13 @@ class Lowered:
         uvals = np.empty(U, dtype=np.float64)
         uvals[:P] = pvals
         uvals[P:P + self.n_consts] = prog.consts
-        for i, (k, _row) in enumerate(self.prefix_rows):
-            uvals[P + self.n_consts + i] = vals[k]
+        uvals[P + self.n_consts:] = vals  # prefix result k is row k after the constants
         T = (3 if spatial else 0) + (P if wrt_params else 0)
         utans = np.zeros((U, max(T, 1)), dtype=np.float64)
         if wrt_params:
             off = 3 if spatial else 0
             utans[:P, off:off + P] = np.eye(P)
-            for i, (k, _row) in enumerate(self.prefix_rows):
-                utans[P + self.n_consts + i, off:off + P] = dparams[k]
+            utans[P + self.n_consts:, off:off + P] = dparams
         zero = np.all(utans == 0, axis=1)
         with np.errstate(over="ignore"):  # values beyond float32 range become inf
             return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
@@ -182,7 +176,7 @@ class Lowered:
             return code
         zero = np.zeros(self.n_rows, dtype=bool)
         zero[UNIFORM_BASE:UNIFORM_BASE + self.n_uniform_rows] = zero_uniform
-        _flag_code(code, zero, lambda a: self.is_const_row(a))
+        _flag_code(code, zero, self.is_const_row)
         return code
 
     def tangent_plan(self, utans: np.ndarray, zero_uniform: np.ndarray, off: int

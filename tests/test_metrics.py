@@ -67,6 +67,21 @@ def test_model_points_are_mesh_vertices_with_the_corners(box):
     assert metrics.diameter(sub) == pytest.approx(metrics.diameter(CORNERS), abs=1e-12)
 
 
+def test_model_points_of_the_meshs_own_resolution_keep_thin_parts():
+    shelf = csdf.zoo.load("bookshelf")  # a 6 mm back panel at y = 0.15
+
+    def back_panel(v):  # on its outer face, between the first two boards
+        return int(np.count_nonzero((v[:, 1] > 0.148) & (np.abs(v[:, 0]) < 0.3)
+                                    & (v[:, 2] > 0.128) & (v[:, 2] < 0.388)))
+
+    assert back_panel(metrics.model_points(shelf, resolution=48)) == 0  # lost
+    fine = metrics.model_points(shelf, resolution=None)
+    assert back_panel(fine) > 100
+    sub = fine[metrics.farthest_points(fine, 300)]
+    assert back_panel(sub) > 0
+    assert metrics.farthest_points(fine, 10 ** 6).shape == (len(fine),)
+
+
 # ---------------------------------------------------------------- symmetries
 def test_symmetries_of_a_box_a_cube_and_a_hexagonal_prism(box, box_syms):
     assert len(box_syms) == 4  # D2: identity and the three 180-degree flips

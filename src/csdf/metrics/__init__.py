@@ -21,12 +21,13 @@ Conventions
 
 Functions: :func:`vsd`, :func:`mssd`, :func:`mspd`, :func:`add`, :func:`adds`,
 :func:`recall`, :func:`average_recall`, :func:`bop_average_recall`, :func:`auc`,
-:func:`visible_fraction`, :func:`symmetries`, :func:`model_points`, :func:`diameter`.
+:func:`visible_fraction`, :func:`symmetries`, :func:`model_points`, :func:`farthest_points`,
+:func:`diameter`.
 """
 
 from __future__ import annotations
 
-from .model import diameter, model_points
+from .model import diameter, farthest_points, model_points
 from .pose_error import add, adds, mspd, mssd
 from .recall import (
     ADD_THRESHOLD,
@@ -46,6 +47,7 @@ from .visibility import VSD_TAUS, visible_fraction, vsd
 __all__ = [
     "vsd", "mssd", "mspd", "add", "adds", "recall", "average_recall",
     "bop_average_recall", "auc", "visible_fraction", "symmetries", "model_points",
+    "farthest_points",
     "diameter", "VSD_TAUS", "VSD_THETAS", "MSSD_THETAS", "MSPD_THETAS",
     "MSPD_REFERENCE_WIDTH", "VSD_DELTA_MM", "ADD_THRESHOLD",
 ]

@@ -45,14 +45,12 @@ from ..mesh import mesh
 from ..pose import Pose
 from ..sample import sample_surface
 from .inputs import positive
-from .model import diameter
+from .model import MAX_RESOLUTION, diameter
 
 __all__ = ["symmetries", "MAX_GROUP", "MAX_RESOLUTION"]
 
 #: the most symmetries a finite group found by :func:`symmetries` may have
 MAX_GROUP = 120
-#: the finest mesh :func:`symmetries` chooses by default (voxels along the longest side)
-MAX_RESOLUTION = 512
 #: angles incommensurate with 2 pi: an axis about which both pass is continuous
 _IRRATIONAL = (math.pi * (3.0 - math.sqrt(5.0)), 1.0)
 _SAME_AXIS = 1e-2      # |a x b| under which two axes are one

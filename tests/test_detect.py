@@ -1264,3 +1264,4 @@ def test_rays_break_a_tie_between_a_bookshelfs_front_and_back(bookshelf_side_sca
     done = [(m, None, None, items)]
     assert run._ray_tie(done, (m, wrong, None))[1] is right
     assert run._ray_tie(done, (m, right, None))[1] is right
+

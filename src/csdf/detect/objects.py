@@ -1407,7 +1407,7 @@ class _Run:
         return win
 
     def _refit_unexplained(self, m: _Model, idx: np.ndarray, top: tuple,
-                           init: FitResult | dict) -> tuple:
+                           init: FitResult | dict) -> list:
         """The winner ``top`` (an item of ``found``, as :meth:`_turns`') of model ``m``
         on the points ``idx``, fitted from the screen's start ``init``, leaves over
         ``REFIT_UNEXPLAINED`` of its visible surface unexplained (the sensor saw

@@ -96,6 +96,7 @@ import numpy as np
 from ..errors import CsdfError
 from ..field import as_field
 from ..fit import FitResult, check_fit, fit
+from ..fit.lie import rotation_angle
 from ..pose import Pose
 from .neighbours import (
     components,
@@ -379,7 +380,7 @@ class _Model:
 
 
 def _model(name: str, shape: Any, source: Any) -> _Model:
-    from ..metrics.model import farthest_points, model_points
+    from ..metrics import farthest_points, model_points
 
     fld = as_field(shape, what="detect")  # the sweep backend: compiled once per model
     if fld.bounds is None or not np.all(np.isfinite(fld.bounds)):
@@ -1381,8 +1382,7 @@ class _Run:
             for f in found:
                 if f is top or f[0] < floor:
                     continue
-                R = np.asarray(f[2].rotation, dtype=float)
-                turn = math.degrees(math.acos(np.clip((np.trace(R0.T @ R) - 1) / 2, -1, 1)))
+                turn = math.degrees(rotation_angle(R0, np.asarray(f[2].rotation, float)))
                 if m is m0 and turn < YAW_SAME and np.linalg.norm(
                         np.asarray(f[2].translation, dtype=float) - t0) < self.sigma:
                     continue

@@ -54,20 +54,30 @@ def model_points(shape: Any, n: int | None = None, *, params: dict | None = None
     if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer))
                           or n < 1):
         raise CsdfError(f"n must be a positive integer or None, got {n!r}")
-    if resolution is None:
-        with warnings.catch_warnings():  # parts thinner than the finest grid: documented
-            warnings.simplefilter("ignore", MeshWarning)
-            m = mesh(shape, method="dc", params=params, progress=False,
-                     max_resolution=MAX_RESOLUTION, check_ranges=check_ranges)
-    else:
-        m = mesh(shape, resolution=resolution, method="dc", params=params, progress=False,
-                 check_thin=False, check_ranges=check_ranges)
+    m = model_mesh(shape, resolution, params=params, check_ranges=check_ranges)
     v = np.asarray(m.vertices, dtype=np.float64)
     if len(v) == 0:
         raise CsdfError("the model's mesh has no vertices (an empty shape?)")
     if n is None or n >= len(v):
         return v
     return v[farthest_points(v, int(n))]
+
+
+def model_mesh(shape: Any, resolution: int | None, *, params: dict | None = None,
+               check_ranges: bool = True) -> Any:
+    """The dual-contouring mesh :func:`model_points` and :func:`csdf.metrics.symmetries`
+    take their points from: at ``resolution`` voxels along the longest side without the
+    thin-part check, or with ``resolution=None`` at :func:`csdf.mesh`'s own choice,
+    refined for thin parts up to :data:`MAX_RESOLUTION` (parts thinner than that grid
+    are lost without a warning: the functions' documentation says so). Its metadata
+    hold the resolution used (``metadata["csdf"]["resolution"]``)."""
+    if resolution is not None:
+        return mesh(shape, resolution=resolution, method="dc", params=params,
+                    progress=False, check_thin=False, check_ranges=check_ranges)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MeshWarning)
+        return mesh(shape, method="dc", params=params, progress=False,
+                    max_resolution=MAX_RESOLUTION, check_ranges=check_ranges)
 
 
 def farthest_points(v: np.ndarray, n: int) -> np.ndarray:

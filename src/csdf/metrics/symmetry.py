@@ -41,11 +41,10 @@ import numpy as np
 
 from ..errors import CsdfError, MeshWarning
 from ..field import Field, as_field
-from ..mesh import mesh
 from ..pose import Pose
 from ..sample import sample_surface
 from .inputs import positive
-from .model import MAX_RESOLUTION, diameter
+from .model import MAX_RESOLUTION, diameter, model_mesh
 
 __all__ = ["symmetries", "MAX_GROUP", "MAX_RESOLUTION"]
 
@@ -239,14 +238,10 @@ def symmetries(shape: Any, *, params: dict | None = None, tol: float = 1e-3,
     fld = as_field(shape, params, work=samples, what="symmetries", check_ranges=check_ranges)
     if fld.dim != 3:
         raise CsdfError("symmetries needs a 3D shape")
+    m = model_mesh(fld, resolution)
+    resolution = int(m.metadata["csdf"]["resolution"])
     with warnings.catch_warnings():  # thin parts: said in the docs, not per call
         warnings.simplefilter("ignore", MeshWarning)
-        if resolution is None:
-            m = mesh(fld, method="dc", progress=False, max_resolution=MAX_RESOLUTION)
-            resolution = int(m.metadata["csdf"]["resolution"])
-        else:
-            m = mesh(fld, resolution=resolution, method="dc", progress=False,
-                     check_thin=False)
         x, _ = sample_surface(fld, samples, seed=seed, resolution=resolution)
     size = diameter(x)
     tester = _Tester(fld, x, _centres(m, x, rel * size), rel * size)

@@ -251,6 +251,12 @@ MIN_CONFIRMED = 0.2
 POLISH_BAND = 5.0
 POLISH_POINTS = 1200
 POLISH_ITER = 60
+#: the refit's rounds at most: each after the first gathers its band again about the last
+#: round's surface, while that adds more than ``POLISH_GROWN`` of the last band's points
+#: (a lamp whose winner had its shade 8 cm short kept it 4 cm short in one round: the
+#: shade's upper points lay outside the first band)
+POLISH_ROUNDS = 3
+POLISH_GROWN = 0.02
 #: upright refits from a better-scoring turn of the winner's upright refit (0: the turn
 #: is judged at the refit's own parameters only)
 TURN_REFITS = 0
@@ -1470,19 +1476,40 @@ class _Run:
         tall thin-walled model to fit its noisy points, and the parameters then fitted
         with the snapped pose held make up for it: a lamp's shade came out 4 cm short,
         its stem too long, and with them its spokes, the only mark of its turn, in the
-        wrong place. None when it cannot be done."""
+        wrong place. The band is gathered again about each round's surface for up to
+        ``POLISH_ROUNDS`` rounds, while it grows by more than ``POLISH_GROWN``: points
+        the first band left out (a shade's upper rim, when the winner's shade was
+        short) then join the fit. None when it cannot be done."""
         aug = self._upright_shape(m)
         if aug is None:
             return None
         c = res.pose.apply(m.centre[None])[0]
         pts = np.flatnonzero(~self.claimed & ~self.support & (
             np.linalg.norm(self.P - c, axis=1) <= 1.2 * m.radius + 3 * self.sigma))
-        fld = as_field(m.shape, res.params, pose=res.pose, backend=m.backend,
-                       what="detect", check_ranges=False)
-        d = np.abs(np.asarray(fld.value(self.P[pts]), dtype=float))
-        band = pts[d <= POLISH_BAND * self.sigma]
-        if len(band) < self.mp:
-            return None
+        out, last = None, np.zeros(0, dtype=np.intp)
+        for _ in range(POLISH_ROUNDS):
+            fld = as_field(m.shape, res.params, pose=res.pose, backend=m.backend,
+                           what="detect", check_ranges=False)
+            d = np.abs(np.asarray(fld.value(self.P[pts]), dtype=float))
+            band = pts[d <= POLISH_BAND * self.sigma]
+            if len(band) < self.mp:
+                return out
+            if out is not None and len(np.setdiff1d(band, last, assume_unique=True)) <= \
+                    POLISH_GROWN * len(last):
+                return out
+            r = self._polish_round(m, aug, res, band)
+            if r is None:
+                return out
+            out = res = r
+            last = band
+        return out
+
+    def _polish_round(self, m: _Model, aug: Any, res: FitResult, band: np.ndarray
+                      ) -> FitResult | None:
+        """One round of :meth:`_polish`: ``res`` refitted with ``m``'s upright shape
+        ``aug`` (its parameters, turn and shift) to the points ``band`` ``(K,)``
+        (indices; at most ``POLISH_POINTS`` of them, a seeded subsample); None when the
+        fit fails."""
         F = self._subsample(band, POLISH_POINTS)
         pv = {**dict(res.params), **dict.fromkeys(UPRIGHT_PARAMS, 0.0)}
         try:

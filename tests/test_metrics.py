@@ -82,6 +82,20 @@ def test_model_points_of_the_meshs_own_resolution_keep_thin_parts():
     assert metrics.farthest_points(fine, 10 ** 6).shape == (len(fine),)
 
 
+def test_farthest_points_is_the_greedy_farthest_first_order():
+    """Each chosen point is the one farthest from those chosen before (the first the
+    farthest from the centroid; ties to the lowest index), checked against the
+    definition on points with many ties."""
+    rng = np.random.default_rng(0)
+    for v in (rng.normal(size=(400, 3)), rng.integers(0, 3, (300, 3)).astype(float)):
+        idx = metrics.farthest_points(v, 40)
+        assert idx[0] == int(np.argmax(np.sum((v - v.mean(axis=0)) ** 2, axis=1)))
+        for i in range(1, len(idx)):
+            d = np.min(np.linalg.norm(v[:, None, :] - v[idx[:i]][None], axis=2), axis=1)
+            assert idx[i] == int(np.argmax(d))
+    assert metrics.farthest_points(np.zeros((3, 3)), 0).shape == (0,)
+
+
 # ---------------------------------------------------------------- symmetries
 def test_symmetries_of_a_box_a_cube_and_a_hexagonal_prism(box, box_syms):
     assert len(box_syms) == 4  # D2: identity and the three 180-degree flips

@@ -8,6 +8,7 @@ import warnings
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ..errors import CsdfError, MeshWarning
 from ..mesh import mesh
@@ -83,17 +84,44 @@ def model_mesh(shape: Any, resolution: int | None, *, params: dict | None = None
 def farthest_points(v: np.ndarray, n: int) -> np.ndarray:
     """Indices ``(min(n, N),)`` of a farthest-point subset of the points ``v``
     ``(N, 3)``: the point farthest from their centroid first, then each time the point
-    farthest from those chosen (deterministic; it keeps the extremes)."""
-    v = np.asarray(v, dtype=np.float64)
+    farthest from those chosen (deterministic; it keeps the extremes; ties go to the
+    lowest index). A compiled loop: 300 of a lamp's 188,000 refined-mesh vertices took
+    1.5 s in NumPy."""
+    v = np.ascontiguousarray(v, dtype=np.float64)
     n = min(int(n), len(v))
+    if n <= 0:
+        return np.empty(0, dtype=np.int64)
     first = int(np.argmax(np.sum((v - v.mean(axis=0)) ** 2, axis=1)))
+    return _farthest(v, n, first)
+
+
+@njit(cache=True, nogil=True)
+def _farthest(v: np.ndarray, n: int, first: int) -> np.ndarray:  # pragma: no cover
+    """:func:`farthest_points`' loop from the point ``first`` (compiled)."""
+    m = v.shape[0]
     idx = np.empty(n, dtype=np.int64)
     idx[0] = first
-    d2 = np.sum((v - v[first]) ** 2, axis=1)
+    d2 = np.empty(m)
+    for k in range(m):
+        dx = v[k, 0] - v[first, 0]
+        dy = v[k, 1] - v[first, 1]
+        dz = v[k, 2] - v[first, 2]
+        d2[k] = dx * dx + dy * dy + dz * dz
     for i in range(1, n):
-        j = int(np.argmax(d2))
+        j = 0
+        best = d2[0]
+        for k in range(1, m):
+            if d2[k] > best:
+                best = d2[k]
+                j = k
         idx[i] = j
-        np.minimum(d2, np.sum((v - v[j]) ** 2, axis=1), out=d2)
+        for k in range(m):
+            dx = v[k, 0] - v[j, 0]
+            dy = v[k, 1] - v[j, 1]
+            dz = v[k, 2] - v[j, 2]
+            e = dx * dx + dy * dy + dz * dz
+            if e < d2[k]:
+                d2[k] = e
     return idx
 
 

@@ -86,7 +86,7 @@ def farthest_points(v: np.ndarray, n: int) -> np.ndarray:
     ``(N, 3)``: the point farthest from their centroid first, then each time the point
     farthest from those chosen (deterministic; it keeps the extremes; ties go to the
     lowest index). A compiled loop: 300 of a lamp's 188,000 refined-mesh vertices took
-    1.5 s in NumPy."""
+    2.0 s in NumPy, 0.2 s so (both measured beside another job)."""
     v = np.ascontiguousarray(v, dtype=np.float64)
     n = min(int(n), len(v))
     if n <= 0:

@@ -65,8 +65,11 @@ def _model_points(name: str, params: dict) -> np.ndarray:
     return csdf.metrics.model_points(csdf.zoo.load(name), 500, params=params)
 
 
-def _match(dets: list[tuple[str, csdf.Pose]], truth: list[dict]) -> tuple[int, int, list]:
-    """``(found, false positives, errors)``: greedy matching by MSSD / diameter."""
+def _matches(dets: list[tuple[str, csdf.Pose]], truth: list[dict]
+             ) -> list[tuple[float, int, int]]:
+    """The greedy matching of detections ``(model, pose)`` to the truth by MSSD /
+    diameter, below :data:`MSSD_THRESHOLD`: ``(error, detection index, truth index)``
+    for each match, smallest error first."""
     pairs = []
     for i, (model, pose) in enumerate(dets):
         for j, tr in enumerate(truth):
@@ -75,14 +78,21 @@ def _match(dets: list[tuple[str, csdf.Pose]], truth: list[dict]) -> tuple[int, i
             e = mssd(tr["_points"], pose, tr["pose"], tr.get("symmetries"))
             pairs.append((e / tr["diameter"], i, j))
     pairs.sort()
-    used_d, used_t, errs = set(), set(), []
+    used_d, used_t, out = set(), set(), []
     for e, i, j in pairs:
         if i in used_d or j in used_t or e >= MSSD_THRESHOLD:
             continue
         used_d.add(i)
         used_t.add(j)
-        errs.append(e)
-    return len(used_t), len(dets) - len(used_d), errs
+        out.append((e, i, j))
+    return out
+
+
+def _match(dets: list[tuple[str, csdf.Pose]], truth: list[dict]) -> tuple[int, int, list]:
+    """``(found, false positives, errors)``: greedy matching by MSSD / diameter
+    (:func:`_matches`)."""
+    m = _matches(dets, truth)
+    return len(m), len(dets) - len(m), [e for e, _, _ in m]
 
 
 def _csdf_objects(sc: dict) -> tuple[list, float]:

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_detect import MSSD_THRESHOLD, _cached_scene, _model_points  # noqa: E402
+from bench_detect import _cached_scene, _matches, _model_points  # noqa: E402
 from detect_scenes import CLUTTER_MODELS  # noqa: E402
 
 import csdf  # noqa: E402
@@ -63,19 +63,10 @@ def spoke_rays(points: np.ndarray, pose: csdf.Pose, params: dict, sigma: float,
 
 
 def found_lamps(dets: list, truth: list[dict]) -> set[int]:
-    """The instances of the lamps of ``truth`` that ``dets`` match (greedy by MSSD /
-    diameter, as ``bench_detect.py``'s matching, all models at once)."""
-    pairs = sorted(
-        (csdf.metrics.mssd(tr["_points"], d.pose, tr["pose"], tr.get("symmetries"))
-         / tr["diameter"], i, j)
-        for i, d in enumerate(dets) for j, tr in enumerate(truth) if tr["model"] == d.model)
-    used_d, used_t = set(), set()
-    for e, i, j in pairs:
-        if i in used_d or j in used_t or e >= MSSD_THRESHOLD:
-            continue
-        used_d.add(i)
-        used_t.add(j)
-    return {truth[j]["instance"] for j in used_t if truth[j]["model"] == "lamp"}
+    """The instances of the lamps of ``truth`` that ``dets`` match (``bench_detect.py``'s
+    greedy matching, all models at once)."""
+    pairs = _matches([(d.model, d.pose) for d in dets], truth)
+    return {truth[j]["instance"] for _, _, j in pairs if truth[j]["model"] == "lamp"}
 
 
 def main() -> None:

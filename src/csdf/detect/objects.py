@@ -310,6 +310,20 @@ EXTENT_CROSS = 0.05
 #: lamp and a distractor cylinder standing side by side make one cluster, and a lamp
 #: fitted to both falls over
 PARTS_WHEN_UNFIT = True
+
+#: the winner cut back to its points' footprint (:meth:`_Run._trimmed`) where it
+#: reaches past them by over this many noise levels and ``TRIM_FRACTION`` of its extent
+TRIM_OVERHANG = 5.0
+TRIM_FRACTION = 0.1
+#: ... and replaces the winner when its explained mass is over this fraction higher
+TRIM_GAIN = 0.03
+
+#: a turn of the winner (:meth:`_Run._turns`) whose refit fails verification with a
+#: parameter at an end of its range is held back to its default (:meth:`_Run._shrunk`,
+#: the last of ``SHRINK_STEPS``): a bookshelf seen side-on, refitted the right way
+#: round, grew its depth to the bound and was seen through, and its wrong half turn won
+SHRINK_TURNS = True
+
 #: verified fits of a cluster whose explained mass lies within this fraction of the
 #: best's are a tie that the sensor's rays break (:meth:`_Run._ray_tie`): a bookshelf
 #: seen nearly side-on explains its points as well turned a half turn (front and back
@@ -1350,6 +1364,14 @@ class _Run:
             refits = self._refit_unexplained(m, idx, top, init)
             done.append((m, init, None, refits))
             top = max(refits, key=lambda f: f[0])
+        if upright and TRIM_OVERHANG and init is not None:
+            # a refit cut back to the points' footprint replaces the winner when it
+            # explains TRIM_GAIN more (not a tie for the rays to break: a bookshelf
+            # seen from the back fits as well a quarter turned, its panel as a side)
+            cut = self._trimmed(m, idx, top)
+            if cut and max(f[0] for f in cut) > (1.0 + TRIM_GAIN) * top[0]:
+                top = max(cut, key=lambda f: f[0])
+                done.append((m, init, None, [top]))
         if self.vp is not None and RAY_TIE > 0.0:
             m, top, init = self._ray_tie(done, (m, top, init))
         if upright:
@@ -1428,6 +1450,56 @@ class _Run:
         if SHRINK_PASSED:
             self._shrunk(m, idx, top[2], found)
         return found
+
+    def _trimmed(self, m: _Model, idx: np.ndarray, top: tuple) -> list:
+        """Refits of the winner ``top`` (an item of ``found``, as :meth:`_turns`') of
+        model ``m`` on the points ``idx`` cut back to the points' footprint: where the
+        model reaches past the cluster's points along its width or depth
+        (:func:`_extents`) by over ``TRIM_OVERHANG`` noise levels and
+        ``TRIM_FRACTION`` of that extent, a start with those extents set to the
+        points' and the model shifted with them; returns the refits that pass
+        verification with their width and depth inside their ranges (items as
+        :meth:`_turns`'; ``[]`` when nothing overhangs). A table seen end-on at the top
+        of the image grew 0.4 m past its far legs into space the sensor never looked
+        at, leaving those legs' points unexplained."""
+        res = top[2]
+        R = np.asarray(res.rotation, dtype=float)
+        t = np.asarray(res.translation, dtype=float)
+        surf, _ = self._surface_at(m, res.params)
+        lo, hi = surf.min(axis=0), surf.max(axis=0)
+        Q = (self.P[idx] - t) @ R
+        Q = Q[(Q[:, 2] >= lo[2] - 3.0 * self.sigma) & (Q[:, 2] <= hi[2] + 3.0 * self.sigma)]
+        if len(Q) < self.mp:
+            return []
+        qlo = np.percentile(Q[:, :2], 0.5, axis=0)
+        qhi = np.percentile(Q[:, :2], 99.5, axis=0)
+        over_lo, over_hi = qlo - lo[:2], hi[:2] - qhi
+        need = np.maximum(TRIM_OVERHANG * self.sigma, TRIM_FRACTION * (hi[:2] - lo[:2]))
+        over = np.maximum(over_lo, over_hi) > need
+        # (the sizes' parameters are looked up only now: each costs a bounds search
+        # the first time)
+        ext = _extents(m) if over.any() else None
+        if ext is None:
+            return []
+        px, py, sx, sy = ext
+        rng = {p.name: (float(p.lo), float(p.hi)) for p in m.fld.program.params}
+        pv = dict(res.params)
+        shift = np.zeros(3)
+        for a, (name, slope) in enumerate(((px, sx), (py, sy))):
+            if not over[a]:
+                continue
+            new_lo, new_hi = lo[a] + max(over_lo[a], 0.0), hi[a] - max(over_hi[a], 0.0)
+            pv[name] = float(np.clip(pv[name] - ((hi[a] - lo[a]) - (new_hi - new_lo))
+                                     / slope, *rng[name]))
+            shift[a] = 0.5 * (new_lo + new_hi) - 0.5 * (lo[a] + hi[a])
+        start = {"rotation": R, "translation": t + R @ shift, "params": pv}
+        found: list = []
+        self._add_verified(m, idx, start, found, stand=True)
+        # a refit that pushes the width or the depth to an end of its range holds a size
+        # that no point holds either (a bookshelf's back panel fitted as its side, 0.45
+        # m deep, explained 8 % more points than a wider fit)
+        return [f for f in found
+                if not {px, py} & {n for n, _, _ in _at_bound(m, f[2].params)}]
 
     def _own_inliers(self, inl: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """The inliers ``inl`` ``(K,)`` (point indices) of a detection on the points
@@ -1556,17 +1628,18 @@ class _Run:
             self._add_verified(m, idx, start, found)
             tried += 1
 
-    def _shrunk(self, m: _Model, idx: np.ndarray, res: FitResult, found: list) -> None:
+    def _shrunk(self, m: _Model, idx: np.ndarray, res: FitResult, found: list,
+                steps: tuple[float, ...] | None = None) -> None:
         """A fit ``res`` of ``m`` to the points ``idx`` with parameters at an end of their
         ranges (within ``AT_BOUND`` of the span): a size no point holds (the side of a
         bookshelf the sensor does not see), which the fit pushes out until the model
         reaches into space the sensor saw empty (seen through: verification fails).
-        Fits again from ``res``'s pose with those parameters set ``SHRINK_STEPS`` of the
-        way back to their defaults and every parameter held (the pose alone refitted,
-        then stood upright) and appends those that pass verification to ``found``
-        (items as :meth:`_turns`'), where explained mass, which counts the surface seen
-        through, judges them against the rest. Two pose fits, only for failed fits with
-        a parameter at a bound."""
+        Fits again from ``res``'s pose with those parameters set ``steps`` (default
+        ``SHRINK_STEPS``) of the way back to their defaults and every parameter held
+        (the pose alone refitted, then stood upright) and appends those that pass
+        verification to ``found`` (items as :meth:`_turns`'), where explained mass,
+        which counts the surface seen through, judges them against the rest. One pose
+        fit a step, only for failed fits with a parameter at a bound."""
         at = _at_bound(m, res.params)
         if not at:
             return
@@ -1576,7 +1649,7 @@ class _Run:
         # not hold trade against each other (a bookshelf seen side-on, its depth held at
         # the default, grew its width instead: 0.112 d, a false positive)
         held = tuple(p.name for p in m.fld.program.params)
-        for frac in SHRINK_STEPS:
+        for frac in SHRINK_STEPS if steps is None else steps:
             pv = dict(res.params)
             pv.update({n: e + frac * (d - e) for n, (e, d) in zip(names, ends)})
             start = {"rotation": res.rotation, "translation": res.translation, "params": pv}
@@ -1948,7 +2021,7 @@ class _Run:
             init = {"rotation": Rt @ base.rotation,
                     "translation": Rt @ (base.translation - cw) + cw,
                     "params": dict(base.params)}
-            self._add_verified(m, idx, init, found, stand=True)
+            self._add_verified(m, idx, init, found, stand=True, shrink=SHRINK_TURNS)
         if SWAP_TURNS:
             self._swapped(m, idx, base, found)
         return found
@@ -1984,15 +2057,20 @@ class _Run:
             self._add_verified(m, idx, init, found, stand=True)
 
     def _add_verified(self, m: _Model, idx: np.ndarray, start: dict, found: list,
-                      **kw: Any) -> None:
+                      shrink: bool = False, **kw: Any) -> None:
         """Fits ``m`` to the points ``idx`` from ``start`` (:meth:`_candidate`, with its
         keywords ``kw``) and appends the fit to ``found`` as ``(explained mass, score,
-        result, inliers, checked)`` when it passes verification."""
+        result, inliers, checked)`` when it passes verification; with ``shrink``, a fit
+        that fails with a parameter at an end of its range and explains most of the
+        points (``RETRY_EXPLAINED``, as a screened fit must to be retried) is held back
+        to the defaults (:meth:`_shrunk`'s last step)."""
         r = self._candidate(m, idx, start, **kw)
         if r is not None:
             ok, sc, il, ch, gain = self._verify(m, r)
             if ok:
                 found.append((gain, sc, r, il, ch))
+            elif shrink and len(il) >= max(self.mp, RETRY_EXPLAINED * len(idx)):
+                self._shrunk(m, idx, r, found, steps=SHRINK_STEPS[-1:])
 
 
 def _at_bound(m: _Model, params: dict) -> list[tuple[str, float, float]]:

@@ -1,5 +1,5 @@
 """The parameter-only prefix of a lowered program, computed by the compiled
-interpreter (:meth:`csdf.backends.lowering.Lowered._prefix`), and the fast backend's
+interpreter (:meth:`csdf.backends.lowering.Lowered.prefix`), and the fast backend's
 uniform inputs kept per parameter vector: the results must be those of the NumPy
 reference, bit for bit."""
 
@@ -37,7 +37,7 @@ def test_compiled_prefix_equals_the_numpy_reference_bit_for_bit() -> None:
             if step == 30:
                 pv[step % len(pv)] = np.nan  # NaN in, NaN out
             for tangents in (True, False):
-                got_v, got_d = low._prefix(pv, tangents)
+                got_v, got_d = low.prefix(pv, tangents)
                 want_v, want_d = numpy_backend.uniform_prefix(prog, pv, low.n_prefix,
                                                               tangents)
                 assert _same(got_v, want_v)

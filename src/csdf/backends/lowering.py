@@ -129,7 +129,7 @@ class Lowered:
     def _uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
         prog = self.prog
         P = self.n_params
-        vals, dparams = self._prefix(pvals, wrt_params)
+        vals, dparams = self.prefix(pvals, wrt_params)
         U = self.n_uniform_rows
         uvals = np.empty(U, dtype=np.float64)
         uvals[:P] = pvals
@@ -145,7 +145,7 @@ class Lowered:
         with np.errstate(over="ignore"):  # values beyond float32 range become inf
             return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
 
-    def _prefix(self, pvals: np.ndarray, tangents: bool) -> tuple[np.ndarray, np.ndarray]:
+    def prefix(self, pvals: np.ndarray, tangents: bool) -> tuple[np.ndarray, np.ndarray]:
         """Values ``(K,)`` and parameter derivatives ``(K, P)`` of the prefix
         instructions (as :func:`csdf.backends.numpy_backend.uniform_prefix`, computed by
         :func:`csdf.backends.interp_kernels.prefix_kernel`: the same rules, compiled;

@@ -35,7 +35,6 @@ from ..layout import N_COORDS
 from ..ops import OPS_BY_CODE, tie_strict
 from ..parallel import N_THREADS, executor
 from .lowering import FLAG_A_ZERO, FLAG_B_ZERO, FLAG_OUT_ZERO, FLAG_TIE_STRICT, lowered
-from .numpy_backend import uniform_prefix
 
 __all__ = ["RegTape", "reg_tape", "TapePool", "CellTapes", "raster_image", "cell_tapes"]
 
@@ -78,7 +77,9 @@ class RegTape:
         lay = prog.layout
         low = lowered(prog)
         n_prefix = low.n_prefix
-        pre_vals, _ = uniform_prefix(prog, np.asarray(pvals, dtype=np.float64), n_prefix)
+        # the interpreter's own compiled prefix rules, so the tape agrees with it bit
+        # for bit (NumPy's arctan2 differs from libm's in the last bit now and then)
+        pre_vals, _ = low.prefix(np.asarray(pvals, dtype=np.float64), tangents=False)
         rows: list[list[int]] = []
         imms: list[float] = []
         zero: list[bool] = [False] * N_COORDS  # structurally zero spatial tangent, by reg

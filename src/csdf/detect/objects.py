@@ -1325,8 +1325,7 @@ class _Run:
                 ok, score, inl, checked, gain = self._verify(m, res)
                 if ok:
                     found.append((gain, score, res, inl, checked))
-                elif init is not None and len(inl) >= max(self.mp,
-                                                          RETRY_EXPLAINED * len(idx)):
+                elif init is not None and self._explains_most(inl, idx):
                     # explained most of the points but failed: other parameter starts
                     self._other_params(m, idx, res, init, found)
                     if not found:
@@ -1368,9 +1367,9 @@ class _Run:
             # a refit cut back to the points' footprint replaces the winner when it
             # explains TRIM_GAIN more (not a tie for the rays to break: a bookshelf
             # seen from the back fits as well a quarter turned, its panel as a side)
-            cut = self._trimmed(m, idx, top)
-            if cut and max(f[0] for f in cut) > (1.0 + TRIM_GAIN) * top[0]:
-                top = max(cut, key=lambda f: f[0])
+            cut = max(self._trimmed(m, idx, top), key=lambda f: f[0], default=None)
+            if cut is not None and cut[0] > (1.0 + TRIM_GAIN) * top[0]:
+                top = cut
                 done.append((m, init, None, [top]))
         if self.vp is not None and RAY_TIE > 0.0:
             m, top, init = self._ray_tie(done, (m, top, init))
@@ -1482,15 +1481,14 @@ class _Run:
         if ext is None:
             return []
         px, py, sx, sy = ext
-        rng = {p.name: (float(p.lo), float(p.hi)) for p in m.fld.program.params}
+        rng = _ranges(m)
         pv = dict(res.params)
         shift = np.zeros(3)
         for a, (name, slope) in enumerate(((px, sx), (py, sy))):
             if not over[a]:
                 continue
             new_lo, new_hi = lo[a] + max(over_lo[a], 0.0), hi[a] - max(over_hi[a], 0.0)
-            pv[name] = float(np.clip(pv[name] - ((hi[a] - lo[a]) - (new_hi - new_lo))
-                                     / slope, *rng[name]))
+            _resize(pv, name, (new_hi - new_lo) - (hi[a] - lo[a]), slope, rng)
             shift[a] = 0.5 * (new_lo + new_hi) - 0.5 * (lo[a] + hi[a])
         start = {"rotation": R, "translation": t + R @ shift, "params": pv}
         found: list = []
@@ -2045,16 +2043,22 @@ class _Run:
         surf, _ = self._surface_at(m, base.params)
         lo, hi = surf.min(axis=0), surf.max(axis=0)
         size = hi - lo
-        rng = {p.name: (float(p.lo), float(p.hi)) for p in m.fld.program.params}
+        rng = _ranges(m)
         pv = dict(base.params)
-        pv[px] = float(np.clip(pv[px] + (size[1] - size[0]) / sx, *rng[px]))
-        pv[py] = float(np.clip(pv[py] + (size[0] - size[1]) / sy, *rng[py]))
+        _resize(pv, px, size[1] - size[0], sx, rng)
+        _resize(pv, py, size[0] - size[1], sy, rng)
         cw = base.rotation @ (0.5 * (lo + hi)) + base.translation
         for th in (0.5 * math.pi, -0.5 * math.pi):
             Rt = _yaw_matrix(self.plane[0], th)
             init = {"rotation": Rt @ base.rotation,
                     "translation": Rt @ (base.translation - cw) + cw, "params": pv}
             self._add_verified(m, idx, init, found, stand=True)
+
+    def _explains_most(self, inl: np.ndarray, idx: np.ndarray) -> bool:
+        """Whether a fit whose inliers are ``inl`` ``(K,)`` explains most of the points
+        ``idx`` (``RETRY_EXPLAINED`` of them, and at least the minimum support): a fit
+        that failed verification but is worth holding back or starting again."""
+        return len(inl) >= max(self.mp, RETRY_EXPLAINED * len(idx))
 
     def _add_verified(self, m: _Model, idx: np.ndarray, start: dict, found: list,
                       shrink: bool = False, **kw: Any) -> None:
@@ -2069,8 +2073,21 @@ class _Run:
             ok, sc, il, ch, gain = self._verify(m, r)
             if ok:
                 found.append((gain, sc, r, il, ch))
-            elif shrink and len(il) >= max(self.mp, RETRY_EXPLAINED * len(idx)):
+            elif shrink and self._explains_most(il, idx):
                 self._shrunk(m, idx, r, found, steps=SHRINK_STEPS[-1:])
+
+
+def _ranges(m: _Model) -> dict[str, tuple[float, float]]:
+    """Each parameter's range of model ``m``: ``{name: (lo, hi)}``."""
+    return {p.name: (float(p.lo), float(p.hi)) for p in m.fld.program.params}
+
+
+def _resize(pv: dict, name: str, change: float, slope: float,
+            rng: dict[str, tuple[float, float]]) -> None:
+    """Sets the size parameter ``name`` of the values ``pv`` (in place) to change its
+    extent by ``change`` (m), at ``slope`` metres of extent per unit of the parameter,
+    clipped to its range in ``rng`` (:func:`_ranges`)."""
+    pv[name] = float(np.clip(pv[name] + change / slope, *rng[name]))
 
 
 def _at_bound(m: _Model, params: dict) -> list[tuple[str, float, float]]:

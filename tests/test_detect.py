@@ -815,6 +815,25 @@ def test_polish_gathers_its_band_again_until_it_reaches_the_shades_rim(lamp_scan
     assert abs(heights[full] - 0.2) < 0.02, heights
 
 
+def _table_fit(run, m, P, inst, gt, params, **changes):
+    """The table ``m`` placed at ``gt`` with ``params`` (the rest at their defaults)
+    changed by ``changes`` (``shift``: moved along its own x, metres; the rest
+    parameter values), asserted to pass ``run``'s verification, as an item of its
+    ``found`` lists: ``(explained mass, score, result, inliers, checked)``."""
+    full = {p.name: float(p.default) for p in m.fld.program.params}
+    full.update(params)
+    base = csdf.fit(m.shape, P[inst == 1][:200], init={
+        "rotation": gt.rotation, "translation": gt.translation, "params": full},
+        estimate=("pose",), max_iter=1, escape=False, coarse=False)
+    shift = changes.pop("shift", 0.0)
+    res = dataclasses.replace(base, rotation=gt.rotation, translation=gt.translation
+                              + gt.rotation @ np.array([shift, 0.0, 0.0]),
+                              params=dict(full, **changes))
+    ok, score, inl, checked, gain = run._verify(m, res)
+    assert ok
+    return gain, score, res, inl, checked
+
+
 def test_trim_cuts_a_table_grown_past_the_image_back_to_its_legs():
     """A table seen end-on whose far end lies at the image's top border: a winner 0.4 m
     longer, grown past the far legs into space no ray looked at, passes verification
@@ -831,27 +850,17 @@ def test_trim_cuts_a_table_grown_past_the_image_back_to_its_legs():
     m = run.models[0]
     gt = _camera_pose(cam, pose)
     idx = max(run.clusters, key=lambda c: int(np.sum(inst[c] == 1)))
-    full = {p.name: float(p.default) for p in m.fld.program.params}
-    full.update(params)
-    base = csdf.fit(m.shape, P[inst == 1][:200], init={
-        "rotation": gt.rotation, "translation": gt.translation, "params": full},
-        estimate=("pose",), max_iter=1, escape=False, coarse=False)
-    away = gt.rotation @ np.array([-0.2, 0.0, 0.0])  # its far end, 0.4 m further
-    grown = dataclasses.replace(base, rotation=gt.rotation, translation=gt.translation
-                                + away, params=dict(full, length=1.8))
-    ok, score, inl, checked, gain = run._verify(m, grown)
-    assert ok  # nothing the sensor saw says otherwise
-    cut = run._trimmed(m, idx, (gain, score, grown, inl, checked))
+    # its far end 0.4 m further; it passes verification: nothing the sensor saw says
+    # otherwise
+    grown = _table_fit(run, m, P, inst, gt, params, length=1.8, shift=-0.2)
+    cut = run._trimmed(m, idx, grown)
     assert len(cut) == 1
-    assert cut[0][0] > (1.0 + TRIM_GAIN) * gain
+    assert cut[0][0] > (1.0 + TRIM_GAIN) * grown[0]
     res = cut[0][2]
     assert abs(res.params["length"] - 1.4) < 0.03
     assert np.linalg.norm(res.translation - gt.translation) < 0.03
     # a winner of the right size is left alone
-    right = dataclasses.replace(base, rotation=gt.rotation, translation=gt.translation,
-                                params=full)
-    ok, score, inl, checked, gain = run._verify(m, right)
-    assert ok and run._trimmed(m, idx, (gain, score, right, inl, checked)) == []
+    assert run._trimmed(m, idx, _table_fit(run, m, P, inst, gt, params)) == []
 
 
 def _squat_lamp_over(truth, solid, z: float, **sizes):
@@ -1384,24 +1393,6 @@ def test_a_table_is_reported_with_its_length_along_its_x_axis():
         r = dataclasses.replace(wide, params=dict(full, length=lw[0], width=lw[1]))
         assert _canonical(m, r) is r
     assert _canonical(m, None) is None
-
-
-def _table_fit(run, m, P, inst, gt, params, **changes):
-    """``(top, full parameters)``: the table ``m`` placed at ``gt`` with ``params``
-    changed by ``changes`` (``shift``: along its own x, metres; the rest parameters),
-    verified by ``run`` as an item of its ``found`` lists."""
-    full = {p.name: float(p.default) for p in m.fld.program.params}
-    full.update(params)
-    base = csdf.fit(m.shape, P[inst == 1][:200], init={
-        "rotation": gt.rotation, "translation": gt.translation, "params": full},
-        estimate=("pose",), max_iter=1, escape=False, coarse=False)
-    shift = changes.pop("shift", 0.0)
-    res = dataclasses.replace(base, rotation=gt.rotation, translation=gt.translation
-                              + gt.rotation @ np.array([shift, 0.0, 0.0]),
-                              params=dict(full, **changes))
-    ok, score, inl, checked, gain = run._verify(m, res)
-    assert ok
-    return gain, score, res, inl, checked
 
 
 @pytest.mark.parametrize("screen", [True, False])

@@ -1272,29 +1272,40 @@ def test_a_quarter_turned_fit_with_sizes_at_their_bounds_is_refitted_swapped():
     assert best[2].params["width"] == pytest.approx(0.6, abs=0.08)
 
 
+def _cropped_scan(name: str, model: str | None = None):
+    """A benchmark scan cropped about an object, saved in ``tests/data/NAME.npz``:
+    ``(the file, its points (N, 3) float64, error)``, where ``error(pose)`` is the
+    MSSD of ``model`` at ``pose`` against the saved truth over its diameter (None
+    without ``model``)."""
+    from pathlib import Path
+
+    z = np.load(Path(__file__).parent / "data" / f"{name}.npz")
+    P = z["points"].astype(np.float64)
+    if model is None:
+        return z, P, None
+    params = {str(k): float(v) for k, v in zip(z["param_names"], z["params"])}
+    shape = csdf.zoo.load(model)
+    pts = csdf.metrics.model_points(shape, 500, params=params)
+    syms = csdf.metrics.symmetries(shape, params=params)
+    gt = csdf.Pose(z["pose"][:3, :3], z["pose"][:3, 3])
+    diameter = csdf.metrics.diameter(pts)
+    return z, P, lambda pose: csdf.metrics.mssd(pts, pose, gt, syms) / diameter
+
+
 def test_a_lamp_in_one_cluster_with_a_distractor_is_found_in_parts(monkeypatch):
     # benchmark scene 141 (cropped: the lamp, a squat distractor cylinder beside it that
     # its cluster also holds, and the floor within 1 m): a lamp fitted to the whole
     # cluster falls over and no model passes; fitted to the lamp's half of the
     # footprint, with the cylinder's half taken as another object, it is found
-    from pathlib import Path
-
     from csdf.detect import objects as O
 
-    z = np.load(Path(__file__).parent / "data" / "lamp_beside_cylinder.npz")
-    P = z["points"].astype(np.float64)
-    params = {str(k): float(v) for k, v in zip(z["param_names"], z["params"])}
+    z, P, error = _cropped_scan("lamp_beside_cylinder", "lamp")
     monkeypatch.setattr(O, "PARTS_WHEN_UNFIT", False)
     assert csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0) == []
     monkeypatch.setattr(O, "PARTS_WHEN_UNFIT", True)
     dets = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0)
     assert [d.model for d in dets] == ["lamp"]
-    lamp = csdf.zoo.load("lamp")
-    pts = csdf.metrics.model_points(lamp, 500, params=params)
-    syms = csdf.metrics.symmetries(lamp, params=params)
-    gt = csdf.Pose(z["pose"][:3, :3], z["pose"][:3, 3])
-    e = csdf.metrics.mssd(pts, dets[0].pose, gt, syms) / csdf.metrics.diameter(pts)
-    assert e < 0.1
+    assert error(dets[0].pose) < 0.1
     # its inliers are the lamp's points, not the cylinder's
     inst = z["instance"][dets[0].inliers]
     assert np.mean(inst == 1) > 0.95
@@ -1499,21 +1510,12 @@ def test_a_cluster_whose_fits_took_a_neighbour_is_searched_again_once_it_is_foun
     the stool's cluster is searched first, its fits take the lamp's cluster as a
     piece of the stool and fail; once the lamp is found and its points claimed, the
     stool's cluster is searched again (``RETRY_JOINED``) and the stool is found."""
-    from pathlib import Path
-
     from csdf.detect import objects as O
 
-    z = np.load(Path(__file__).parent / "data" / "stool_against_lamp.npz")
-    P = z["points"].astype(np.float64)
-    params = {str(k): float(v) for k, v in zip(z["param_names"], z["params"])}
+    z, P, error = _cropped_scan("stool_against_lamp", "stool")
     monkeypatch.setattr(O, "RETRY_JOINED", retry)
     dets = csdf.detect(P, ["stool", "lamp"], viewpoint=(0, 0, 0), seed=0)
-    stool = csdf.zoo.load("stool")
-    pts = csdf.metrics.model_points(stool, 500, params=params)
-    syms = csdf.metrics.symmetries(stool, params=params)
-    gt = csdf.Pose(z["pose"][:3, :3], z["pose"][:3, 3])
-    errs = [(csdf.metrics.mssd(pts, d.pose, gt, syms) / csdf.metrics.diameter(pts), d)
-            for d in dets if d.model == "stool"]
+    errs = [(error(d.pose), d) for d in dets if d.model == "stool"]
     assert "lamp" in [d.model for d in dets]
     found = [d for e, d in errs if e < 0.1]
     assert bool(found) == retry, [e for e, _ in errs]
@@ -1527,12 +1529,9 @@ def test_a_box_squeezed_into_a_lamp_is_dropped(monkeypatch, limit):
     2.8 cm range noise: its lower third is taken for the floor, and the rest fits a
     lamp with most of its sizes at the ends of their ranges. More than
     ``MAX_AT_BOUND`` of them there, it is dropped."""
-    from pathlib import Path
-
     from csdf.detect import objects as O
 
-    z = np.load(Path(__file__).parent / "data" / "box_taken_for_a_lamp.npz")
-    P = z["points"].astype(np.float64)
+    z, P, _ = _cropped_scan("box_taken_for_a_lamp")
     monkeypatch.setattr(O, "MAX_AT_BOUND", limit)
     dets = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0)
     if limit is not None:

@@ -770,14 +770,14 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
     failed = []  # (cluster, the clusters its failed fits joined, their claimed counts)
     for members in run.clusters:
         joined = _search(run, members, out, cap)
-        if joined:
+        if joined and RETRY_JOINED:
             failed.append((members, joined, _claimed_in(run, joined)))
         if len(out) >= cap:
             break
     # a cluster whose fits failed with a neighbour's points joined (a stool standing
     # against a lamp, fitted over both) is searched again once a later detection has
     # claimed some of those points
-    for members, joined, before in failed if RETRY_JOINED else ():
+    for members, joined, before in failed:
         if len(out) >= cap:
             break
         if any(n > before.get(c, 0) for c, n in _claimed_in(run, joined).items()):
@@ -1115,11 +1115,11 @@ class _Run:
         shade came out 0.08 m short and failed the band test. (Stretched for other
         clusters too, a tall bookshelf took its neighbours' pieces: four objects
         lost over the benchmark's 280 seeds.)"""
-        pv = init.get("params") if isinstance(init, dict) else init.params
         if isinstance(init, dict):
-            R, t = np.asarray(init["rotation"], float), np.asarray(init["translation"], float)
+            R, t, pv = init["rotation"], init["translation"], init.get("params")
         else:
-            R, t = np.asarray(init.rotation, float), np.asarray(init.translation, float)
+            R, t, pv = init.rotation, init.translation, init.params
+        R, t = np.asarray(R, dtype=float), np.asarray(t, dtype=float)
         c = R @ m.centre + t
         inside = ~self.claimed & (self.label >= 0) & (
             np.linalg.norm(self.P - c, axis=1) <= 1.1 * m.radius)

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import MeshWarning
 
-__all__ = ["detections_picture", "PICTURE_SAMPLES"]
+__all__ = ["detections_picture", "PICTURE_SAMPLES", "PICTURE_RESOLUTION"]
 
 #: surface samples drawn per detection
 PICTURE_SAMPLES = 4000

@@ -126,3 +126,25 @@ def test_infer_one_view_measures_see_only_what_the_sensor_sees():
                                         ("(box_1 & cylinder_1)", False, False)):
         assert bi.view_structure(Res(), truth, leaves, front, tol, text) is from_front
         assert bi.view_structure(Res(), truth, leaves, back, tol, text) is from_back
+
+
+def test_detect_counts_a_false_positive_turned_about_its_axis_as_a_turned_miss():
+    """``bench_detect._turned``: a lamp detected in the right place with its spokes
+    turned 60 degrees (half its symmetry's period) matches nothing, and is reported as
+    a missed lamp turned wrong; moved 0.3 m it is not; a matched detection is not a
+    false positive at all."""
+    bd = _load("bench_detect")
+    params = {p.name: p.default for p in bd.csdf.zoo.load("lamp").params}
+    pose = bd.csdf.Pose(np.eye(3), np.array([0.5, 0.2, 3.0]))
+    truth = [{"model": "lamp", "pose": pose, "params": params, "diameter": 0.5,
+              "symmetries": bd.csdf.metrics.symmetries(bd.csdf.zoo.load("lamp")),
+              "_points": bd._model_points("lamp", params)}]
+    turned = bd.csdf.Pose(bd._rz(np.radians(60.0)), pose.translation)
+    moved = bd.csdf.Pose(turned.rotation, pose.translation + [0.3, 0.0, 0.0])
+    assert bd._matches([("lamp", turned)], truth) == []
+    assert bd._turned([("lamp", turned)], truth, []) == ["lamp"]
+    assert bd._turned([("lamp", moved)], truth, []) == []
+    right = [("lamp", pose), ("lamp", turned)]
+    m = bd._matches(right, truth)
+    assert [i for _, i, _ in m] == [0]
+    assert bd._turned(right, truth, m) == []  # the object is found: no turned miss

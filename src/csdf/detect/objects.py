@@ -1446,7 +1446,9 @@ class _Run:
                     if not found and OWN_REFIT and len(self.joined) > joined:
                         # it took another cluster as a piece of its object: without it,
                         # competing after the turns (a failed placement's turns are
-                        # searched as before)
+                        # searched as before). (Only a cluster that no model tried
+                        # before it in this search took counts: a second model's fit
+                        # that takes the same one is not refitted.)
                         mine: list = []
                         self._add_verified(m, idx, init, mine, stand=STAND_FIRST,
                                            pieces=False)

@@ -97,7 +97,8 @@ def _turned(dets: list[tuple[str, csdf.Pose]], truth: list[dict],
     match an object that no detection matched (MSSD < :data:`MSSD_THRESHOLD` of its
     diameter)."""
     used_d = {i for _, i, _ in matches}
-    free_t = [tr for j, tr in enumerate(truth) if j not in {k for _, _, k in matches}]
+    used_t = {j for _, _, j in matches}
+    free_t = [tr for j, tr in enumerate(truth) if j not in used_t]
     out = []
     for i, (model, pose) in enumerate(dets):
         if i in used_d:
@@ -233,7 +234,8 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None,
                          else _open3d_objects(sc, clouds))
             if name == "csdf.detect":
                 cpu += time.process_time() - c0
-            found, fp, _ = _match(dets, sc["truth"])
+            matches = _matches(dets, sc["truth"])
+            found, fp = len(matches), len(dets) - len(matches)
             r = rows[name]
             r[0] += found
             r[1] += len(sc["truth"])
@@ -248,7 +250,7 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None,
                                                        tr.get("symmetries"))
                              < MSSD_THRESHOLD * tr["diameter"] for m, p in dets)
                     per_model[tr["model"]][0] += int(ok)
-                turned += _turned(dets, sc["truth"], _matches(dets, sc["truth"]))
+                turned += _turned(dets, sc["truth"], matches)
                 print(f"  scene {seed}: {found}/{len(sc['truth'])} found, {fp} false, "
                       f"{sec:.2f} s")
                 if seed == first_scene:

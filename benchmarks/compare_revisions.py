@@ -11,11 +11,23 @@ script checks the other revision out into a temporary git worktree, then for
 * ``csdf.mesh`` of the CSG example at 512^3 (``mc`` and ``dc``),
 
 and prints, per measurement, the median over rounds of each child's median, and the
-ratio new / old (below 1: the new revision is faster).
+ratio new / old (below 1: the new revision is faster). Other suites (``--suite``):
+
+* ``calls``: the small calls a fit and a detector make thousands of times, where the
+  time is the call's own overhead more than the kernel's: a program's values, and
+  values, gradients and parameter Jacobian at new parameters, on 700 points (a
+  cluster); a field's values on 50 points (a sphere tracer's late steps); one robust
+  pose-and-shape fit of the chair to 1,200 noisy points with a viewpoint;
+* ``detect``: ``csdf.detect`` on the benchmark's cluttered scenes
+  (``bench_detect.py``'s, seeds ``--first-scene`` on, ``--scenes`` of them), CPU and
+  wall seconds per object after a warm-up scene, and whether both revisions return
+  the same detections (poses to 1e-9).
 
 Usage::
 
     .venv/bin/python benchmarks/compare_revisions.py 608cde1 [--rounds 3] [--output F]
+    .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite calls
+    .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite detect --scenes 5
 """
 
 from __future__ import annotations
@@ -29,6 +41,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -75,10 +89,93 @@ for method in ("mc", "dc"):
 print("RESULT " + json.dumps(out))
 '''
 
+CHILD_CALLS = r'''
+import json, time
+import numpy as np
+import csdf
 
-def run_child(src: Path) -> dict[str, float]:
+def per_call(fn, n):
+    fn()
+    ts = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn()
+        ts.append((time.perf_counter() - t0) / n)
+    return float(np.median(ts))
+
+chair = csdf.zoo.load("chair")
+prog = chair.compile()
+rng = np.random.default_rng(0)
+q = rng.normal(scale=0.3, size=(700, 3))
+pv = {p.name: float(p.default) for p in prog.params}
+first = prog.params[0].name
+step = [0]
+
+def moved():  # a solver's next step: parameters never seen before
+    step[0] += 1
+    p = dict(pv)
+    p[first] = pv[first] * (1.0 + 1e-9 * step[0])
+    return prog.value_grad_param_jacobian(q, p, check_ranges=False)
+
+fld = csdf.as_field(chair)
+q50 = np.ascontiguousarray(q[:50])
+pts = csdf.sample_surface(chair, 1200, seed=1)[0]
+pts = pts + rng.normal(scale=0.004, size=pts.shape) + [0.1, -0.05, 0.02]
+init = {"rotation": np.eye(3), "translation": np.zeros(3), "params": pv}
+out = {
+    "program value, 700 points": per_call(lambda: prog(q, pv, check_ranges=False), 400),
+    "program value+grad+jac, new parameters, 700 points": per_call(moved, 200),
+    "field value, 50 points": per_call(lambda: fld.value(q50), 400),
+    "fit chair pose+params, 1200 points": per_call(lambda: csdf.fit(
+        chair, pts, init=init, estimate=("pose", "params"), loss="cauchy", f_scale=0.005,
+        viewpoint=(0.0, 0.0, -3.0), max_iter=40, check_ranges=False), 2),
+}
+print("RESULT " + json.dumps(out))
+'''
+
+CHILD_DETECT = r'''
+import hashlib, json, sys, time
+import numpy as np
+import csdf
+
+data = np.load(sys.argv[1])
+clouds = [data[f"points_{i}"] for i in range(int(data["count"]))]
+objects = int(data["objects"])
+models = sys.argv[2].split(",")
+csdf.detect(clouds[0], models, viewpoint=(0.0, 0.0, 0.0), seed=0)  # kernels compiled
+h = hashlib.sha1()
+c0, t0 = time.process_time(), time.perf_counter()
+for P in clouds:
+    for d in csdf.detect(P, models, viewpoint=(0.0, 0.0, 0.0), seed=0):
+        h.update(d.model.encode())
+        h.update(np.round(d.pose.matrix, 9).tobytes())
+cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+print("RESULT " + json.dumps({"detect CPU s / object": cpu / objects,
+                              "detect wall s / object": wall / objects,
+                              "_detections": h.hexdigest()}))
+'''
+
+
+def detect_scenes(first: int, count: int, path: Path) -> list[str]:
+    """The benchmark's cluttered scenes ``first .. first + count - 1`` (this tree's
+    ``bench_detect.py``) saved to ``path`` for the children; returns the models."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from detect_scenes import CLUTTER_MODELS, clutter_scene
+
+    arrays: dict = {}
+    objects = 0
+    for i in range(count):
+        sc = clutter_scene(first + i)
+        arrays[f"points_{i}"] = np.asarray(sc["points"], dtype=np.float64)
+        objects += len(sc["truth"])
+    np.savez(path, count=count, objects=objects, **arrays)
+    return list(CLUTTER_MODELS)
+
+
+def run_child(src: Path, code: str = CHILD, args: tuple[str, ...] = ()) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(src))
-    res = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True,
+    res = subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True,
                          text=True, cwd=tempfile.gettempdir(), check=False)
     for line in res.stdout.splitlines():
         if line.startswith("RESULT "):
@@ -91,9 +188,24 @@ def main() -> None:
     ap.add_argument("rev", help="the earlier revision (a commit) to compare against")
     ap.add_argument("--rounds", type=int, default=3, help="child runs per revision")
     ap.add_argument("--output", type=Path, default=None, help="also write Markdown here")
+    ap.add_argument("--suite", choices=("eval", "calls", "detect"), default="eval",
+                    help="what to time (module docs)")
+    ap.add_argument("--first-scene", type=int, default=100,
+                    help="detect suite: the first scene's seed")
+    ap.add_argument("--scenes", type=int, default=5,
+                    help="detect suite: scenes timed (the first detected once before too, "
+                    "to warm up)")
     args = ap.parse_args()
+    if not 1 <= args.scenes <= 100:
+        ap.error(f"--scenes must be 1-100, got {args.scenes}")
     t_start = time.time()
     with tempfile.TemporaryDirectory(prefix="csdf-ab-") as tmp:
+        code, child_args = {"eval": CHILD, "calls": CHILD_CALLS, "detect": CHILD_DETECT}[
+            args.suite], ()
+        if args.suite == "detect":
+            data = Path(tmp) / "scenes.npz"
+            models = detect_scenes(args.first_scene, args.scenes, data)
+            child_args = (str(data), ",".join(models))
         wt = Path(tmp) / "old"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),
                         args.rev], check=True, capture_output=True)
@@ -103,21 +215,30 @@ def main() -> None:
                 order = ("old", "new") if k % 2 == 0 else ("new", "old")
                 for which in order:
                     src = wt / "src" if which == "old" else ROOT / "src"
-                    runs[which].append(run_child(src))
+                    runs[which].append(run_child(src, code, child_args))
                     print(f"round {k + 1}/{args.rounds}: {which} done", flush=True)
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                             str(wt)], check=False, capture_output=True)
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                           capture_output=True, text=True, check=False).stdout.strip()
-    lines = [f"A/B against {args.rev} (this tree: {head}), {args.rounds} rounds, fresh "
-             f"processes, alternating order; {os.cpu_count()} CPUs; "
-             f"{time.time() - t_start:.0f} s", "",
+    lines = [f"A/B against {args.rev} (this tree: {head}), suite {args.suite}, "
+             f"{args.rounds} rounds, fresh processes, alternating order; "
+             f"{os.cpu_count()} CPUs; {time.time() - t_start:.0f} s", "",
              "| measurement | old (median) | new (median) | new / old |", "|---|---|---|---|"]
     for key in runs["old"][0]:
+        if key.startswith("_"):
+            continue
         old = statistics.median(r[key] for r in runs["old"])
         new = statistics.median(r[key] for r in runs["new"])
-        lines.append(f"| {key} | {old * 1e3:.1f} ms | {new * 1e3:.1f} ms | {new / old:.2f} |")
+        unit, f = ("s", 1.0) if "/ object" in key else (("us", 1e6) if old < 1e-3
+                                                        else ("ms", 1e3))
+        lines.append(f"| {key} | {old * f:.{2 if unit == 's' else 1}f} {unit} | "
+                     f"{new * f:.{2 if unit == 's' else 1}f} {unit} | {new / old:.2f} |")
+    if "_detections" in runs["old"][0]:
+        same = {r["_detections"] for r in runs["old"] + runs["new"]}
+        lines += ["", "same detections in every run: " + ("yes" if len(same) == 1 else
+                                                           f"NO ({len(same)} different)")]
     text = "\n".join(lines)
     print(text)
     if args.output:

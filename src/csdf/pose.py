@@ -79,7 +79,7 @@ class Pose:
             a scale that is not positive.
     """
 
-    __slots__ = ("rotation", "translation", "scale")
+    __slots__ = ("rotation", "translation", "scale", "_identity")
 
     def __init__(self, rotation: Any = None, translation: Any = None, scale: float = 1.0):
         R = np.eye(3) if rotation is None else check_rotation(rotation, "rotation")
@@ -97,6 +97,10 @@ class Pose:
         object.__setattr__(self, "rotation", R)
         object.__setattr__(self, "translation", t)
         object.__setattr__(self, "scale", s)
+        # the exact identity test, asked on every evaluation of a field (the arrays
+        # are read-only, so it cannot change)
+        object.__setattr__(self, "_identity", bool(
+            s == 1.0 and (R == _EYE3).all() and not (t != 0.0).any()))
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError("a Pose is immutable; make a new one")
@@ -194,10 +198,7 @@ class Pose:
     def is_identity(self, tol: float = 0.0) -> bool:
         """True when this is the identity to ``tol`` (exactly, by default)."""
         if tol == 0.0:
-            # the exact test without the temporaries (fields ask on every evaluation);
-            # NaN entries fail it as they fail the general one
-            return bool(self.scale == 1.0 and (self.rotation == _EYE3).all()
-                        and not (self.translation != 0.0).any())
+            return self._identity  # (made when the pose was: fields ask on every call)
         return bool(np.max(np.abs(self.rotation - np.eye(3))) <= tol
                     and np.max(np.abs(self.translation)) <= tol
                     and abs(self.scale - 1.0) <= tol)

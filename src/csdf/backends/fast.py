@@ -29,7 +29,7 @@ import numpy as np
 
 from ..cache import memo
 from ..memory import result_array
-from ..parallel import run_parallel
+from ..parallel import MIN_PER_THREAD, run_parallel
 from .codegen import BLOCK, generate, structure_key
 from .lowering import lowered, numba_available
 
@@ -111,7 +111,8 @@ _EXTRA = np.array([0.0, 1.0, 2.0, 0.5, np.nan])
 
 
 def _prepare(prog, pvals: np.ndarray, mode: str, dtype):
-    """``(kernel, u, du, spatial, wrt)`` for one program, parameter values and mode.
+    """``(kernel, u, du, spatial, wrt, nan)`` for one program, parameter values and
+    mode (``nan``: a parameter value is NaN).
 
     ``u`` (uniform values ``(U + 5,)``) and ``du`` (their parameter derivatives
     ``(U, P)``, or ``(1, 1)`` zeros) are kept for the last few parameter vectors per
@@ -123,39 +124,48 @@ def _prepare(prog, pvals: np.ndarray, mode: str, dtype):
     spatial = kmode != "value"
     wrt = kmode == "all"
     key = (np.asarray(pvals, dtype=np.float64).tobytes(), kmode, np.dtype(dtype).str)
-    u, du = memo(low, "_fast_uniform", key, lambda: _uniform_rows(low, pvals, spatial,
-                                                                   wrt, dtype), 16)
-    return kernel, u, du, spatial, wrt
+    u, du, nan = memo(low, "_fast_uniform", key, lambda: _uniform_rows(low, pvals, wrt,
+                                                                        dtype), 16)
+    return kernel, u, du, spatial, wrt, nan
 
 
-def _uniform_rows(low, pvals: np.ndarray, spatial: bool, wrt: bool, dtype
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """The kernels' uniform inputs ``(u, du)`` (see :func:`_prepare`); not to be written."""
-    P = low.n_params
-    uvals, utans, _ = low.uniform(pvals, np.float64, spatial, wrt)
-    off = 3 if spatial else 0
+def _uniform_rows(low, pvals: np.ndarray, wrt: bool, dtype
+                  ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The kernels' uniform inputs ``(u, du)`` (see :func:`_prepare`; not to be
+    written) and whether a parameter value is NaN (:meth:`Lowered.uniform_rows`,
+    without the copies and flags of :meth:`Lowered.uniform`: a fit asks for new ones
+    at every step)."""
+    uvals, drows = low.uniform_rows(pvals, wrt)
+    f64 = np.dtype(dtype) == np.float64
     with np.errstate(over="ignore"):  # values beyond float32 range become inf
-        u = np.concatenate([uvals, _EXTRA]).astype(dtype)
-        du = (utans[:, off:off + P] if wrt else np.zeros((1, 1))).astype(dtype)
-    du = np.ascontiguousarray(du) if du.size else np.zeros((1, 1), dtype)
-    return u, du
+        u = np.concatenate([uvals, _EXTRA])
+        u = u if f64 else u.astype(dtype)
+        if drows is not None and drows.shape[1]:
+            du = drows if f64 else drows.astype(dtype)
+        else:
+            du = np.zeros((1, 1), dtype)
+    return u, du, bool(np.isnan(uvals[:low.n_params]).any())
 
 
 def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
     """Same contract as :func:`csdf.backends.numpy_backend.evaluate`."""
     dtype = pts.dtype
     n = pts.shape[0]
-    kernel, u, du, spatial, wrt = _prepare(prog, pvals, mode, dtype)
+    kernel, u, du, spatial, wrt, nan = _prepare(prog, pvals, mode, dtype)
     out = result_array((n,), dtype)  # (recycled memory for large results: csdf.memory)
-    grad = result_array((n if spatial else 0, 3), dtype)
-    jac = result_array((n if wrt else 0, len(prog.params)), dtype)
-    run_parallel(lambda r: kernel(pts, u, du, out, grad, jac, r[0], r[1]), n, BLOCK)
+    grad = result_array((n, 3), dtype) if spatial else np.empty((0, 3), dtype)
+    P = len(prog.params)
+    jac = result_array((n, P), dtype) if wrt else np.empty((0, P), dtype)
+    if n and n < 2 * MIN_PER_THREAD:  # one range (run_parallel's), on this thread
+        kernel(pts, u, du, out, grad, jac, 0, n)
+    else:
+        run_parallel(lambda r: kernel(pts, u, du, out, grad, jac, r[0], r[1]), n, BLOCK)
     res = {"value": out}
     if mode in ("grad", "all"):
         res["grad"] = grad
     if mode in ("jac", "all"):
         res["jac"] = jac
-    if np.isnan(pvals).any():
+    if nan:
         for arr in res.values():
             arr[:] = np.nan
     return res
@@ -167,9 +177,8 @@ def serial_values(prog, pvals: np.ndarray) -> Callable[..., np.ndarray]:
     ``evaluate(prog, pts, pvals, 'value')`` gives, with no per-call preparation and no
     thread hand-off, written into ``out (>= M,)`` when given. For callers that run many
     small evaluations on threads of their own (the streaming mesher)."""
-    kernel, u, du, _, _ = _prepare(prog, pvals, "value", np.float64)
+    kernel, u, du, _, _, nan = _prepare(prog, pvals, "value", np.float64)
     empty2 = np.empty((0, 3))
-    nan = bool(np.isnan(pvals).any())
 
     def f(pts: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         out = np.empty(pts.shape[0]) if out is None else out[:pts.shape[0]]

@@ -127,23 +127,34 @@ class Lowered:
         return hit[0].copy(), hit[1].copy(), hit[2].copy()
 
     def _uniform(self, pvals: np.ndarray, dtype, spatial: bool, wrt_params: bool):
-        prog = self.prog
         P = self.n_params
-        vals, dparams = self.prefix(pvals, wrt_params)
-        U = self.n_uniform_rows
-        uvals = np.empty(U, dtype=np.float64)
-        uvals[:P] = pvals
-        uvals[P:P + self.n_consts] = prog.consts
-        uvals[P + self.n_consts:] = vals  # prefix result k is row k after the constants
+        uvals, drows = self.uniform_rows(pvals, wrt_params)
         T = (3 if spatial else 0) + (P if wrt_params else 0)
-        utans = np.zeros((U, max(T, 1)), dtype=np.float64)
+        utans = np.zeros((self.n_uniform_rows, max(T, 1)), dtype=np.float64)
         if wrt_params:
             off = 3 if spatial else 0
-            utans[:P, off:off + P] = np.eye(P)
-            utans[P + self.n_consts:, off:off + P] = dparams
+            utans[:, off:off + P] = drows
         zero = np.all(utans == 0, axis=1)
         with np.errstate(over="ignore"):  # values beyond float32 range become inf
             return uvals.astype(dtype), utans[:, :T].astype(dtype), zero
+
+    def uniform_rows(self, pvals: np.ndarray, wrt_params: bool
+                     ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The uniform rows' values ``(U,)`` float64 (the parameters, the constants,
+        then the prefix's results) and, with ``wrt_params``, their derivatives by the
+        parameters ``(U, P)`` (else None); new arrays, made afresh each call (the
+        compiled evaluator asks for them at every step of a fit)."""
+        P = self.n_params
+        pv = np.asarray(pvals, dtype=np.float64).reshape(-1)
+        vals, dparams = self.prefix(pv, wrt_params)
+        # prefix result k is row k after the constants
+        uvals = np.concatenate([pv, self.prog.consts, vals])
+        if not wrt_params:
+            return uvals, None
+        drows = np.zeros((self.n_uniform_rows, P), dtype=np.float64)
+        drows.reshape(-1)[:P * P:P + 1] = 1.0  # the parameters' own rows: the identity
+        drows[P + self.n_consts:] = dparams
+        return uvals, drows
 
     def prefix(self, pvals: np.ndarray, tangents: bool) -> tuple[np.ndarray, np.ndarray]:
         """Values ``(K,)`` and parameter derivatives ``(K, P)`` of the prefix

@@ -119,14 +119,28 @@ class EvaluatorInfo:
     mesh_calls: bool = False
 
     def load(self) -> ModuleType:
-        """The evaluator's module (imported on first use)."""
-        return importlib.import_module(f"{__package__}.{self.module}")
+        """The evaluator's module (imported on first use, then kept: every evaluation
+        call asks for it)."""
+        mod = _LOADED.get(self.module)
+        if mod is None:
+            mod = _LOADED[self.module] = importlib.import_module(
+                f"{__package__}.{self.module}")
+        return mod
 
     def available(self) -> bool:
         """True when it can run on this machine (its module's ``available()``, where it
-        has one; compiles nothing)."""
-        check = getattr(self.load(), "available", None)
-        return bool(check()) if callable(check) else True
+        has one; compiles nothing). Asked once per process: what a machine can import
+        does not change while it runs."""
+        ok = _AVAILABLE.get(self.module)
+        if ok is None:
+            check = getattr(self.load(), "available", None)
+            ok = _AVAILABLE[self.module] = bool(check()) if callable(check) else True
+        return ok
+
+
+#: evaluator modules already imported, and whether each can run (by module name)
+_LOADED: dict[str, ModuleType] = {}
+_AVAILABLE: dict[str, bool] = {}
 
 
 #: every evaluator, the reference first (the order of ``BACKENDS``)

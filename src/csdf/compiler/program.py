@@ -130,6 +130,8 @@ class Program:
             self.bounds = box
         self._param_index = {p.name: i for i, p in enumerate(self.params)}
         self._param_order = tuple(p.name for p in self.params)
+        self._defaults = np.array([p.default for p in self.params], dtype=np.float64)
+        self._defaults.setflags(write=False)
         self.consts.setflags(write=False)
         self.code.setflags(write=False)
 
@@ -218,6 +220,8 @@ class Program:
             # every value given, in order, as floats (a solver's state): what the loop
             # below gives, without its per-name checks
             return np.fromiter(params.values(), dtype=np.float64, count=len(params))
+        if not params and not kw:  # the defaults (a field at them asks on every call)
+            return self._defaults.copy()
         vals = np.array([p.default for p in self.params], dtype=np.float64)
         given = dict(params or {})
         overlap = set(given) & set(kw)
@@ -254,9 +258,7 @@ class Program:
 
     # ------------------------------------------------------------------ evaluation
     def _run(self, points, params, kw, mode: str, backend: str, check_ranges: bool = True):
-        from ..backends import select
-        from ..points import as_points
-
+        select, as_points = _evaluation_helpers()
         pts, batch, dtype = as_points(points, self.dim)
         pv = self.param_values(params, check_ranges=check_ranges, **kw)
         impl = select(backend, pts.shape[0], self, mode)
@@ -454,3 +456,20 @@ def _colour_programs(cls: type, fields: dict) -> None:
         fields["colors"] = (tuple(cls(**f) for f in inner), None)
     else:
         fields["colors"] = (cls(**inner), palette)
+
+
+_HELPERS: tuple = ()
+
+
+def _evaluation_helpers() -> tuple:
+    """``(csdf.backends.select, csdf.points.as_points)``, imported on the first
+    evaluation (the backends import this module's package lazily too) and kept: an
+    import statement in :meth:`Program._run` cost a few microseconds on every call, and
+    a fit makes thousands of small calls."""
+    global _HELPERS
+    if not _HELPERS:
+        from ..backends import select
+        from ..points import as_points
+
+        _HELPERS = (select, as_points)
+    return _HELPERS

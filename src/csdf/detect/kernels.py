@@ -1,7 +1,8 @@
 """Compiled (Numba) core of detection: connected components of a masked neighbour graph
 by union-find, visiting only the masked points' own edges; the distances of points to
 surface hypotheses (:mod:`.surfaces`' table) with their inlier tests and counts; the
-k nearest neighbours of every point on a grid of cells."""
+k nearest neighbours of every point on a grid of cells; the nearest of a sensor's rays
+to a direction (:class:`.rays.RayIndex`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from numba import njit
 
 __all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
-           "bounds",
+           "bounds", "ray_grid", "ray_nearest", "ray_nearest_point",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
@@ -428,3 +429,145 @@ def grow_inliers(kind: int, h: np.ndarray, P: np.ndarray, N: np.ndarray, free: n
         if free[i]:
             state[i] = UNTESTED
     return _spread(state, seeds, start, adj, kind, h, P, N, eps, cos_tol)
+
+
+@njit(cache=True, nogil=True)
+def ray_grid(G: np.ndarray, lo0: float, lo1: float, h: float, n0: int, n1: int
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Cells of the projected rays ``G`` ``(N, 2)`` on an ``n0 x n1`` grid of cell size
+    ``h`` from ``(lo0, lo1)``: ``(order (N,), start (n0 * n1 + 1,))``, the rays sorted
+    by cell (row-major, stable) and where each cell's run begins."""
+    n = G.shape[0]
+    cell = np.empty(n, dtype=np.int64)
+    count = np.zeros(n0 * n1 + 1, dtype=np.int64)
+    for i in range(n):
+        a = min(max(int(math.floor((G[i, 0] - lo0) / h)), 0), n0 - 1)
+        b = min(max(int(math.floor((G[i, 1] - lo1) / h)), 0), n1 - 1)
+        cell[i] = a * n1 + b
+        count[cell[i] + 1] += 1
+    for c in range(n0 * n1):
+        count[c + 1] += count[c]
+    order = np.empty(n, dtype=np.int64)
+    fill = count[:-1].copy()
+    for i in range(n):
+        order[fill[cell[i]]] = i
+        fill[cell[i]] += 1
+    return order, count
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _square(q0: float, q1: float, q2: float, cq: float, th: float, a: float,
+            e0: np.ndarray, e1: np.ndarray) -> tuple[float, float, float]:
+    """The gnomonic projection ``(u, v)`` of the unit direction ``q`` (``cq``: its
+    cosine to the axis) and the half-width ``r`` of the square holding every direction
+    within the arc ``a`` of it, ``th`` being the largest angle from the axis along such
+    an arc (lengths stretch by at most ``sec^2 th``)."""
+    ce = math.cos(th)
+    r = a / (ce * ce) * (1.0 + 1e-9) + 1e-15
+    return ((q0 * e0[0] + q1 * e0[1] + q2 * e0[2]) / cq,
+            (q0 * e1[0] + q1 * e1[1] + q2 * e1[2]) / cq, r)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nearest_in_square(x0: float, x1: float, x2: float, A: np.ndarray, order: np.ndarray,
+                       start: np.ndarray, u: float, v: float, r: float, lo0: float,
+                       lo1: float, h: float, n0: int, n1: int, limit: float
+                       ) -> tuple[int, float]:
+    """The row of ``A`` ``(N, 3)`` nearest to ``(x0, x1, x2)`` among those gridded
+    (:func:`ray_grid`) in the cells of the square of half-width ``r`` about ``(u, v)``,
+    when its squared distance is below ``limit``: ``(row or -1, squared distance)``;
+    of equally near rows, the lowest."""
+    a0 = max(int(math.floor((u - r - lo0) / h)), 0)
+    a1 = min(int(math.floor((u + r - lo0) / h)), n0 - 1)
+    b0 = max(int(math.floor((v - r - lo1) / h)), 0)
+    b1 = min(int(math.floor((v + r - lo1) / h)), n1 - 1)
+    k = -1
+    dmin = limit
+    for ga in range(a0, a1 + 1):
+        for gb in range(b0, b1 + 1):
+            cc = ga * n1 + gb
+            for s in range(start[cc], start[cc + 1]):
+                j = order[s]
+                d0 = x0 - A[j, 0]
+                d1 = x1 - A[j, 1]
+                d2 = x2 - A[j, 2]
+                dd = d0 * d0 + d1 * d1 + d2 * d2
+                if dd < dmin or (dd == dmin and k >= 0 and j < k):
+                    dmin = dd
+                    k = j
+    return k, dmin
+
+
+@njit(cache=True, nogil=True)
+def ray_nearest(Q: np.ndarray, D: np.ndarray, order: np.ndarray, start: np.ndarray,
+                c: np.ndarray, e0: np.ndarray, e1: np.ndarray, lo0: float, lo1: float,
+                h: float, n0: int, n1: int, tol: float, cos_far: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """For each unit direction ``Q[i]`` ``(M, 3)``, the ray of ``D`` ``(N, 3)`` nearest
+    to it (chord distance) when nearer than ``tol``: ``(index (M,), -1 for none;
+    squared distance (M,))``. The rays are gridded in the gnomonic projection about
+    the axis ``c`` (``u = D.e0 / D.c``, ``v = D.e1 / D.c``; :func:`ray_grid`). A chord
+    below ``tol`` is an arc below ``a = 2 asin(tol / 2)``; along it the angle from
+    ``c`` stays below ``theta_q + a``, where the projection stretches lengths by at
+    most ``sec^2``, so every ray within ``tol`` lies within ``a sec^2(theta_q + a)``
+    of the query's projection, and only the cells of that square are read. Queries
+    farther than ``cos_far`` (a cosine) from the axis are answered by the caller."""
+    m = Q.shape[0]
+    best = np.full(m, -1, dtype=np.int64)
+    bd = np.full(m, np.inf)
+    tol2 = tol * tol
+    a = 2.0 * math.asin(min(1.0, 0.5 * tol))
+    for i in range(m):
+        q0, q1, q2 = Q[i, 0], Q[i, 1], Q[i, 2]
+        cq = q0 * c[0] + q1 * c[1] + q2 * c[2]
+        if cq < cos_far:
+            continue
+        u, v, r = _square(q0, q1, q2, cq, math.acos(min(1.0, cq)) + a, a, e0, e1)
+        k, dmin = _nearest_in_square(q0, q1, q2, D, order, start, u, v, r, lo0, lo1, h,
+                                     n0, n1, tol2)
+        if k >= 0:
+            best[i] = k
+            bd[i] = dmin
+    return best, bd
+
+
+@njit(cache=True, nogil=True)
+def ray_nearest_point(X: np.ndarray, o: np.ndarray, P: np.ndarray, order: np.ndarray,
+                      start: np.ndarray, c: np.ndarray, e0: np.ndarray, e1: np.ndarray,
+                      lo0: float, lo1: float, h: float, n0: int, n1: int, radius: float,
+                      widest: float, far: float) -> tuple[np.ndarray, np.ndarray]:
+    """For each point ``X[i]`` ``(M, 3)``, the scan point of ``P`` ``(N, 3)`` (seen
+    from ``o``, gridded by their rays as in :func:`ray_nearest`) nearest to it when
+    nearer than ``radius``: ``(index (M,), -1 for none, -2 where the caller must look
+    itself; squared distance (M,))``. A point within ``radius`` of ``X[i]``, at range
+    ``rho`` from ``o``, lies on a ray within ``a = asin(radius / rho)`` of ``X[i]``'s,
+    so only those rays' cells are read (``widest``: the largest angle of a ray from the
+    axis; ``far``: the largest angle the grid's stretch bound is used at)."""
+    m = X.shape[0]
+    best = np.full(m, -1, dtype=np.int64)
+    bd = np.full(m, np.inf)
+    r2 = radius * radius
+    for i in range(m):
+        x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
+        v0, v1, v2 = x0 - o[0], x1 - o[1], x2 - o[2]
+        rho = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        if rho <= radius * (1.0 + 1e-6):
+            best[i] = -2
+            continue
+        a = math.asin(radius / rho) * (1.0 + 1e-9) + 1e-15
+        q0, q1, q2 = v0 / rho, v1 / rho, v2 / rho
+        cq = q0 * c[0] + q1 * c[1] + q2 * c[2]
+        thq = math.acos(max(-1.0, min(1.0, cq)))
+        if thq - a > widest + 1e-9:
+            continue  # no ray comes that close
+        th = thq + a
+        if th >= far:
+            best[i] = -2
+            continue
+        u, v, r = _square(q0, q1, q2, cq, th, a, e0, e1)
+        k, dmin = _nearest_in_square(x0, x1, x2, P, order, start, u, v, r, lo0, lo1, h,
+                                     n0, n1, r2)
+        if k >= 0:
+            best[i] = k
+            bd[i] = dmin
+    return best, bd

@@ -115,6 +115,7 @@ from .neighbours import (
     viewpoint_arg,
 )
 from .primitives import PrimitiveDetection, detect_primitives
+from .rays import RayIndex
 from .surfaces import frame_z
 
 __all__ = ["Detection", "detect", "detections_to_scene", "YAWS", "REFINE_TOP",
@@ -1021,13 +1022,20 @@ class _Run:
         else:
             front = np.ones(X.shape[:2], dtype=bool)
         dd = np.zeros(X.shape[:2])  # only the sensor-facing samples are looked up
-        q, _ = self.nb.tree.query(X[front], k=1, distance_upper_bound=fs)
-        q = np.minimum(q, fs)
+        Xf = X[front]
+        seen = np.ones(len(Xf), dtype=bool)
         if self.vp is not None:
             # a sample whose ray shows a scan point nearer than it is hidden (by another
-            # object): its missing points are no evidence against the pose
-            q = np.where(self._occluded(X[front], fs), 0.0, q)
-        dd[front] = q
+            # object): its missing points are no evidence against the pose (it costs
+            # nothing, so only the others are looked up: a third of them in clutter)
+            seen = ~self._occluded(Xf, fs)
+        q = np.zeros(len(Xf))
+        if self.vp is not None:
+            rays, _, _ = self._ray_index()
+            q[seen], _ = rays.nearest_point(Xf[seen], self.P, self.vp, fs, self.nb.tree)
+        else:
+            q[seen], _ = self.nb.tree.query(Xf[seen], k=1, distance_upper_bound=fs)
+        dd[front] = np.minimum(q, fs)
         return (np.where(front, 0.5 * dd * dd, 0.0).sum(axis=1)
                 / np.maximum(front.sum(axis=1), 1))
 
@@ -1036,11 +1044,10 @@ class _Run:
         point on the ray through each (the nearest ray within the scan's angular
         spacing) lies nearer the sensor by more than ``margin`` (scene units). Points
         whose ray holds no scan point are not occluded (shape ``X.shape[:-1]``)."""
-        tree, tol, rng_scan = self._ray_index()
+        rays, _, rng_scan = self._ray_index()
         v = X - self.vp
         r = np.linalg.norm(v, axis=-1)
-        dd, j = tree.query((v / np.maximum(r, 1e-300)[..., None]).reshape(-1, 3), k=1,
-                           distance_upper_bound=tol)
+        dd, j = rays.nearest((v / np.maximum(r, 1e-300)[..., None]).reshape(-1, 3))
         j = np.minimum(j, len(self.P) - 1).reshape(r.shape)
         return np.isfinite(dd).reshape(r.shape) & (rng_scan[j] < r - margin)
 
@@ -2147,18 +2154,18 @@ class _Run:
         frame)."""
         return _moved_surface(m.fld, m.surface, params)
 
-    def _ray_index(self) -> tuple[Any, float, np.ndarray]:
-        """``(tree, tolerance, ranges)``: a KD-tree of the scan's unit ray directions,
-        the angular tolerance of a ray match (radians, as a chord: 1.5 times the median
-        angle to the nearest other ray) and the points' ranges ``(N,)`` from the
-        viewpoint (scene units); built once."""
+    def _ray_index(self) -> tuple[RayIndex, float, np.ndarray]:
+        """``(index, tolerance, ranges)``: the scan's unit ray directions for
+        nearest-ray queries within the tolerance of a ray match (:class:`.rays.RayIndex`;
+        radians, as a chord: 1.5 times the median angle to the nearest other ray) and
+        the points' ranges ``(N,)`` from the viewpoint (scene units); built once."""
         if getattr(self, "_rays", None) is None:
             from scipy.spatial import cKDTree
 
-            tree = cKDTree(self.dirs)
             step = max(1, len(self.dirs) // 2000)
-            dd, _ = tree.query(self.dirs[::step], k=2)
-            self._rays = (tree, 1.5 * float(np.median(dd[:, 1])),
+            dd, _ = cKDTree(self.dirs).query(self.dirs[::step], k=2)
+            tol = 1.5 * float(np.median(dd[:, 1]))
+            self._rays = (RayIndex(self.dirs, tol), tol,
                           np.linalg.norm(self.P - self.vp, axis=1))
         return self._rays
 
@@ -2192,14 +2199,13 @@ class _Run:
         d = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(poses), len(near))
         score = _gain(d, self.sigma).sum(axis=1)
         if self.vp is not None and len(near):
-            tree, tol, rng_scan = self._ray_index()
+            rays, _, rng_scan = self._ray_index()
             Xw = np.stack([surf @ RR.T + tt for RR, tt in poses])  # (Y, K, 3)
             Nw = np.stack([sn @ RR.T for RR, _ in poses])
             v = Xw - self.vp
             r = np.linalg.norm(v, axis=2)
             front = np.einsum("yki,yki->yk", Nw, -v) > 0
-            dd, j = tree.query((v / r[..., None]).reshape(-1, 3), k=1,
-                               distance_upper_bound=tol)
+            dd, j = rays.nearest((v / r[..., None]).reshape(-1, 3))
             hit = np.isfinite(dd).reshape(r.shape) & front
             jj = np.minimum(j, len(self.P) - 1).reshape(r.shape)
             through = hit & (rng_scan[jj] > r + 3.0 * self.sigma)

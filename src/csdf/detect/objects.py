@@ -1023,18 +1023,16 @@ class _Run:
             front = np.ones(X.shape[:2], dtype=bool)
         dd = np.zeros(X.shape[:2])  # only the sensor-facing samples are looked up
         Xf = X[front]
-        seen = np.ones(len(Xf), dtype=bool)
+        q = np.zeros(len(Xf))
         if self.vp is not None:
             # a sample whose ray shows a scan point nearer than it is hidden (by another
             # object): its missing points are no evidence against the pose (it costs
             # nothing, so only the others are looked up: a third of them in clutter)
             seen = ~self._occluded(Xf, fs)
-        q = np.zeros(len(Xf))
-        if self.vp is not None:
             rays, _, _ = self._ray_index()
             q[seen], _ = rays.nearest_point(Xf[seen], self.P, self.vp, fs, self.nb.tree)
         else:
-            q[seen], _ = self.nb.tree.query(Xf[seen], k=1, distance_upper_bound=fs)
+            q[:], _ = self.nb.tree.query(Xf, k=1, distance_upper_bound=fs)
         dd[front] = np.minimum(q, fs)
         return (np.where(front, 0.5 * dd * dd, 0.0).sum(axis=1)
                 / np.maximum(front.sum(axis=1), 1))
@@ -2164,10 +2162,11 @@ class _Run:
         if getattr(self, "_rays", None) is None:
             from scipy.spatial import cKDTree
 
+            tree = cKDTree(self.dirs)
             step = max(1, len(self.dirs) // 2000)
-            dd, _ = cKDTree(self.dirs).query(self.dirs[::step], k=2)
+            dd, _ = tree.query(self.dirs[::step], k=2)
             tol = 1.5 * float(np.median(dd[:, 1]))
-            self._rays = (RayIndex(self.dirs, tol), tol,
+            self._rays = (RayIndex(self.dirs, tol, tree), tol,
                           np.linalg.norm(self.P - self.vp, axis=1))
         return self._rays
 

@@ -16,6 +16,7 @@ than :data:`MAX_CELLS` cells, fall back to the KD-tree.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -32,12 +33,14 @@ MAX_CELLS = 1 << 22
 
 class RayIndex:
     """The unit ray directions ``dirs`` ``(N, 3)`` of a scan, for nearest-ray queries
-    within the chord distance ``tol`` (radians, about an angle)."""
+    within the chord distance ``tol`` (radians, about an angle). ``tree``: a
+    :class:`scipy.spatial.cKDTree` of ``dirs`` the caller already has, for the
+    fallback (else one is built when needed)."""
 
-    def __init__(self, dirs: np.ndarray, tol: float):
+    def __init__(self, dirs: np.ndarray, tol: float, tree: Any = None):
         self.dirs = np.ascontiguousarray(dirs, dtype=np.float64)
         self.tol = float(tol)
-        self._tree = None
+        self._tree = tree
         self._grid: tuple | None = None
         n = len(self.dirs)
         mean = self.dirs.sum(axis=0) if n else np.zeros(3)
@@ -73,9 +76,10 @@ class RayIndex:
         self._widest = widest
 
     def _fallback(self) -> None:
-        from scipy.spatial import cKDTree
+        if self._tree is None:
+            from scipy.spatial import cKDTree
 
-        self._tree = cKDTree(self.dirs)
+            self._tree = cKDTree(self.dirs)
 
     @property
     def gridded(self) -> bool:

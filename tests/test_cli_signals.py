@@ -129,6 +129,21 @@ def test_sigterm_during_an_atomic_write_removes_the_temporary_file(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_swallowed_stop_that_ends_in_another_error_is_reported_as_the_stop(tmp_path):
+    # trimesh's import, interrupted by SIGINT under load, swallowed the stop and then
+    # failed with a TypeError of its own: the command must still stop cleanly
+    proc, stderr, _ = _run_go("""
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5)
+        except BaseException:
+            pass  # swallowed
+        raise TypeError("unsupported operand type(s) for |")
+    """, tmp_path)
+    assert proc.returncode == 130, stderr
+    assert "SIGINT" in stderr and "Traceback" not in stderr and "TypeError" not in stderr
+
+
 def test_a_swallowed_stop_is_sent_again(tmp_path):
     # code that takes the stop for some other failure (trimesh imports its optional
     # packages under ``except BaseException``) must not keep the command running

@@ -197,7 +197,7 @@ class _StopRequest:
 
 
 @contextmanager
-def _signals() -> Iterator[None]:
+def _signals() -> Iterator[_StopRequest | None]:
     """While a command runs, SIGINT and SIGTERM raise :class:`Stopped` on the main
     thread (even where the process was started with them ignored, as a shell does for
     background jobs: a long ``csdf mesh`` must stop when asked), so that the work in
@@ -205,10 +205,10 @@ def _signals() -> Iterator[None]:
     the work queued on its threads), temporary files are removed, and the exit status
     says which signal it was. Where some code swallows the ``Stopped`` (it is raised
     wherever the main thread happens to be), the signal is sent again every
-    :data:`RESEND_S` seconds until it stops the command. Off the main thread (tests,
-    embedding) nothing is installed."""
+    :data:`RESEND_S` seconds until it stops the command. Yields the stop request
+    (None off the main thread (tests, embedding), where nothing is installed)."""
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield None
         return
     wanted = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
     request = _StopRequest()
@@ -221,7 +221,7 @@ def _signals() -> Iterator[None]:
     try:
         for sig in wanted:
             old[sig] = signal.signal(sig, stop)
-        yield
+        yield request
     finally:
         request.finish()
         for sig, handler in old.items():
@@ -232,8 +232,9 @@ def _run(fn: Callable[[], None]) -> None:
     """Run a command: a :class:`csdf.CsdfError` (or a stray ``OSError``) is printed as
     one message and exits with status 2; SIGINT and SIGTERM stop it cleanly with status
     130 or 143."""
+    request = None
     try:
-        with _signals():
+        with _signals() as request:
             fn()
     except CsdfError as exc:
         err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, markup=True,
@@ -248,6 +249,11 @@ def _run(fn: Callable[[], None]) -> None:
         # a signal raised inside a compiled kernel's call comes out as a SystemError
         # ("returned a result with an exception set") caused by the Stopped
         stop = _stopped_by(exc)
+        if stop is None and request is not None and request.signum is not None:
+            # code that swallowed the Stopped then failed for want of what it was
+            # doing (trimesh's import, interrupted, raised a TypeError of its own):
+            # the failure is the signal's
+            stop = Stopped(request.signum)
         if stop is None:
             raise
         _report_stop(stop)

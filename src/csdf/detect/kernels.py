@@ -13,7 +13,7 @@ from numba import njit
 
 __all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
-           "bounds", "ray_grid", "ray_nearest", "ray_nearest_point",
+           "bounds", "ray_nearest", "ray_nearest_point",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
@@ -431,30 +431,6 @@ def grow_inliers(kind: int, h: np.ndarray, P: np.ndarray, N: np.ndarray, free: n
     return _spread(state, seeds, start, adj, kind, h, P, N, eps, cos_tol)
 
 
-@njit(cache=True, nogil=True)
-def ray_grid(G: np.ndarray, lo0: float, lo1: float, h: float, n0: int, n1: int
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Cells of the projected rays ``G`` ``(N, 2)`` on an ``n0 x n1`` grid of cell size
-    ``h`` from ``(lo0, lo1)``: ``(order (N,), start (n0 * n1 + 1,))``, the rays sorted
-    by cell (row-major, stable) and where each cell's run begins."""
-    n = G.shape[0]
-    cell = np.empty(n, dtype=np.int64)
-    count = np.zeros(n0 * n1 + 1, dtype=np.int64)
-    for i in range(n):
-        a = min(max(int(math.floor((G[i, 0] - lo0) / h)), 0), n0 - 1)
-        b = min(max(int(math.floor((G[i, 1] - lo1) / h)), 0), n1 - 1)
-        cell[i] = a * n1 + b
-        count[cell[i] + 1] += 1
-    for c in range(n0 * n1):
-        count[c + 1] += count[c]
-    order = np.empty(n, dtype=np.int64)
-    fill = count[:-1].copy()
-    for i in range(n):
-        order[fill[cell[i]]] = i
-        fill[cell[i]] += 1
-    return order, count
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _square(q0: float, q1: float, q2: float, cq: float, th: float, a: float,
             e0: np.ndarray, e1: np.ndarray) -> tuple[float, float, float]:
@@ -473,10 +449,10 @@ def _nearest_in_square(x0: float, x1: float, x2: float, A: np.ndarray, order: np
                        start: np.ndarray, u: float, v: float, r: float, lo0: float,
                        lo1: float, h: float, n0: int, n1: int, limit: float
                        ) -> tuple[int, float]:
-    """The row of ``A`` ``(N, 3)`` nearest to ``(x0, x1, x2)`` among those gridded
-    (:func:`ray_grid`) in the cells of the square of half-width ``r`` about ``(u, v)``,
-    when its squared distance is below ``limit``: ``(row or -1, squared distance)``;
-    of equally near rows, the lowest."""
+    """The row of ``A`` ``(N, 3)`` nearest to ``(x0, x1, x2)`` among those in the grid
+    cells (``order``, ``start``: :func:`csdf.cellsort.group_by_cell`) of the square of
+    half-width ``r`` about ``(u, v)``, when its squared distance is below ``limit``:
+    ``(row or -1, squared distance)``; of equally near rows, the lowest."""
     a0 = max(int(math.floor((u - r - lo0) / h)), 0)
     a1 = min(int(math.floor((u + r - lo0) / h)), n0 - 1)
     b0 = max(int(math.floor((v - r - lo1) / h)), 0)
@@ -506,7 +482,7 @@ def ray_nearest(Q: np.ndarray, D: np.ndarray, order: np.ndarray, start: np.ndarr
     """For each unit direction ``Q[i]`` ``(M, 3)``, the ray of ``D`` ``(N, 3)`` nearest
     to it (chord distance) when nearer than ``tol``: ``(index (M,), -1 for none;
     squared distance (M,))``. The rays are gridded in the gnomonic projection about
-    the axis ``c`` (``u = D.e0 / D.c``, ``v = D.e1 / D.c``; :func:`ray_grid`). A chord
+    the axis ``c`` (``u = D.e0 / D.c``, ``v = D.e1 / D.c``; :class:`.rays.RayIndex`). A chord
     below ``tol`` is an arc below ``a = 2 asin(tol / 2)``; along it the angle from
     ``c`` stays below ``theta_q + a``, where the projection stretches lengths by at
     most ``sec^2``, so every ray within ``tol`` lies within ``a sec^2(theta_q + a)``

@@ -1029,7 +1029,7 @@ class _Run:
             # object): its missing points are no evidence against the pose (it costs
             # nothing, so only the others are looked up: a third of them in clutter)
             seen = ~self._occluded(Xf, fs)
-            rays, _, _ = self._ray_index()
+            rays, _ = self._ray_index()
             q[seen], _ = rays.nearest_point(Xf[seen], self.P, self.vp, fs, self.nb.tree)
         else:
             q[:], _ = self.nb.tree.query(Xf, k=1, distance_upper_bound=fs)
@@ -1042,7 +1042,7 @@ class _Run:
         point on the ray through each (the nearest ray within the scan's angular
         spacing) lies nearer the sensor by more than ``margin`` (scene units). Points
         whose ray holds no scan point are not occluded (shape ``X.shape[:-1]``)."""
-        rays, _, rng_scan = self._ray_index()
+        rays, rng_scan = self._ray_index()
         v = X - self.vp
         r = np.linalg.norm(v, axis=-1)
         dd, j = rays.nearest((v / np.maximum(r, 1e-300)[..., None]).reshape(-1, 3))
@@ -1370,7 +1370,7 @@ class _Run:
                           np.array([lo - pad, hi + pad]), what="detect", check_ranges=False)
         R, t = np.asarray(res.rotation, dtype=float), np.asarray(res.translation, dtype=float)
         tm = sphere_trace(fld, (self.vp - t) @ R, self.dirs[rays] @ R).t
-        _, _, rng_scan = self._ray_index()
+        _, rng_scan = self._ray_index()
         r = rng_scan[rays]
         hit = np.isfinite(tm)
         tol = 3.0 * self.sigma
@@ -1407,7 +1407,7 @@ class _Run:
         fld = trace_field(m.shape, dict(res.params), m.backend,
                           np.array([b[0] - 2 * pad, b[1] + 2 * pad]), what="detect",
                           check_ranges=False)
-        _, _, rng_scan = self._ray_index()
+        _, rng_scan = self._ray_index()
         tm = sphere_trace(fld, (self.vp - res.translation) @ res.rotation,
                           self.dirs[inb] @ res.rotation).t
         free = np.where(np.isfinite(tm), rng_scan[inb] < tm - pad, True)
@@ -1901,7 +1901,7 @@ class _Run:
             cone = np.ones(len(self.P), dtype=bool)
         else:
             cone = self.dirs @ (v / dist) >= math.cos(math.asin(rad / dist))
-        _, _, rng_scan = self._ray_index()
+        _, rng_scan = self._ray_index()
         rays = np.flatnonzero(cone & (rng_scan >= dist - rad))
         inside = np.linalg.norm(self.P[rays] - cw, axis=1) <= rad
         within, behind = rays[inside], rays[~inside]
@@ -1943,7 +1943,7 @@ class _Run:
         pad = 0.05 * float(np.linalg.norm(hi - lo)) + 3.0 * self.sigma
         fld = trace_field(m.shape, params, m.backend, np.array([lo - pad, hi + pad]),
                           what="detect", check_ranges=False)
-        _, _, rng_scan = self._ray_index()
+        _, rng_scan = self._ray_index()
         D = self.dirs[rays]
         offsets = [np.zeros((len(rays), 3))]
         if spread > 0.0:
@@ -2154,10 +2154,10 @@ class _Run:
         frame)."""
         return _moved_surface(m.fld, m.surface, params)
 
-    def _ray_index(self) -> tuple[RayIndex, float, np.ndarray]:
-        """``(index, tolerance, ranges)``: the scan's unit ray directions for
-        nearest-ray queries within the tolerance of a ray match (:class:`.rays.RayIndex`;
-        radians, as a chord: 1.5 times the median angle to the nearest other ray) and
+    def _ray_index(self) -> tuple[RayIndex, np.ndarray]:
+        """``(index, ranges)``: the scan's unit ray directions for nearest-ray queries
+        within the tolerance of a ray match (:class:`.rays.RayIndex`; its ``tol``, in
+        radians as a chord: 1.5 times the median angle to the nearest other ray) and
         the points' ranges ``(N,)`` from the viewpoint (scene units); built once."""
         if getattr(self, "_rays", None) is None:
             from scipy.spatial import cKDTree
@@ -2166,7 +2166,7 @@ class _Run:
             step = max(1, len(self.dirs) // 2000)
             dd, _ = tree.query(self.dirs[::step], k=2)
             tol = 1.5 * float(np.median(dd[:, 1]))
-            self._rays = (RayIndex(self.dirs, tol, tree), tol,
+            self._rays = (RayIndex(self.dirs, tol, tree),
                           np.linalg.norm(self.P - self.vp, axis=1))
         return self._rays
 
@@ -2200,7 +2200,7 @@ class _Run:
         d = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(poses), len(near))
         score = _gain(d, self.sigma).sum(axis=1)
         if self.vp is not None and len(near):
-            rays, _, rng_scan = self._ray_index()
+            rays, rng_scan = self._ray_index()
             Xw = np.stack([surf @ RR.T + tt for RR, tt in poses])  # (Y, K, 3)
             Nw = np.stack([sn @ RR.T for RR, _ in poses])
             v = Xw - self.vp

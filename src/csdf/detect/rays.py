@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import ray_grid, ray_nearest, ray_nearest_point
+from ..cellsort import group_by_cell
+from .kernels import ray_nearest, ray_nearest_point
 
 __all__ = ["RayIndex", "MAX_ANGLE", "MAX_CELLS"]
 
@@ -50,7 +51,8 @@ class RayIndex:
             return
         c = mean / norm
         a = 2.0 * math.asin(min(1.0, 0.5 * self.tol))
-        widest = math.acos(max(-1.0, min(1.0, float((self.dirs @ c).min()))))
+        cq = self.dirs @ c
+        widest = math.acos(max(-1.0, min(1.0, float(cq.min()))))
         if widest + 2.0 * a + 1e-6 >= MAX_ANGLE:
             self._fallback()
             return
@@ -58,7 +60,6 @@ class RayIndex:
         e0 = np.cross(c, np.eye(3)[int(np.argmin(np.abs(c)))])
         e0 /= np.linalg.norm(e0)
         e1 = np.cross(c, e0)
-        cq = self.dirs @ c
         G = np.ascontiguousarray(np.stack([(self.dirs @ e0) / cq, (self.dirs @ e1) / cq],
                                           axis=1))
         h = a  # a cell as wide as the search square at the axis
@@ -67,7 +68,10 @@ class RayIndex:
         if n0 * n1 > MAX_CELLS:
             self._fallback()
             return
-        order, start = ray_grid(G, float(lo[0]), float(lo[1]), h, n0, n1)
+        # each ray's cell, as the queries compute it (row-major), grouped by cell
+        cell = (np.clip(np.floor((G[:, 0] - lo[0]) / h).astype(np.int64), 0, n0 - 1) * n1
+                + np.clip(np.floor((G[:, 1] - lo[1]) / h).astype(np.int64), 0, n1 - 1))
+        order, start = group_by_cell(cell, n0 * n1)
         # queries farther from the axis than the widest ray and an arc of the
         # tolerance are within it of no ray (a little more is read: it is checked)
         cos_far = math.cos(widest + a + 1e-6)

@@ -911,6 +911,13 @@ class _Run:
                 continue
             off = float(pl.params["offset"])
             d = self.P @ nrm - off
+            if self.plane is None and self.vp is None:
+                # no sensor to face: the plane's normal from unoriented normals has
+                # either sign, and "up" is the side that holds most of the points off
+                # it (what stands on a floor or a table top)
+                away = np.abs(d) > 3.0 * self.sigma
+                if np.count_nonzero(d[away] < 0.0) > np.count_nonzero(d[away] > 0.0):
+                    nrm, off, d = -nrm, -off, -d
             if self.plane is None and self.estimate_noise:
                 # the noise level from the support's residuals (the neighbourhoods'
                 # estimate is low when the noise is not small against the spacing)

@@ -12,7 +12,14 @@ import pytest
 
 import csdf
 from csdf.detect import surfaces as S
-from csdf.detect.neighbours import components, linked_edges, neighbourhood, sparse_points
+from csdf.detect.neighbours import (
+    components,
+    distinct_points,
+    linked_edges,
+    neighbourhood,
+    sparse_points,
+    with_copies,
+)
 from csdf.detect.objects import GAIN_CAP_LOG, MAX_INTRUDERS, RAY_SPREAD, YAW_DOUBT, _rz
 from csdf.fit.quality import VIEW_RAYS, _edge_rays
 
@@ -288,6 +295,25 @@ def _noisy_samples(shape, n, seed, noise=0.001):
     return p + rng.normal(0.0, noise, (len(p), 1)) * q, q
 
 
+
+def test_repeated_points_are_found_as_the_distinct_ones_with_every_copy():
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0], [2, 0, 0], [1, 0, 0], [0, 0, 0.0]])
+    keep, owner = distinct_points(P)
+    assert keep.tolist() == [0, 1, 3] and owner.tolist() == [0, 1, 0, 2, 1, 0]
+    assert with_copies(np.array([0, 2]), owner).tolist() == [0, 2, 3, 5]
+    assert distinct_points(P[[0, 1, 3]]) is None
+    # a sphere whose points each come six times (a cloud read off a mesh's triangles
+    # repeats every vertex about that often): its neighbours were its own copies at
+    # distance 0, and from five copies up the sphere was lost; now it is the sphere of
+    # the distinct points, with every copy
+    p, q = _noisy_samples(csdf.sphere(0.3), 2000, seed=4)
+    one = csdf.detect_primitives(p, q, seed=0)
+    six = csdf.detect_primitives(np.repeat(p, 6, axis=0), np.repeat(q, 6, axis=0), seed=0)
+    assert [d.kind for d in six] == [d.kind for d in one] == ["sphere"]
+    assert six[0].params == one[0].params
+    assert np.array_equal(six[0].inliers, with_copies(one[0].inliers, np.repeat(
+        np.arange(len(p)), 6)))
+
 @pytest.fixture(scope="module")
 def hard_scene():
     """Primitives at 1 mm noise and the density of a 40k-point benchmark scene (25,000
@@ -477,6 +503,11 @@ def test_detect_bad_models():
         csdf.detect(P, [])
     with pytest.raises(csdf.CsdfError, match="viewpoint"):
         csdf.detect(P, ["stool"], viewpoint=(0, 0))
+    with pytest.raises(csdf.CsdfError, match="three numbers"):
+        csdf.detect(P, ["stool"], viewpoint="0,0,0")
+    with pytest.raises(csdf.CsdfError, match="model 'model_0' has no finite bounds") as e:
+        csdf.detect(P, [csdf.plane((0, 0, 1), 0)])
+    assert "bounds=" not in str(e.value)  # detect takes no bounds
     with pytest.raises(csdf.CsdfError, match="twice"):
         csdf.detect(P, ["stool", "stool"])
     for bad in (0, -1, 1.5, True):
@@ -505,6 +536,30 @@ def test_cli_detect(clutter, tmp_path):
     assert png.stat().st_size > 10_000
     r = CliRunner().invoke(app, ["detect", str(ply), "--models", "nosuch", "-o", str(out)])
     assert r.exit_code != 0 and "nosuch" in r.output
+    # an output folder that does not exist is reported before the work, and nothing is
+    # written (the scene was written before the picture failed)
+    other = tmp_path / "other.json"
+    r = CliRunner().invoke(app, ["detect", str(ply), "--models", "stool", "-o", str(other),
+                                 "--picture", str(tmp_path / "no" / "p.png")])
+    assert r.exit_code == 2 and "folder" in r.output and "does not exist" in r.output
+    assert not other.exists()
+    # a bad row is reported with the file's name; an empty scan is an error
+    bad = tmp_path / "bad.ply"
+    bad.write_text("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                   "property float y\nproperty float z\nend_header\n0 0 1\nnan 0 1\n")
+    r = CliRunner().invoke(app, ["detect", str(bad), "--models", "stool", "-o", str(other)])
+    assert r.exit_code == 2 and "bad.ply: points: row 1 is not finite" in r.output
+    empty = tmp_path / "empty.ply"
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                     "property float y\nproperty float z\nend_header\n")
+    r = CliRunner().invoke(app, ["detect", str(empty), "--models", "stool", "-o", str(other)])
+    assert r.exit_code == 2 and "no points" in r.output and not other.exists()
+
+
+def test_a_cloud_in_millimetres_is_named_when_nothing_is_found(clutter):
+    P, *_ = clutter
+    with pytest.warns(UserWarning, match=r"millimetres against metres: scale them by 0.001"):
+        assert csdf.detect(1000.0 * P, ["stool"], viewpoint=(0, 0, 0), seed=0) == []
 
 
 def test_picture_projection_camera_and_world_frames():
@@ -547,6 +602,16 @@ def test_detect_without_a_viewpoint_takes_up_from_what_stands_on_the_floor(clutt
     assert [d.model for d in again] == ["stool"], again
     err = csdf.metrics.mssd(pts, again[0].pose, flip @ _camera_pose(cam, pose), syms)
     assert err < 0.1 * csdf.metrics.diameter(pts)
+
+
+def test_detect_on_a_scan_given_twice_finds_the_same_stool_with_both_copies(clutter):
+    P, N, *_ = clutter
+    once = csdf.detect(P, ["stool"], viewpoint=(0, 0, 0), seed=0)
+    twice = csdf.detect(np.concatenate([P, P]), ["stool"], viewpoint=(0, 0, 0), seed=0)
+    assert [d.model for d in twice] == [d.model for d in once] == ["stool"]
+    assert np.array_equal(twice[0].pose.matrix, once[0].pose.matrix)
+    assert np.array_equal(twice[0].inliers, np.concatenate([once[0].inliers,
+                                                            once[0].inliers + len(P)]))
 
 def test_feet_split_a_cluster_wider_than_the_model():
     from csdf.detect.objects import FEET_SPLIT, _feet
@@ -1634,3 +1699,17 @@ def test_a_tall_models_fit_gathers_the_points_of_its_own_top(monkeypatch, sized)
         assert share == 1.0
     else:
         assert share < 0.8
+
+
+@pytest.mark.parametrize("bad", [-1, "a", 1.5, True])
+def test_bad_seeds_are_named_before_any_work(bad):
+    P, N = _noisy_samples(csdf.sphere(0.3), 200, seed=0)
+    cam = csdf.Camera.look_at(eye=(0, -2, 0), target=(0, 0, 0), fov=40, width=8, height=6)
+    calls = [lambda: csdf.detect_primitives(P, N, seed=bad),
+             lambda: csdf.detect(P, ["stool"], seed=bad),
+             lambda: csdf.infer(P, N, seed=bad),
+             lambda: csdf.scan(csdf.sphere(0.3), cam, seed=bad),
+             lambda: csdf.sample_surface(csdf.sphere(0.3), 10, seed=bad)]
+    for call in calls:
+        with pytest.raises(csdf.CsdfError, match="seed must be None, a whole number >= 0"):
+            call()

@@ -107,6 +107,11 @@ def test_bad_input(cloud):
         infer(pts, effort=0)
     with pytest.raises(CsdfError, match="prefer"):
         infer(pts, prefer="smallest")
+    for bad in (-1, float("nan"), "a"):
+        with pytest.raises(CsdfError, match="penalty must be None or a number >= 0"):
+            infer(pts, penalty=bad)
+    with pytest.raises(CsdfError, match="at least 50 distinct points, got 20"):
+        infer(np.repeat(pts[:20], 5, axis=0))  # copies are one point
     with pytest.raises(CsdfError, match="normals"):
         infer(pts, nrm[:5])
     with pytest.raises(CsdfError, match="no primitive"):

@@ -27,6 +27,7 @@ LAYERS: dict[str, int] = {
     "csdf.parallel": 0, "csdf.memory": 0, "csdf.cache": 0, "csdf.pose": 0,
     "csdf.opformula": 0, "csdf.bvh": 0, "csdf.exprgrad": 0,
     "csdf.cellsort": 0,  # points grouped by cell (a counting sort)
+    "csdf.seeds": 0,  # the seed argument, checked
     "csdf.meshdata": 0,  # a closed triangle mesh, the data block of mesh calls
     # 1 shapes: primitives, operators, and the text language that builds them
     "csdf.shapes": 1, "csdf.lang": 1, "csdf.zoo": 1,

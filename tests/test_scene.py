@@ -177,6 +177,15 @@ def test_scene_files_round_trip(tmp_path):
     small = csdf.Scene.load(tmp_path / "small.json")
     assert len(small) == 1 and small[0].pose.is_identity()
     assert not list(tmp_path.glob(".scene.json.*"))  # no temporary file left
+    # a scene saved in another folder names its model files relative to that folder,
+    # and one loaded from a file and saved again elsewhere still finds them
+    (tmp_path / "out" / "deep").mkdir(parents=True)
+    sc.save(tmp_path / "out" / "scene.json")
+    assert '"file": "../parts/peg.csdf"' in (tmp_path / "out" / "scene.json").read_text()
+    moved = csdf.Scene.load(tmp_path / "out" / "scene.json")
+    moved.save(tmp_path / "out" / "deep" / "again.json")
+    again = csdf.Scene.load(tmp_path / "out" / "deep" / "again.json")
+    np.testing.assert_array_equal(again.distance(pts), sc.distance(pts))
 
 
 @pytest.mark.parametrize("text, match", [

@@ -1082,13 +1082,15 @@ def infer(
 
     def go():
         from .infer import infer as infer_fn
-        from .io import atomic_path, read_point_cloud
+        from .io import atomic_path, check_writable, read_point_cloud
 
         if output.suffix.lower() != ".csdf":
             raise CsdfError(f"{output}: the output must end in .csdf")
+        check_writable(output)
         cloud = read_point_cloud(scan)
+        P, N = _cloud_arrays(cloud, scan)
         vp, source = _cloud_viewpoint(viewpoint, cloud, scan)
-        res = infer_fn(cloud.points, cloud.normals, max_primitives=max_primitives,
+        res = infer_fn(P, N, max_primitives=max_primitives,
                        kinds=kinds, viewpoint=vp, time_limit=time_limit, seed=seed,
                        prefer=prefer)
         others = [a for a in res.alternatives if a != res.tree]
@@ -1103,6 +1105,11 @@ def infer(
                   f"rmse {res.rmse:.4g}, {res.inlier_fraction:.1%} inliers, "
                   f"{res.seconds:.1f} s (viewpoint: {source})", soft_wrap=True,
                   markup=False)
+        if res.inlier_fraction < INFER_FEW_INLIERS:
+            out.print(f"note: the model explains only {res.inlier_fraction:.0%} of the "
+                      "points" + ("; a single-view scan needs --viewpoint (its hidden side "
+                                  "is otherwise taken for free space)" if vp is None
+                                  else ""), soft_wrap=True, markup=False)
 
     _run(go)
 
@@ -1131,18 +1138,31 @@ def detect(
     def go():
         from .detect import detect as detect_fn
         from .detect import detections_to_scene
-        from .io import read_point_cloud
+        from .io import check_writable, read_point_cloud
 
         if output.suffix.lower() != ".json":
             raise CsdfError(f"{output}: the output must end in .json")
         if picture is not None and picture.suffix.lower() != ".png":
             raise CsdfError(f"{picture}: the picture must end in .png")
+        check_writable(output)
+        if picture is not None:
+            check_writable(picture)
         cloud = read_point_cloud(scan)
+        if len(cloud.points) == 0:
+            raise CsdfError(f"{scan}: the scan has no points")
+        P, N = _cloud_arrays(cloud, scan)
         vp, _ = _cloud_viewpoint(viewpoint, cloud, scan)
         t0 = time.perf_counter()
-        dets = detect_fn(cloud.points, models, normals=cloud.normals, viewpoint=vp,
-                         max_instances=max_instances, seed=seed, noise=noise)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            dets = detect_fn(P, models, normals=N, viewpoint=vp,
+                             max_instances=max_instances, seed=seed, noise=noise)
         seconds = time.perf_counter() - t0
+        img = None
+        if picture is not None:
+            from .detect.picture import detections_picture
+
+            img = detections_picture(cloud.points, dets, vp)
         detections_to_scene(dets).save(output)
         table = Table("model", "position", "score", "points")
         for d in dets:
@@ -1152,10 +1172,13 @@ def detect(
         out.print(f"{output}: {len(dets)} detections in {seconds:.2f} s"
                   + ("" if vp is not None else " (no viewpoint: free space not checked; "
                      "give --viewpoint for a single-view scan)"), soft_wrap=True)
+        for w in caught:
+            if str(w.message).startswith("detect found nothing"):
+                out.print(f"note: {w.message}", soft_wrap=True, markup=False)
+            else:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
         if picture is not None:
-            from .detect.picture import detections_picture
-
-            _write_png(picture, detections_picture(cloud.points, dets, vp))
+            _write_png(picture, img)
             out.print(f"{picture}: the scan with the detections", soft_wrap=True)
 
     _run(go)
@@ -1287,6 +1310,24 @@ def _cloud_viewpoint(viewpoint: str | None, cloud, scan: Path
         return tuple(float(v) for v in cloud.viewpoint), f"{scan}'s header"
     return None, (f"none ({scan} records no viewpoint; give --viewpoint for a "
                   "single-view scan)")
+
+
+#: ``csdf infer`` notes a model that leaves more than this share of the points
+#: unexplained
+INFER_FEW_INLIERS = 0.8
+
+
+def _cloud_arrays(cloud, scan: Path):
+    """``(points (N, 3), normals (N, 3) or None)`` of a cloud read from ``scan``,
+    checked, with errors naming the file (``scan.ply: points: row 7 is not finite``)."""
+    from .detect.neighbours import normals_arg, points_arg
+
+    try:
+        P = points_arg(cloud.points)
+        N = None if cloud.normals is None else normals_arg(cloud.normals, P)
+    except CsdfError as exc:
+        raise CsdfError(f"{scan}: {exc}") from None
+    return P, N
 
 
 def _write_png(path: Path, img) -> None:

@@ -25,6 +25,7 @@ import numpy as np
 
 from .errors import CsdfError
 from .field import Field, as_field
+from .seeds import rng_arg
 
 __all__ = ["sample_surface", "sample_volume", "MAX_SAMPLES"]
 
@@ -55,13 +56,6 @@ def _count(n: Any, what: str = "n") -> int:
     if not 0 <= int(n) <= MAX_SAMPLES:
         raise CsdfError(f"{what} must be in [0, {MAX_SAMPLES:,}], got {int(n)}")
     return int(n)
-
-
-def _rng(seed: Any) -> np.random.Generator:
-    try:
-        return np.random.default_rng(seed)
-    except (TypeError, ValueError) as exc:
-        raise CsdfError(f"seed must be None, an integer or a numpy Generator: {exc}") from None
 
 
 def _resolution(n: int, bounds: np.ndarray) -> int:
@@ -256,9 +250,9 @@ def sample_surface(
         if colors:
             raise CsdfError("colors=True samples a shape; a scene's colours are not "
                             "drawn yet")
-        return shape.sample_surface(n, _rng(seed), resolution=resolution)
+        return shape.sample_surface(n, rng_arg(seed), resolution=resolution)
     fld = _field(shape, "sample_surface", params, backend, n, check_ranges=check_ranges)
-    rng = _rng(seed)
+    rng = rng_arg(seed)
     if n == 0:
         out = np.zeros((0, 3)), np.zeros((0, 3))
     else:
@@ -322,7 +316,7 @@ def sample_volume(
     frac = float(near_surface)
     if not 0.0 <= frac <= 1.0:
         raise CsdfError(f"near_surface must be in [0, 1], got {near_surface}")
-    rng = _rng(seed)
+    rng = rng_arg(seed)
     b = fld.bounds
     ext = b[1] - b[0]
     if sigma is None:

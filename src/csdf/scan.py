@@ -18,6 +18,7 @@ from .errors import CsdfError
 from .pose import as_pose
 from .render.camera import Camera
 from .render.trace import trace_field, trace_hits
+from .seeds import rng_arg
 
 __all__ = ["scan", "MIN_COS"]
 
@@ -97,7 +98,7 @@ def scan(shape, camera: Camera, width: int | None = None, height: int | None = N
     outliers = _fraction(outliers, "outliers", 1.0)
     min_cos = _fraction(min_cos, "min_cos", 1.0)
     pose = as_pose(object_pose, "object_pose", rigid=True)
-    rng = np.random.default_rng(seed)
+    rng = rng_arg(seed)
     scene = getattr(shape, "__csdf_scene__", False)
     if scene and (params or bounds is not None):
         raise CsdfError("a scene's instances carry their own parameters and bounds")

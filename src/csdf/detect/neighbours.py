@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 from ..errors import CsdfError
 
 __all__ = ["Neighbourhood", "neighbourhood", "knn", "estimate_normals", "points_arg",
-           "viewpoint_arg",
+           "viewpoint_arg", "distinct_points", "with_copies",
            "normals_arg", "components",
            "linked_edges", "sparse_points", "K_NORMALS", "MAX_DETECT_POINTS", "LINK",
            "SPARSE"]
@@ -66,10 +66,43 @@ def viewpoint_arg(viewpoint) -> np.ndarray | None:
     """``viewpoint`` as a finite ``(3,)`` array (None stays None), or a CsdfError."""
     if viewpoint is None:
         return None
-    vp = np.asarray(viewpoint, dtype=float)
+    try:
+        vp = np.asarray(viewpoint, dtype=float)
+    except (TypeError, ValueError):
+        raise CsdfError(f"viewpoint must be a finite (3,) position (three numbers); got "
+                        f"{viewpoint!r}") from None
     if vp.shape != (3,) or not np.all(np.isfinite(vp)):
         raise CsdfError(f"viewpoint must be a finite (3,) position; got {viewpoint!r}")
     return vp
+
+
+def distinct_points(P: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Repeated points of a cloud ``P`` ``(N, 3)``: None when every row is distinct, else
+    ``(keep (K,), owner (N,))``: ``keep`` the ascending indices of each distinct row's
+    first copy, ``owner[j]`` the position in ``keep`` of the copy that stands for point
+    ``j``.
+
+    Copies break the neighbour structure every detector stands on (a point's nearest
+    neighbours are its own copies at distance 0, so the sampling scale, the noise and
+    the links collapse): a cloud read off a mesh's triangles (each vertex about six
+    times) or with a frame added twice found nothing. The detectors run on the distinct
+    points and give each result every copy (:func:`with_copies`)."""
+    _, first, inverse = np.unique(P, axis=0, return_index=True, return_inverse=True)
+    if len(first) == len(P):
+        return None
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inverse.ravel()]
+
+
+def with_copies(idx: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """The ascending indices of every point whose distinct copy is among ``idx``
+    ``(K,)`` (positions in the ``keep`` of :func:`distinct_points`; ``owner`` its
+    ``(N,)``)."""
+    hit = np.zeros(int(owner.max()) + 1, dtype=bool)
+    hit[np.asarray(idx, dtype=np.int64)] = True
+    return np.flatnonzero(hit[owner])
 
 
 def normals_arg(normals, points: np.ndarray) -> np.ndarray:

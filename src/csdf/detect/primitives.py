@@ -54,6 +54,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import CsdfError
 from ..fit import fit
+from ..seeds import rng_arg
 from .kernels import (
     bounds,
     grow_inliers,
@@ -64,11 +65,13 @@ from .kernels import (
 )
 from .neighbours import (
     Neighbourhood,
+    distinct_points,
     linked_edges,
     neighbourhood,
     normals_arg,
     points_arg,
     viewpoint_arg,
+    with_copies,
 )
 from .solids import (
     SOLID_BACKEND,
@@ -286,11 +289,24 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
     """
     P = points_arg(points)
     n = len(P)
+    rng = rng_arg(seed)
     ks = _kinds_arg(kinds)
     vp = viewpoint_arg(viewpoint)
     tol = float(normal_tolerance)
     if not 0.0 < tol < 90.0:
         raise CsdfError(f"normal_tolerance must be an angle in (0, 90) degrees; got {tol}")
+    copies = distinct_points(P)
+    if copies is not None:
+        # repeated points: found on the distinct ones, each detection given every copy
+        keep, owner = copies
+        found = detect_primitives(
+            P[keep], None if normals is None else normals_arg(normals, P)[keep], kinds,
+            epsilon, min_points, seed, viewpoint=vp, normal_tolerance=normal_tolerance,
+            cluster_epsilon=cluster_epsilon, max_primitives=max_primitives,
+            flat_share=flat_share)
+        for d in found:
+            d.inliers = with_copies(d.inliers, owner)
+        return found
     if n < 4:
         return []
     nb = neighbourhood(P, viewpoint=vp, want_normals=normals is None)
@@ -310,7 +326,7 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
     ctx = _Ctx(P=P, N=N, nb=nb, eps=eps, cos_tol=math.cos(math.radians(tol)),
                conn=conn, linked=linked_edges(nb, conn), min_points=max(mp, 4),
                max_radius=max(diag, eps),
-               rng=np.random.default_rng(seed), kinds=ks, viewpoint=vp, flat_share=flat)
+               rng=rng, kinds=ks, viewpoint=vp, flat_share=flat)
     ctx.graph = linked_graph(nb.nbr, ctx.linked)
     _build_levels(ctx)
     found = _extract(ctx, int(max_primitives))

@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 from ..errors import CsdfError
+from ..seeds import rng_arg
 from .problem import Problem, loss_weights, make_result, prepare, residuals
 from .quality import assess
 from .result import FitResult
@@ -202,6 +203,8 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
     t0 = time.perf_counter()
     if solver not in ("lm", "scipy"):
         raise CsdfError(f"solver must be 'lm' or 'scipy'; got {solver!r}")
+    if multistart:
+        rng_arg(seed)  # checked before any work
     prob = prepare(shape, points, init, estimate, params, loss, f_scale, backend,
                    check_ranges=check_ranges)
     auto = prob.loss == "auto"

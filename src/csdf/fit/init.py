@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from ..seeds import rng_arg
 from .lie import cube_rotations, exp_so3, sphere_rotations
 from .lm import normal_equations
 from .problem import jacobian
@@ -72,7 +73,7 @@ def _gn_pose(prob, P, R, t, s, iters: int, fs: float):
 
 def multistart(prob, seed=None, n_sub: int = 400, iters: int = 6, n_sphere: int = 72) -> None:
     """Replace ``prob``'s starting pose by the best of many hypotheses (in place)."""
-    rng = np.random.default_rng(seed)
+    rng = rng_arg(seed)
     P = prob.points
     sub = P if len(P) <= n_sub else P[rng.choice(len(P), n_sub, replace=False)]
     s = prob.s

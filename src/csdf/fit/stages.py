@@ -76,7 +76,10 @@ def _small_start(prob: Problem, P: np.ndarray, st: State, idx: list[int], max_it
     sub = P if n <= N_COARSE else P[np.random.default_rng(2).choice(n, N_COARSE, False)]
     lo = np.array([prob.prog.params[i].lo for i in idx])
     hi = np.array([prob.prog.params[i].hi for i in idx])
-    small = np.where(np.isfinite(hi - lo), lo + SMALL_START * (hi - lo), st.cvals)
+    span = hi - lo
+    finite = np.isfinite(span)  # (an unbounded range: inf - inf is not computed)
+    small = st.cvals.copy()
+    small[finite] = lo[finite] + SMALL_START * span[finite]
     best, nev = None, 0
     starts = (st.cvals,) if np.array_equal(small, st.cvals) else (st.cvals, small)
     for cvals in starts:  # (an unbounded range has no small start: one solve)

@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 
 from ..detect.neighbours import (
     K_NORMALS,
+    distinct_points,
     neighbourhood,
     normals_arg,
     points_arg,
@@ -65,6 +66,7 @@ from ..detect.solids import SOLID_PARAMS
 from ..errors import CsdfError
 from ..expr import param
 from ..lang.printer import dumps
+from ..seeds import rng_arg
 from ..shapes import box, capped_cone, cylinder, sphere, torus
 from ..shapes.domain import orient_matrix
 from . import tree as T
@@ -542,7 +544,7 @@ def _snapped(lf: Leaf | None) -> Leaf | None:
 def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple[str, ...],
            max_primitives: int, seed: int, epsilon, penalty) -> _Problem:
     """Normals, detection, candidates, the noise level, penalty and score samples."""
-    rng = np.random.default_rng(seed)
+    rng = rng_arg(seed)
     k = NORMAL_NEIGHBOURS if N is None and vp is not None else K_NORMALS
     nb = neighbourhood(P, k=k, viewpoint=vp, want_normals=N is None)
     estimated = N is None
@@ -1116,9 +1118,13 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     """
     t0 = time.perf_counter()
     P = points_arg(points)
-    if len(P) < 50:
-        raise CsdfError(f"infer needs at least 50 points, got {len(P)}")
     N = None if normals is None else normals_arg(normals, P)
+    copies = distinct_points(P)
+    if copies is not None:  # repeated points (a mesh's triangles) weigh nothing more
+        P = P[copies[0]]
+        N = None if N is None else N[copies[0]]
+    if len(P) < 50:
+        raise CsdfError(f"infer needs at least 50 distinct points, got {len(P)}")
     vp = viewpoint_arg(viewpoint)
     ks = _kinds(kinds)
     if isinstance(max_primitives, bool) or not isinstance(max_primitives, (int, np.integer)) \
@@ -1128,6 +1134,10 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         raise CsdfError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
     if prefer is not None and prefer not in PREFER:
         raise CsdfError(f"prefer must be None or one of {', '.join(PREFER)}; got {prefer!r}")
+    if penalty is not None and (isinstance(penalty, bool) or not isinstance(
+            penalty, (int, float)) or not math.isfinite(penalty) or penalty < 0):
+        raise CsdfError(f"penalty must be None or a number >= 0, got {penalty!r}")
+    rng_arg(seed)  # checked before any work
     if effort is None:
         effort = time_limit
     elif isinstance(effort, bool) or not (isinstance(effort, (int, float)) and effort > 0):

@@ -10,13 +10,14 @@ layout, written and read); OpenSCAD's ``.csg`` and ``.scad`` are read by
 """
 
 from ..lang.csg import load_csg, load_scad, loads_csg
-from .atomic import atomic_path
+from .atomic import atomic_path, check_writable
 from .bop import DepthClipWarning, read_bop, read_frames, write_bop
 from .mesh import MESH_FORMATS, write_mesh
 from .points import PointCloud, read_point_cloud, read_point_properties, read_points, write_points
 from .vm import dumps_vm, load_vm, loads_vm, save_vm
 
-__all__ = ["atomic_path", "write_mesh", "MESH_FORMATS", "read_points", "write_points",
+__all__ = ["atomic_path", "check_writable", "write_mesh", "MESH_FORMATS", "read_points",
+           "write_points",
            "read_point_properties", "read_point_cloud", "PointCloud", "load_vm", "loads_vm",
            "save_vm", "dumps_vm", "write_bop", "read_bop", "read_frames", "DepthClipWarning",
            "load_csg", "loads_csg", "load_scad"]

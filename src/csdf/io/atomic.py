@@ -19,12 +19,29 @@ from pathlib import Path
 
 from ..errors import CsdfError
 
-__all__ = ["atomic_path"]
+__all__ = ["atomic_path", "check_writable"]
 
 
 def _reason(exc: OSError) -> str:
     """The operating system's words for an error (``'Permission denied'``)."""
     return exc.strerror or str(exc) or type(exc).__name__
+
+
+def check_writable(path: str | os.PathLike) -> Path:
+    """``path``'s folder, checked before a long job writes ``path`` (the job's work is
+    not lost to a typo in the output's folder).
+
+    Raises:
+        CsdfError: ``"cannot write PATH: folder FOLDER does not exist"``, or it is not
+            writable.
+    """
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise CsdfError(f"cannot write {target}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise CsdfError(f"cannot write {target}: folder {folder} is not writable")
+    return folder
 
 
 @contextmanager
@@ -37,9 +54,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             ``"cannot write PATH: REASON"``. Nothing is left behind.
     """
     target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise CsdfError(f"cannot write {target}: folder {folder} does not exist")
+    folder = check_writable(target)
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:

@@ -44,8 +44,25 @@ VERSION = 1
 MAX_SCENE_BYTES = 64 << 20
 
 
-def dumps(scene) -> str:
-    """The scene as JSON text (see the module docs)."""
+def _file_record(src: dict, base: Path | None) -> dict:
+    """``{"file": PATH}`` of an instance's model file: as it was given, or with ``base``
+    (the folder of the scene file being written) relative to that folder, so that the
+    file reads back from wherever the scene is saved (absolute where no relative path
+    leads there)."""
+    resolved = src.get("resolved")
+    if base is None or resolved is None:
+        return {"file": src["file"]}
+    try:
+        rel = os.path.relpath(resolved, Path(base).resolve())
+    except ValueError:  # another drive
+        return {"file": resolved}
+    return {"file": Path(rel).as_posix()}
+
+
+def dumps(scene, base: Path | None = None) -> str:
+    """The scene as JSON text (see the module docs); ``base``: the folder the text will
+    be saved in, which model file paths are then written relative to (default: as they
+    were given)."""
     from ..lang import dumps as shape_text
 
     models: dict[str, dict] = {}
@@ -53,8 +70,10 @@ def dumps(scene) -> str:
     records = []
     for inst in scene:
         src = dict(inst.source)
-        if "zoo" in src or "file" in src:
+        if "zoo" in src:
             model = src
+        elif "file" in src:
+            model = _file_record(src, base)
         else:
             key = keys.get(id(inst.model))
             if key is None:
@@ -91,7 +110,7 @@ def save(scene, path: str | os.PathLike) -> None:
     """Write :func:`dumps` to ``path`` (through a temporary file, then renamed)."""
     from ..io.atomic import atomic_path
 
-    text = dumps(scene)
+    text = dumps(scene, base=Path(path).parent)
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
@@ -229,7 +248,7 @@ def _instance(scene, rec: Any, where: str, models: dict, base: Path | None) -> N
             model, src = models[value], {}
         else:
             model, src = scene._model(value if kind == "zoo" else Path(value), base)
-            src = {kind: value}
+            src["file" if kind == "file" else "zoo"] = value  # as the file wrote it
         scene._put(iid, model, src, pose, 1.0, params, name)
     except CsdfError as exc:
         raise _Bad(f"{where}: {exc}") from None

@@ -29,6 +29,7 @@ from ..errors import CsdfError
 from ..field import Field, as_field
 from ..fieldset import FieldSet
 from ..pose import Pose, as_pose
+from ..seeds import rng_arg
 from . import fileformat
 
 __all__ = ["Scene", "Instance", "SceneQuery", "SceneHits", "MAX_INSTANCES",
@@ -47,8 +48,9 @@ class Instance:
     Attributes:
         id: its id in the scene (never reused); name: its name (unique in the scene).
         model: the shape or program it places; source: how the scene file names the
-            model (``{'zoo': name}``, ``{'file': path}``, ``{'csdf': text}`` or
-            ``{'program': text}``).
+            model (``{'zoo': name}``, ``{'file': path, 'resolved': absolute path}``,
+            ``{'csdf': text}`` or ``{'program': text}``; a file's path as it was given,
+            written relative to the folder of the scene file it is saved in).
         pose: the :class:`csdf.Pose` (the scale included) from the model's frame to the
             world; params: its parameter values ``{name: value}`` (the others at their
             defaults).
@@ -227,7 +229,9 @@ class Scene:
                 from ..io.model import load_model
 
                 self._models[key] = load_model(path)
-            return self._models[key], {"file": str(model)}
+            # the path as given (the scene's own files write it relative to their
+            # folder: :func:`csdf.scene.fileformat.save`) and the file it named
+            return self._models[key], {"file": str(model), "resolved": key[1]}
         if isinstance(model, str):
             from .. import zoo
 
@@ -548,7 +552,7 @@ class Scene:
             raise CsdfError(f"n must be >= 0, got {n}")
         if not self._inst:
             raise CsdfError("an empty scene has no surface to sample")
-        rng = np.random.default_rng(seed)
+        rng = rng_arg(seed)
         insts: list[Instance] = []
         area: list[float] = []
         for g in self._groups().values():

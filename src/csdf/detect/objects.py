@@ -770,11 +770,21 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
             +z along its normal); False searches all rotations (:func:`csdf.fit`'s
             multistart), for objects that may lie on their side.
 
+    Repeated points (a cloud read off a mesh's triangles, a frame given twice) count
+    once: detection runs on the distinct points and each detection's inliers hold
+    every copy. Without a viewpoint, up is the side of the largest plane that holds
+    most of the points off it.
+
     Returns:
         :class:`Detection` list in the order found (largest clusters first).
 
+    Warns:
+        UserWarning: nothing was found and the cloud is over ``UNIT_RATIO`` times
+            larger than every model, or smaller (:func:`unit_hint`: other units?).
+
     Raises:
-        CsdfError: bad points, normals, viewpoint or models, a model without bounds.
+        CsdfError: bad points, normals, viewpoint, seed or models, a model without
+            bounds.
     """
     P = points_arg(points)
     if normals is not None:

@@ -280,12 +280,14 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
 
     Returns:
         :class:`PrimitiveDetection` list, largest first (boxes and solids that absorbed
-        planes keep their place of first detection). A point belongs to at most one.
+        planes keep their place of first detection). A point belongs to at most one;
+        repeated points count once (the search runs on the distinct points) and every
+        copy is among the inliers of what explains it.
 
     Raises:
         CsdfError: points or normals of the wrong shape or not finite, unknown kinds,
             a non-positive ``epsilon``, ``min_points`` or ``normal_tolerance`` outside
-            (0, 90).
+            (0, 90), a bad seed.
     """
     P = points_arg(points)
     n = len(P)

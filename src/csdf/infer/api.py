@@ -1082,7 +1082,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
     """Infer a CSG tree of csdf primitives, with named parameters, from a point cloud.
 
     Args:
-        points: ``(N, 3)`` points on the object's surface (scene units).
+        points: ``(N, 3)`` points on the object's surface (scene units); repeated
+            points count once.
         normals: ``(N, 3)`` outward normals (as :func:`csdf.sample_surface` and
             :func:`csdf.scan` give), or None to estimate them (turned to the viewpoint
             when one is given). Normals whose signs are not consistent are used for
@@ -1103,8 +1104,8 @@ def infer(points, normals=None, max_primitives: int = 8, kinds=SOLID_KINDS, view
         epsilon: the noise level ``tau`` (scene units) of the score; default three
             times the detections' median rmse, at least ``1e-3`` of the cloud's
             diagonal.
-        penalty: the cost of one more primitive, as a share of the points it must
-            explain; default :data:`PENALTY`.
+        penalty: the cost of one more primitive (>= 0), as a share of the points it
+            must explain; default :data:`PENALTY`.
         effort: the search's effort in seconds of this project's machine (beam width
             and trees refined, as ``time_limit`` sets them); default ``time_limit``.
             Give it with a larger ``time_limit`` for a result that no machine's speed

@@ -68,6 +68,11 @@ def test_errors_exit_2_with_location(tmp_path):
     assert r.exit_code == 2 and "unknown parameter 'radius'" in r.output
     r = runner.invoke(app, ["info", str(tmp_path / "missing.csdf")])
     assert r.exit_code == 2 and "cannot read" in r.output
+    # every command takes a zoo name where it takes a model file
+    r = runner.invoke(app, ["info", "stool"])
+    assert r.exit_code == 0 and "seat_radius" in r.output, r.output
+    r = runner.invoke(app, ["info", "stoool"])
+    assert r.exit_code == 2 and "not a zoo model" in r.output
     r = runner.invoke(app, ["--version"])
     assert r.exit_code == 0 and "csdf" in r.output
 

@@ -43,10 +43,16 @@ err = Console(stderr=True)
 
 
 def _load(path: Path):
-    """A Shape (from .csdf, Fidget's .vm, OpenSCAD's .csg/.scad) or a Program (from
-    .csdfb/.csdft)."""
+    """A Shape (from .csdf, Fidget's .vm, OpenSCAD's .csg/.scad, or a zoo model's name:
+    no suffix, no such file) or a Program (from .csdfb/.csdft)."""
     from .io.model import load_model
 
+    if not path.suffix and not path.exists():
+        from . import zoo
+
+        if str(path) in zoo.names():
+            return zoo.load(str(path))
+        raise CsdfError(f"{path}: no such file, and not a zoo model (csdf zoo list)")
     return load_model(path)
 
 
@@ -297,7 +303,7 @@ def main_options(
 
 
 @app.command()
-def info(model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program).")):
+def info(model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name.")):
     """Parameters, exactness, Lipschitz bound, bytecode sizes and Table-1 counts."""
 
     def go():
@@ -352,7 +358,7 @@ def _cluster(scheduler: str | None, workers: int | None):
 
 @app.command()
 def mesh(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Mesh file: .stl .obj .ply .glb"),
     resolution: int | None = typer.Option(
         None, "--resolution", "-r", help="Voxels along the longest side (default: 128, "
@@ -522,7 +528,7 @@ def compile(  # noqa: A001 - the verb users type
 
 @app.command()
 def export(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     glsl: bool = typer.Option(False, "--glsl", help="A Shadertoy-ready GLSL image shader."),
     c: bool = typer.Option(False, "--c", help="A self-contained C header: value, and value "
                            "with gradient and parameter derivatives, in double and float."),
@@ -563,7 +569,7 @@ def export(
 
 @app.command()
 def fit(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     scan: Path = typer.Argument(..., help="The point cloud (.ply), or a folder of them "
                                 "(every *.ply in it, fitted one task each; the result "
                                 "file then lists them)."),
@@ -723,7 +729,7 @@ def fit(
 
 @app.command()
 def sample(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Point cloud file (.ply)."),
     count: int = typer.Option(100_000, "-n", "--count", help="Number of points."),
     volume: bool = typer.Option(False, "--volume", help="Points in and around the shape "
@@ -789,7 +795,7 @@ def sample(
 
 @app.command(name="slice")
 def slice_(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Image: .png .pdf .svg"),
     axis: str = typer.Option("z", "--axis", help="Normal of the plane: x, y or z."),
     at: float = typer.Option(0.0, "--at", help="Coordinate of the plane along the axis."),
@@ -911,17 +917,6 @@ def plan(
     _run(go)
 
 
-def _model_or_zoo(path: Path):
-    """A model file, or a zoo model's name (no suffix, no such file)."""
-    if not path.suffix and not path.exists():
-        from . import zoo
-
-        if str(path) in zoo.names():
-            return zoo.load(str(path))
-        raise CsdfError(f"{path}: no such file, and not a zoo model (csdf zoo list)")
-    return _load(path)
-
-
 def _camera_file(path: Path, size: tuple[int, int] | None):
     """A camera from JSON: ``{"fx", "fy", "cx", "cy", "width", "height"}`` or
     ``{"cam_K": [9 numbers], "width", "height"}`` (size default: the frames')."""
@@ -1006,7 +1001,7 @@ def track(
 
         if output.suffix.lower() != ".json":
             raise CsdfError(f"{output}: the output must end in .json")
-        m = _model_or_zoo(model)
+        m = _load(model)
         depth, mk, cam, ids = read_frames(frames, mm_per_unit=mm_per_unit)
         if camera is not None:
             cam = _camera_file(camera, (cam.width, cam.height))
@@ -1210,7 +1205,7 @@ def metrics(
         from .io import atomic_path
         from .io.bop import read_bop
 
-        m = _model_or_zoo(model)
+        m = _load(model)
         seq = read_bop(truth, mm_per_unit=mm_per_unit)
         try:
             doc = json.loads(estimates.read_text(encoding="utf-8"))
@@ -1387,7 +1382,7 @@ _TARGET_HELP = "Point looked at, x,y,z (default: the centre of the model's bound
 
 @app.command(name="render")
 def render_(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Image file (.png)."),
     size: str = typer.Option("640x480", "--size", help="WIDTHxHEIGHT in pixels."),
     eye: str | None = typer.Option(None, "--eye", help=_EYE_HELP),
@@ -1421,7 +1416,7 @@ def render_(
 
 @app.command(name="scan")
 def scan_(
-    model: Path = typer.Argument(..., help="A .csdf model (or .csdfb/.csdft program)."),
+    model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Point cloud file (.ply)."),
     size: str = typer.Option("640x480", "--size", help="Sensor WIDTHxHEIGHT in pixels."),
     eye: str | None = typer.Option(None, "--eye", help=_EYE_HELP),

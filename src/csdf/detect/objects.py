@@ -787,9 +787,8 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
             bounds.
     """
     P = points_arg(points)
-    if normals is not None:
-        normals_arg(normals, P)  # checked before any work
-    rng_arg(seed)
+    N = None if normals is None else normals_arg(normals, P)
+    rng_arg(seed)  # checked before any work
     ms = _models_arg(models)
     vp = viewpoint_arg(viewpoint)
     if max_instances is not None and (isinstance(max_instances, bool)
@@ -800,12 +799,12 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
     cap = math.inf if max_instances is None else int(max_instances)
     copies = distinct_points(P)
     if copies is None:
-        out = _detect(P, ms, normals, vp, cap, seed, noise, min_points, upright)
+        out = _detect(P, ms, N, vp, cap, seed, noise, min_points, upright)
     else:
         # repeated points: found on the distinct ones, each detection given every copy
         keep, owner = copies
-        N = None if normals is None else normals_arg(normals, P)[keep]
-        out = _detect(P[keep], ms, N, vp, cap, seed, noise, min_points, upright)
+        out = _detect(P[keep], ms, None if N is None else N[keep], vp, cap, seed, noise,
+                      min_points, upright)
         for d in out:
             d.inliers = with_copies(d.inliers, owner)
     hint = None if out else unit_hint(P, ms)
@@ -840,9 +839,9 @@ def unit_hint(points: np.ndarray, models: list[_Model]) -> str | None:
 
 def _detect(P: np.ndarray, ms: list[_Model], normals, vp: np.ndarray | None, cap: float,
             seed, noise, min_points, upright: bool) -> list[Detection]:
-    """:func:`detect` on checked, distinct points ``P`` ``(N, 3)``, models ``ms``,
-    viewpoint ``vp`` and at most ``cap`` detections (the other arguments as
-    :func:`detect`'s)."""
+    """:func:`detect` on checked, distinct points ``P`` ``(N, 3)``, their checked unit
+    ``normals`` ``(N, 3)`` or None, models ``ms``, viewpoint ``vp`` and at most ``cap``
+    detections (the other arguments as :func:`detect`'s)."""
     if len(P) < 10:
         return []
     run = _prepare(P, ms, normals, vp, seed, noise, min_points, upright)
@@ -893,15 +892,13 @@ def _claimed_in(run: _Run, clusters: set[int]) -> dict[int, int]:
 
 def _prepare(P: np.ndarray, ms: list[_Model], normals, vp: np.ndarray | None, seed,
              noise, min_points, upright: bool) -> _Run:
-    """Steps 1-3 of :func:`detect` on checked points ``P`` ``(N, 3)``, models ``ms``
+    """Steps 1-3 of :func:`detect` on checked points ``P`` ``(N, 3)``, their checked
+    unit ``normals`` ``(N, 3)`` (:func:`.neighbours.normals_arg`) or None, models ``ms``
     and viewpoint ``vp`` ``(3,)`` or None (the other arguments as :func:`detect`'s):
     the run's state with its supports and clusters found."""
     n = len(P)
     nb = neighbourhood(P, viewpoint=vp, want_normals=normals is None)
-    if normals is None:
-        N = nb.normals
-    else:
-        N = normals_arg(normals, P)
+    N = nb.normals if normals is None else normals
     sigma = nb.noise if noise is None else float(noise)
     if not (math.isfinite(sigma) and sigma > 0):
         raise CsdfError(f"noise must be a positive number; got {noise!r}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import trimesh
 from typer.testing import CliRunner
 
@@ -75,6 +76,29 @@ def test_errors_exit_2_with_location(tmp_path):
     assert r.exit_code == 2 and "not a zoo model" in r.output
     r = runner.invoke(app, ["--version"])
     assert r.exit_code == 0 and "csdf" in r.output
+
+
+@pytest.mark.parametrize("args, option", [
+    (["mesh", "stool", "-o", "m.stl", "--voxel-size", "0"], "'--voxel-size'"),
+    (["mesh", "stool", "-o", "m.stl", "--workers", "0"], "'--workers'"),
+    (["sample", "stool", "-o", "s.ply", "-n", "-5"], "'--count'"),
+    (["sample", "stool", "-o", "s.ply", "--volume", "--near", "2"], "'--near'"),
+    (["sample", "stool", "-o", "s.ply", "--seed", "-1"], "'--seed'"),
+    (["infer", "s.ply", "-o", "m.csdf", "--time-limit", "0"], "'--time-limit'"),
+    (["infer", "s.ply", "-o", "m.csdf", "--max-primitives", "40"], "'--max-primitives'"),
+    (["infer", "s.ply", "-o", "m.csdf", "--prefer", "near"], "'--prefer'"),
+    (["detect", "s.ply", "--models", "stool", "-o", "d.json", "--max-instances", "0"],
+     "'--max-instances'"),
+    (["detect", "s.ply", "--models", "stool", "-o", "d.json", "--noise", "nan"], "'--noise'"),
+])
+def test_bad_option_values_name_the_option(tmp_path, monkeypatch, args, option):
+    """A value out of an option's range is refused before any work, and the message
+    names the option as typed (not the Python argument it becomes)."""
+    monkeypatch.chdir(tmp_path)
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2, r.output
+    assert option in " ".join(r.output.split()), r.output
+    assert not any(tmp_path.iterdir())
 
 
 def test_export_glsl(tmp_path):

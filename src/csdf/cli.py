@@ -64,6 +64,27 @@ def _field(model):
     return as_field(model, what="csdf")
 
 
+def _positive(value: float | None) -> float | None:
+    """Option callback: None, or a finite number > 0 (the error names the option)."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"must be a positive number, got {value:g}")
+    return value
+
+
+def _non_negative(value: float | None) -> float | None:
+    """Option callback: None, or a finite number >= 0 (the error names the option)."""
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        raise typer.BadParameter(f"must be a finite number >= 0, got {value:g}")
+    return value
+
+
+def _prefer(value: str | None) -> str | None:
+    """``csdf infer --prefer``'s callback: None, 'local' or 'global'."""
+    if value is not None and value not in ("local", "global"):
+        raise typer.BadParameter(f"must be local or global, got {value!r}")
+    return value
+
+
 #: the end of a range error's message on the command line
 _RANGE_HINT = "pass --no-check-ranges to use it anyway"
 _NO_CHECK_HELP = ("Accept --param values outside their parameters' declared ranges (the "
@@ -361,15 +382,17 @@ def mesh(
     model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Mesh file: .stl .obj .ply .glb"),
     resolution: int | None = typer.Option(
-        None, "--resolution", "-r", help="Voxels along the longest side (default: 128, "
+        None, "--resolution", "-r", min=2, help="Voxels along the longest side (default: 128, "
         "or finer where the shape has thin parts, up to --max-resolution)."),
-    voxel_size: float | None = typer.Option(None, "--voxel-size", help="Voxel edge length."),
+    voxel_size: float | None = typer.Option(None, "--voxel-size", callback=_positive,
+                                            help="Voxel edge length."),
     method: str = typer.Option("mc", "--method", help="mc (marching cubes) or dc (dual "
                                "contouring: keeps sharp edges)."),
-    max_resolution: int = typer.Option(1024, "--max-resolution",
+    max_resolution: int = typer.Option(1024, "--max-resolution", min=2,
                                        help="The finest default resolution."),
     min_feature: float | None = typer.Option(
-        None, "--min-feature", help="Thinnest part or gap to look for (model units; "
+        None, "--min-feature", callback=_positive,
+        help="Thinnest part or gap to look for (model units; "
         "default 1/4 voxel)."),
     check_thin: bool = typer.Option(True, "--check-thin/--no-check-thin",
                                     help="Look for parts thinner than a voxel."),
@@ -380,10 +403,10 @@ def mesh(
                                          "Marching cubes only; no thin-part search; .ply "
                                          "and .stl are written by the workers (in a folder "
                                          "they see, else through the client)."),
-    workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
+    workers: int | None = typer.Option(None, "--workers", min=1, help=_WORKERS_HELP),
     colors: bool = typer.Option(False, "--colors", help="Vertex colours from the model's "
                                 "color() nodes (kept by .ply, .glb and .obj)."),
-    super_brick: int | None = typer.Option(None, "--super-brick", help="With --scheduler/"
+    super_brick: int | None = typer.Option(None, "--super-brick", min=1, help="With --scheduler/"
                                            "--workers: voxels along every task's cube (a "
                                            "power of two; default: cubes of similar work, "
                                            "8 tasks per worker thread)."),
@@ -580,7 +603,7 @@ def fit(
                                     "first (for large initial errors)."),
     loss: str = typer.Option("auto", "--loss", help="auto (Huber, then Cauchy when many "
                              "points are outliers), huber, cauchy, soft_l1, arctan, linear."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the multistart subsampling."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the multistart subsampling."),
     viewpoint: str | None = typer.Option(None, "--viewpoint", help="x,y,z: the sensor "
                                          "position of a single-view scan (0,0,0 for "
                                          "camera-frame clouds); points are then matched to "
@@ -602,7 +625,7 @@ def fit(
                                         "(green: inliers, red: outliers)."),
     scheduler: str | None = typer.Option(None, "--scheduler", help=_SCHEDULER_HELP + " "
                                          "For a folder of scans."),
-    workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
+    workers: int | None = typer.Option(None, "--workers", min=1, help=_WORKERS_HELP),
 ):
     """Recover the model's pose (and scale, parameters) from a point cloud."""
 
@@ -731,24 +754,26 @@ def fit(
 def sample(
     model: Path = typer.Argument(..., help="A .csdf model or program, or a zoo name."),
     output: Path = typer.Option(..., "-o", "--output", help="Point cloud file (.ply)."),
-    count: int = typer.Option(100_000, "-n", "--count", help="Number of points."),
+    count: int = typer.Option(100_000, "-n", "--count", min=0, help="Number of points."),
     volume: bool = typer.Option(False, "--volume", help="Points in and around the shape "
                                 "with a 'distance' property (default: surface points "
                                 "with normals)."),
-    near: float = typer.Option(0.5, "--near", help="With --volume: fraction of points "
+    near: float = typer.Option(0.5, "--near", min=0.0, max=1.0,
+                               help="With --volume: fraction of points "
                                "near the surface."),
-    sigma: float | None = typer.Option(None, "--sigma", help="With --volume: offset "
+    sigma: float | None = typer.Option(None, "--sigma", callback=_non_negative,
+                                       help="With --volume: offset "
                                        "standard deviation (default 1% of the "
                                        "bounding-box diagonal)."),
-    seed: int | None = typer.Option(None, "--seed", help="Random seed."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Random seed."),
     ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),
     param: list[str] = typer.Option([], "--param", "-p", help="name=value (repeatable)."),
     no_check_ranges: bool = typer.Option(False, "--no-check-ranges", help=_NO_CHECK_HELP),
     scheduler: str | None = typer.Option(None, "--scheduler", help=_SCHEDULER_HELP + " "
                                          "Tasks of --chunk points, from child seeds of "
                                          "--seed."),
-    workers: int | None = typer.Option(None, "--workers", help=_WORKERS_HELP),
-    chunk: int = typer.Option(1_000_000, "--chunk", help="With --scheduler/--workers: "
+    workers: int | None = typer.Option(None, "--workers", min=1, help=_WORKERS_HELP),
+    chunk: int = typer.Option(1_000_000, "--chunk", min=1, help="With --scheduler/--workers: "
                               "points per task."),
 ):
     """Sample points uniformly on a model's surface (with normals), or in its volume
@@ -868,9 +893,10 @@ def plan(
     start: str = typer.Option(..., "--start", help="Joint positions q1,q2,... (rad, m)."),
     goal: str = typer.Option(..., "--goal", help="Joint positions q1,q2,... (rad, m)."),
     output: Path = typer.Option(..., "-o", "--output", help="The trajectory: .json"),
-    waypoints: int = typer.Option(32, "--waypoints", help="Waypoints, both ends included."),
-    margin: float = typer.Option(0.05, "--margin", help="Clearance asked of the robot (m)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the restarts' detours."),
+    waypoints: int = typer.Option(32, "--waypoints", min=2, help="Waypoints, both ends included."),
+    margin: float = typer.Option(0.05, "--margin", callback=_non_negative,
+                                 help="Clearance asked of the robot (m)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the restarts' detours."),
     srdf: Path | None = typer.Option(None, "--srdf", help="An SRDF whose "
                                      "disabled collisions self-collision leaves out."),
     lock: list[str] = typer.Option([], "--lock", help="joint=value: hold a joint still "
@@ -982,7 +1008,8 @@ def track(
     masks: bool = typer.Option(True, "--masks/--no-masks", help="Use mask_visib/ (the "
                                "silhouette term) when the folder has it."),
     estimate: str = typer.Option("pose", "--estimate", help="pose or pose,params"),
-    mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", help="Millimetres per "
+    mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", callback=_positive,
+                                      help="Millimetres per "
                                       "model unit (1000: a model in metres)."),
     colors: bool = typer.Option(True, "--colors/--no-colors", help="Use rgb/ (the "
                                 "region-based colour term) when the folder has it."),
@@ -1056,9 +1083,11 @@ def track(
 def infer(
     scan: Path = typer.Argument(..., help="The point cloud (.ply) of one object."),
     output: Path = typer.Option(..., "-o", "--output", help="The inferred model (.csdf)."),
-    max_primitives: int = typer.Option(8, "--max-primitives", help="The most primitives "
+    max_primitives: int = typer.Option(8, "--max-primitives", min=1, max=32,
+                                       help="The most primitives "
                                        "in the tree."),
-    time_limit: float = typer.Option(30.0, "--time-limit", help="Seconds for the "
+    time_limit: float = typer.Option(30.0, "--time-limit", callback=_positive,
+                                     help="Seconds for the "
                                      "structure search (the best tree found by then)."),
     kinds: str = typer.Option("box,cylinder,sphere,cone,torus", "--kinds",
                               help="The primitive kinds to use."),
@@ -1066,8 +1095,9 @@ def infer(
                                          "position of a single-view scan. Default: the PLY "
                                          "header's record (csdf scan writes it); 'none' "
                                          "ignores it."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random choice."),
-    prefer: str | None = typer.Option(None, "--prefer", help="Of the trees the points "
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random choice."),
+    prefer: str | None = typer.Option(None, "--prefer", callback=_prefer,
+                                      help="Of the trees the points "
                                       "cannot tell apart: 'local' (trims and cuts reach "
                                       "the fewest primitives) or 'global' (the most). "
                                       "Default: the search's own."),
@@ -1120,11 +1150,12 @@ def detect(
                                          "position (0,0,0 for camera-frame clouds). "
                                          "Default: the PLY header's record (csdf scan "
                                          "writes it); 'none' ignores it."),
-    max_instances: int | None = typer.Option(None, "--max-instances", help="Stop after "
+    max_instances: int | None = typer.Option(None, "--max-instances", min=1, help="Stop after "
                                              "this many detections."),
-    noise: float | None = typer.Option(None, "--noise", help="The scan's noise standard "
+    noise: float | None = typer.Option(None, "--noise", callback=_positive,
+                                       help="The scan's noise standard "
                                        "deviation (default: estimated)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random choice."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random choice."),
     picture: Path | None = typer.Option(None, "--picture", help="Also write a PNG: the "
                                         "scan with each detection's model drawn over it."),
 ):
@@ -1188,7 +1219,8 @@ def metrics(
                                      "scene_gt.json of estimates."),
     output: Path | None = typer.Option(None, "-o", "--output", help="Also write the "
                                        "errors and recalls as JSON."),
-    mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", help="Millimetres per "
+    mm_per_unit: float = typer.Option(1000.0, "--mm-per-unit", callback=_positive,
+                                      help="Millimetres per "
                                       "model unit (1000: a model in metres)."),
     vsd: bool = typer.Option(True, "--vsd/--no-vsd", help="Compute VSD (renders the model "
                              "twice per image)."),
@@ -1426,7 +1458,7 @@ def scan_(
                                 "(model units, along the ray)."),
     outliers: float = typer.Option(0.0, "--outliers", help="Fraction of points replaced "
                                    "by outliers in the view frustum."),
-    seed: int | None = typer.Option(None, "--seed", help="Random seed."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Random seed."),
     world: bool = typer.Option(False, "--world", help="Write world coordinates (default: "
                                "the camera frame, OpenCV: x right, y down, z forward)."),
     ascii_: bool = typer.Option(False, "--ascii", help="Write ASCII PLY."),

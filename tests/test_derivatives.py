@@ -133,3 +133,21 @@ def test_large_input_is_chunked_and_matches():
     v, g = prog.value_and_grad(pts)
     np.testing.assert_array_equal(v, full)
     assert np.isfinite(g).all()
+
+
+@pytest.mark.parametrize("make", [
+    lambda: csdf.capped_cone(0.3, 0.1, 0.5), lambda: csdf.cone(0.3, 0.5),
+    lambda: csdf.capped_cone(0.1, 0.4, 0.2), lambda: csdf.cylinder(0.2, 0.8),
+    lambda: csdf.box((0.3, 0.2, 0.4)), lambda: csdf.sphere(0.3), lambda: csdf.torus(0.4, 0.1),
+], ids=["capped_cone", "cone", "capped_cone_wide_top", "cylinder", "box", "sphere", "torus"])
+def test_gradient_on_the_surface_is_the_normal(make):
+    """At points exactly on the surface (as sampled, before any noise) the gradient is
+    the unit outward normal: a frustum's distance had a 0 / 0 gradient there (1876 of
+    3000 sampled points of a capped cone had a zero gradient, so a noise-free cone's
+    caps were detected as planes)."""
+    shape = make()
+    P, N = csdf.sample_surface(shape, 3000, seed=0)
+    v, g = shape.compile().value_and_grad(P, {})
+    assert np.abs(v).max() < 1e-12
+    assert np.allclose(np.linalg.norm(g, axis=1), 1.0, atol=1e-9)
+    assert np.einsum("ij,ij->i", g, N).min() > 0.99

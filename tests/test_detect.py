@@ -1728,3 +1728,11 @@ def test_bad_seeds_are_named_before_any_work(bad):
     for call in calls:
         with pytest.raises(csdf.CsdfError, match="seed must be None, a whole number >= 0"):
             call()
+
+
+def test_noise_free_cone_caps_join_the_cone():
+    """A capped cone sampled without noise is one cone: its caps join it (they came out
+    as two planes while the frustum's gradient was 0 on them)."""
+    P, N = csdf.sample_surface(csdf.capped_cone(0.3, 0.1, 0.5), 3000, seed=0)
+    dets = csdf.detect_primitives(P, N, seed=0)
+    assert [d.kind for d in dets] == ["cone"] and len(dets[0].inliers) == 3000

@@ -25,8 +25,22 @@ def box_distance(q: Vec) -> Expr:
     return length(q.max(0.0)) + minimum(q.max_comp(), 0.0)
 
 
+#: how far below the distance to the nearest corner (a fraction of the trapezoid's
+#: size) the corner term of :func:`trapezoid2` is lowered, so that rounding alone never
+#: lets it win against the edge lines (whose gradients are defined on the outline)
+CORNER_SLACK = 1e-14
+
+
 def trapezoid2(q: Vec, r1, r2, he) -> Expr:
-    """Exact isosceles trapezoid: half-width ``r1`` at ``y=-he``, ``r2`` at ``y=+he``."""
+    """Exact isosceles trapezoid: half-width ``r1`` at ``y=-he``, ``r2`` at ``y=+he``.
+
+    Inside, on the outline and beside an edge the distance is the largest signed
+    distance to the three edge lines (a convex outline's exact distance there), whose
+    gradient is that edge's normal. Only where a corner is nearest does the distance to
+    the nearest point of the outline (a square root of a squared length) take over:
+    that term's gradient is 0 / 0 on the outline itself (a sampled point on a cone's
+    cap had a zero gradient), so it is lowered by ``CORNER_SLACK`` times the size to
+    lose every tie to rounding."""
     qx = abs(q.x)
     qy = q.y
     k1 = Vec((r2, he))
@@ -37,7 +51,11 @@ def trapezoid2(q: Vec, r1, r2, he) -> Expr:
     cb = p - k1 + k2 * t
     inside = (1.0 - step(cb.x)) * (1.0 - step(ca.y))
     s = 1.0 - 2.0 * inside
-    return s * sqrt(minimum(length2(ca), length2(cb)))
+    corner = s * sqrt(minimum(length2(ca), length2(cb)))
+    side = ((qx - r1) * (2.0 * he) + (qy + he) * (r1 - r2)) / length(k2)
+    lines = maximum(abs(qy) - he, side)
+    slack = CORNER_SLACK * (abs(r1) + abs(r2) + abs(he))
+    return maximum(lines, corner - slack)
 
 
 def hexagon2(p: Vec, apothem) -> Expr:

@@ -79,9 +79,13 @@ def _non_negative(value: float | None) -> float | None:
 
 
 def _prefer(value: str | None) -> str | None:
-    """``csdf infer --prefer``'s callback: None, 'local' or 'global'."""
-    if value is not None and value not in ("local", "global"):
-        raise typer.BadParameter(f"must be local or global, got {value!r}")
+    """``csdf infer --prefer``'s callback: None or one of ``csdf.infer``'s choices
+    (imported only when a value is given: the CLI starts without the search)."""
+    if value is not None:
+        from .infer.api import PREFER
+
+        if value not in PREFER:
+            raise typer.BadParameter(f"must be one of {', '.join(PREFER)}, got {value!r}")
     return value
 
 

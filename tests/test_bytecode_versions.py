@@ -28,6 +28,10 @@ OLD = {
         csdf.sphere(csdf.param("r", 0.8, 0.5, 1.2)), csdf.box(1.0).twist(0.5), k=0.1),
     "old_v1_polygon_2d": lambda: csdf.polygon([(0, 0), (1, 0), (0.5, 1)]),
 }
+#: files whose shape csdf now compiles with another formula of the same distance (the
+#: polygon's edge lines, for gradients defined on the outline): the old program still
+#: loads and gives its values; today's gives them to rounding
+REFORMULATED = {"old_v1_polygon_2d"}
 
 
 def _points(dim: int) -> np.ndarray:
@@ -55,15 +59,19 @@ def test_old_version_1_files_load(name):
     assert old.bounds is None
     assert old.to_bytes() == raw  # a program without bounds is still written as v1
     fresh = OLD[name]().compile()
-    _same_tape(old, fresh)
+    if name not in REFORMULATED:
+        _same_tape(old, fresh)
     pts = _points(old.dim)
     want = np.load(DATA / f"{name}_values.npy")
     np.testing.assert_array_equal(old(pts, backend="numpy"), want)
-    np.testing.assert_array_equal(fresh(pts, backend="numpy"), want)
     # the old listing loads to the same program
     listing = (DATA / f"{name}.csdft").read_text()
     assert "bounds" not in listing
     assert csdf.Program.from_text(listing) == old
+    if name in REFORMULATED:
+        np.testing.assert_allclose(fresh(pts, backend="numpy"), want, rtol=0, atol=1e-14)
+        return
+    np.testing.assert_array_equal(fresh(pts, backend="numpy"), want)
     # and giving it the shape's bounds makes it the program csdf compiles today
     assert old.with_bounds(OLD[name]().bounds) == fresh
 

@@ -139,15 +139,32 @@ def test_large_input_is_chunked_and_matches():
     lambda: csdf.capped_cone(0.3, 0.1, 0.5), lambda: csdf.cone(0.3, 0.5),
     lambda: csdf.capped_cone(0.1, 0.4, 0.2), lambda: csdf.cylinder(0.2, 0.8),
     lambda: csdf.box((0.3, 0.2, 0.4)), lambda: csdf.sphere(0.3), lambda: csdf.torus(0.4, 0.1),
-], ids=["capped_cone", "cone", "capped_cone_wide_top", "cylinder", "box", "sphere", "torus"])
+    lambda: csdf.hex_prism(0.4, 0.5), lambda: csdf.tri_prism(0.5, 0.3),
+    lambda: csdf.pyramid(0.7, 0.6), lambda: csdf.polyhedron(),
+    lambda: csdf.extrude(csdf.hexagon(0.4), 0.3),
+    lambda: csdf.extrude(csdf.equilateral_triangle(0.5), 0.3),
+    lambda: csdf.extrude(csdf.regular_polygon(7, 0.5), 0.3),
+    lambda: csdf.extrude(csdf.rhombus((0.8, 0.5)), 0.3),
+    lambda: csdf.extrude(csdf.triangle((0.1, 0.5), (-0.4, -0.3), (0.5, -0.4)), 0.3),
+    lambda: csdf.extrude(csdf.polygon(
+        [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (0.0, 0.1), (-0.5, 0.5),
+         (-0.2, -0.3), (-0.2, 0.0), (0.2, 0.0), (0.2, -0.3)],
+        paths=[[0, 1, 2, 3, 4], [5, 6, 7, 8]]), 0.3),
+], ids=["capped_cone", "cone", "capped_cone_wide_top", "cylinder", "box", "sphere", "torus",
+        "hex_prism", "tri_prism", "pyramid", "polyhedron", "hexagon", "equilateral_triangle",
+        "regular_polygon", "rhombus", "triangle", "polygon_notched_with_hole"])
 def test_gradient_on_the_surface_is_the_normal(make):
     """At points exactly on the surface (as sampled, before any noise) the gradient is
     the unit outward normal: a frustum's distance had a 0 / 0 gradient there (1876 of
     3000 sampled points of a capped cone had a zero gradient, so a noise-free cone's
-    caps were detected as planes)."""
+    caps were detected as planes); so did the polygons' (hexagonal and triangular
+    prisms, the pyramid, extruded polygons: 526-1181 of 2000 points), and a mesh's
+    gradient on a face was the direction of the rounding residue."""
     shape = make()
     P, N = csdf.sample_surface(shape, 3000, seed=0)
     v, g = shape.compile().value_and_grad(P, {})
-    assert np.abs(v).max() < 1e-12
+    assert np.abs(v).max() < 1e-9  # the sampler's projection tolerance
     assert np.allclose(np.linalg.norm(g, axis=1), 1.0, atol=1e-9)
-    assert np.einsum("ij,ij->i", g, N).min() > 0.99
+    cos = np.einsum("ij,ij->i", g, N)
+    # a point on a rim (a prism's cap edge) takes one of its two faces' normals
+    assert cos.min() > 0.5 and np.mean(cos > 0.99) > 0.999

@@ -148,8 +148,9 @@ def _pseudonormal(t, f, T, fn, en, tri_edge, vn):
 def signed_distance(P, V, T, order, node_f, node_i, fn, en, tri_edge, vn, out, grad,
                     closest, want_grad, want_closest):
     """Signed distances ``out`` ``(N,)`` of the points ``P`` ``(N, 3)``; with
-    ``want_grad`` their gradients into ``grad`` ``(N, 3)`` (the unit direction from the
-    nearest point, signed; the feature's pseudonormal on the surface); with
+    ``want_grad`` their gradients into ``grad`` ``(N, 3)`` (the face's normal where a
+    face is nearest; else the unit direction from the nearest point, signed, and the
+    feature's pseudonormal on the surface); with
     ``want_closest`` the nearest points into ``closest`` ``(N, 3)``."""
     n = P.shape[0]
     for i in prange(n):
@@ -162,7 +163,14 @@ def signed_distance(P, V, T, order, node_f, node_i, fn, en, tri_edge, vn, out, g
         d = np.sqrt(d2)
         out[i] = s * d
         if want_grad:
-            if d > 0.0:
+            if f == FACE:
+                # the signed distance is (p - c) . n wherever the face is nearest, so
+                # its gradient is the face normal, on the surface too (where p - c is
+                # rounding and its direction arbitrary)
+                grad[i, 0] = n0
+                grad[i, 1] = n1
+                grad[i, 2] = n2
+            elif d > 0.0:
                 grad[i, 0] = s * w0 / d
                 grad[i, 1] = s * w1 / d
                 grad[i, 2] = s * w2 / d

@@ -36,6 +36,7 @@ from .base import (
 from .formulas import (
     SQRT3,
     box_distance,
+    edges_first,
     equilateral_triangle2,
     hexagon2,
     segment_distance,
@@ -411,7 +412,10 @@ def pyramid(height=1.0, base=1.0) -> Shape:
         # the lateral formula ignores the base: below it the nearest point is on the base
         # square; inside, the base may be nearer than the sides
         under = length(Vec((Vec((ax, ay)) - 0.5).max(0.0).c + (q.z,)))
-        return select_ge(q.z, maximum(sides, -q.z), under) * b
+        exact = select_ge(q.z, maximum(sides, -q.z), under)
+        # the base's and the four sides' planes first (a convex solid: see edges_first)
+        planes = maximum(-q.z, (hn * maximum(ax, ay) + 0.5 * q.z - 0.5 * hn) / sqrt(m2))
+        return edges_first(planes, exact, 1.0 + abs(hn)) * b
 
     return primitive(
         "pyramid", f, args=(height, base), prim_args=(h, b), exactness="exact",

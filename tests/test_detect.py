@@ -613,6 +613,60 @@ def test_detect_on_a_scan_given_twice_finds_the_same_stool_with_both_copies(clut
     assert np.array_equal(twice[0].inliers, np.concatenate([once[0].inliers,
                                                             once[0].inliers + len(P)]))
 
+
+def test_detect_on_a_scan_given_twice_with_jitter_finds_the_same_stool(clutter):
+    """The copy moved by 1 mm (at 4 mm noise; a frame added twice, say) is a cloud of
+    near-copies: the nearest-neighbour spacing collapsed to the jitter and the fit's
+    visibility check found every model ray empty, so nothing was found from 0.5 to
+    2 mm. The near-copies fold into the first copy, so the result is the single scan's
+    (to the few points that fold with another point of the scan) with the copies among
+    the inliers."""
+    P, N, *_ = clutter
+    once = csdf.detect(P, ["stool"], viewpoint=(0, 0, 0), seed=0)
+    rng = np.random.default_rng(5)
+    for jitter in (0.0005, 0.001):
+        Q = np.concatenate([P, P + rng.normal(0.0, jitter, P.shape)])
+        twice = csdf.detect(Q, ["stool"], viewpoint=(0, 0, 0), seed=0)
+        assert [d.model for d in twice] == ["stool"], (jitter, twice)
+        assert np.allclose(twice[0].pose.matrix, once[0].pose.matrix, atol=1e-4)
+        copies = np.setdiff1d(twice[0].inliers, once[0].inliers) - len(P)
+        assert len(copies) >= 0.95 * len(once[0].inliers)
+        assert np.isin(copies, once[0].inliers).mean() > 0.95
+
+
+def test_near_copies_fold_only_where_most_points_have_one():
+    rng = np.random.default_rng(0)
+    g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0)), -1).reshape(-1, 2) * 0.01
+    P = np.c_[g, rng.normal(0.0, 0.001, len(g))]  # a grid of 1 cm, 1 mm noise
+    assert distinct_points(P) is None
+    near = P + rng.normal(0.0, 0.0005, P.shape)  # each point again, 0.5 mm off
+    keep, owner = distinct_points(np.concatenate([P, near, P[:5]]))
+    assert keep.tolist() == list(range(len(P)))
+    assert owner.tolist() == [*range(len(P)), *range(len(P)), *range(5)]
+    # random samples of a surface have close pairs, not near-copies: left alone
+    Q = rng.uniform(0.0, 1.0, (3000, 3)) * (1.0, 1.0, 0.0)
+    assert distinct_points(Q) is None
+
+
+def test_typical_spacing_skips_near_copies():
+    from scipy.spatial import cKDTree
+
+    from csdf.points import NEAR_K, has_near_copies, typical_spacing
+
+    g = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), -1).reshape(-1, 2)
+    P = np.c_[g, np.zeros(len(g))] * 0.01
+
+    def spacing(X):
+        dd, _ = cKDTree(X).query(X, k=NEAR_K + 1)
+        return typical_spacing(dd[:, 1:]), has_near_copies(dd[:, 1:])
+
+    assert spacing(P) == (pytest.approx(0.01), False)
+    twice = np.concatenate([P, P + (0.0003, 0.0002, 0.0)])
+    assert spacing(twice) == (pytest.approx(0.01, rel=0.05), True)
+    with pytest.raises(ValueError, match="neighbour distances"):
+        typical_spacing(np.zeros((5, 2)))
+
+
 def test_feet_split_a_cluster_wider_than_the_model():
     from csdf.detect.objects import FEET_SPLIT, _feet
 

@@ -126,6 +126,22 @@ def test_back_face_solution_is_not_a_success():
     assert abs((right.translation - t) @ n) < 1e-6
 
 
+def test_visibility_check_of_a_scan_given_twice_with_jitter():
+    """A scan given twice, the copy 0.5 mm off (a tenth of the point spacing): the
+    check's spacing was the median nearest-neighbour distance, the jitter, so every
+    model ray found no point near it and the right pose was 'unexplained'."""
+    plate, P, R, t = _plate_scan()
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = R, t
+    rng = np.random.default_rng(0)
+    twice = np.concatenate([P, P + rng.normal(0.0, 0.0005, P.shape)])
+    for cloud in (P, twice):
+        res = check_fit(plate, cloud, csdf.fit(plate, cloud, init=M, escape=False),
+                        viewpoint=np.zeros(3))
+        assert res.quality["visible_checked"] and res.success, res.quality
+        assert res.quality["visible_unexplained"] < 0.05
+
+
 def test_bad_start_with_a_viewpoint_is_not_a_success():
     """A camera-frame chair cloud from the identity start (no multistart): the fit
     converges to the chair turned away; success is false, with the reasons."""

@@ -6,9 +6,15 @@ import numpy as np
 
 from .errors import CsdfError
 
-__all__ = ["as_points", "MAX_POINTS"]
+__all__ = ["as_points", "MAX_POINTS", "typical_spacing", "has_near_copies", "NEAR_K",
+           "NEAR_COPY"]
 
 MAX_POINTS = 2**31 - 1
+#: :func:`typical_spacing` reads each point's distances to this many nearest others
+NEAR_K = 4
+#: a neighbour nearer than this fraction of a point's ``NEAR_K``-th neighbour distance
+#: is a near-copy of it (see :func:`typical_spacing`)
+NEAR_COPY = 0.2
 _FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 
 
@@ -50,3 +56,43 @@ def as_points(points, dim: int = 3) -> tuple[np.ndarray, tuple[int, ...], np.dty
     if flat.shape[0] > MAX_POINTS:
         raise CsdfError(f"too many points ({flat.shape[0]}); evaluate in batches")
     return flat, batch, arr.dtype
+
+
+def typical_spacing(dd: np.ndarray) -> float:
+    """The typical distance between neighbouring points of a cloud (its units).
+
+    Args:
+        dd: ``(S, k)``, ``k >= NEAR_K``: for each of ``S`` points of the cloud (all, or
+            a sample), its distances to its ``k`` nearest other points, ascending.
+
+    Returns:
+        The median distance to the nearest other point. When most points have a
+        near-copy (that median is below ``NEAR_COPY`` times the median distance to the
+        ``NEAR_K``-th neighbour: a scan given twice with millimetres of jitter, frames
+        stacked), the median distance to the nearest point that is not a near-copy
+        (farther than ``NEAR_COPY`` times the point's own ``NEAR_K``-th neighbour
+        distance). A cloud without near-copies gets the plain median (random samples
+        of a surface give about 0.4 times, grids about 1).
+    """
+    dd = _distances(dd)
+    first = float(np.median(dd[:, 0]))
+    if not has_near_copies(dd):
+        return first
+    far = dd[:, NEAR_K - 1]
+    apart = dd > NEAR_COPY * far[:, None]  # the NEAR_K-th is always apart
+    return float(np.median(dd[np.arange(len(dd)), np.argmax(apart, axis=1)]))
+
+
+def has_near_copies(dd: np.ndarray) -> bool:
+    """Whether most points of a cloud have a near-copy: the median distance to the
+    nearest other point is below ``NEAR_COPY`` times the median distance to the
+    ``NEAR_K``-th (``dd`` as :func:`typical_spacing`'s)."""
+    dd = _distances(dd)
+    return bool(np.median(dd[:, 0]) < NEAR_COPY * np.median(dd[:, NEAR_K - 1]))
+
+
+def _distances(dd) -> np.ndarray:
+    dd = np.asarray(dd, np.float64)
+    if dd.ndim != 2 or dd.shape[1] < NEAR_K or len(dd) == 0:
+        raise ValueError(f"need (S, >= {NEAR_K}) neighbour distances, got {dd.shape}")
+    return dd

@@ -11,9 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..errors import CsdfError
+from ..points import NEAR_COPY, NEAR_K, has_near_copies, typical_spacing
 
 __all__ = ["Neighbourhood", "neighbourhood", "knn", "estimate_normals", "points_arg",
            "viewpoint_arg", "distinct_points", "with_copies",
@@ -39,6 +42,8 @@ GRID_SAMPLE = 500
 GRID_QUANTILE = 0.98
 #: the most cells the grid may have (else the tree answers)
 GRID_MAX_CELLS = 4_000_000
+#: points of the sample that tells whether a cloud has near-copies (:func:`distinct_points`)
+NEAR_SAMPLE = 2000
 #: the most points detection accepts in one cloud
 MAX_DETECT_POINTS = 5_000_000
 
@@ -77,23 +82,56 @@ def viewpoint_arg(viewpoint) -> np.ndarray | None:
 
 
 def distinct_points(P: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Repeated points of a cloud ``P`` ``(N, 3)``: None when every row is distinct, else
-    ``(keep (K,), owner (N,))``: ``keep`` the ascending indices of each distinct row's
-    first copy, ``owner[j]`` the position in ``keep`` of the copy that stands for point
-    ``j``.
+    """Repeated points of a cloud ``P`` ``(N, 3)``: None when every row is distinct and
+    the cloud has no near-copies, else ``(keep (K,), owner (N,))``: ``keep`` the
+    ascending indices of the first point of each group of copies, ``owner[j]`` the
+    position in ``keep`` of the point that stands for point ``j``.
 
     Copies break the neighbour structure every detector stands on (a point's nearest
     neighbours are its own copies at distance 0, so the sampling scale, the noise and
     the links collapse): a cloud read off a mesh's triangles (each vertex about six
-    times) or with a frame added twice found nothing. The detectors run on the distinct
-    points and give each result every copy (:func:`with_copies`)."""
+    times) or with a frame added twice found nothing. So did a scan given twice with
+    0.5-2 mm of jitter (at 4 mm of noise): when most points have a near-copy
+    (:func:`csdf.points.has_near_copies`, judged on a sample of ``NEAR_SAMPLE``), two
+    points nearer than ``NEAR_COPY`` times the smaller of their ``NEAR_K``-th neighbour
+    distances are copies too (and copies of copies). A cloud without near-copies keeps
+    every distinct row. The detectors run on the distinct points and give each result
+    every copy (:func:`with_copies`)."""
     _, first, inverse = np.unique(P, axis=0, return_index=True, return_inverse=True)
-    if len(first) == len(P):
+    rep = first[inverse.ravel()]  # (N,) each point's first exact copy
+    folded = _near_copies(P, np.sort(first))
+    if folded is not None:
+        rep = folded[rep]
+    keep = np.unique(rep)
+    if len(keep) == len(P):
         return None
-    order = np.argsort(first)
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return first[order], rank[inverse.ravel()]
+    return keep, np.searchsorted(keep, rep)
+
+
+def _near_copies(P: np.ndarray, distinct: np.ndarray) -> np.ndarray | None:
+    """``(N,)`` for each of the ``distinct`` rows of ``P`` the first row (by index) of
+    its group of near-copies (other rows: themselves), or None when the cloud has no
+    near-copies (see :func:`distinct_points`)."""
+    if len(distinct) <= 2 * NEAR_K:
+        return None
+    D = P[distinct]
+    tree = cKDTree(D)
+    step = max(1, len(D) // NEAR_SAMPLE)
+    dd, _ = tree.query(D[::step], k=NEAR_K + 1)
+    if not has_near_copies(dd[:, 1:]):
+        return None
+    dd, ii = tree.query(D, k=NEAR_K + 1)
+    dd, ii = dd[:, 1:], ii[:, 1:]
+    far = dd[:, NEAR_K - 1]
+    near = dd < NEAR_COPY * np.minimum(far[:, None], far[ii])
+    rows = np.repeat(np.arange(len(D)), NEAR_K)[near.ravel()]
+    graph = coo_matrix((np.ones(len(rows)), (rows, ii[near])), shape=(len(D), len(D)))
+    _, comp = connected_components(graph, directed=False)
+    lowest = np.full(comp.max() + 1, len(D))
+    np.minimum.at(lowest, comp, np.arange(len(D)))  # distinct is ascending: first row
+    out = np.arange(len(P))
+    out[distinct] = distinct[lowest[comp]]
+    return out
 
 
 def with_copies(idx: np.ndarray, owner: np.ndarray) -> np.ndarray:
@@ -126,7 +164,8 @@ class Neighbourhood:
         nbr: ``(N, k)`` the indices of each point's ``k`` nearest neighbours (itself
             excluded).
         lengths: ``(N, k)`` their distances (scene units).
-        spacing: the median distance to the nearest neighbour (scene units).
+        spacing: the median distance to the nearest neighbour, near-copies not counted
+            (:func:`csdf.points.typical_spacing`; scene units).
         local: ``(N,)`` each point's distance to its ``k // 2``-th neighbour: the local
             sampling scale (scene units).
         noise: a robust estimate of the noise standard deviation: the median over points
@@ -174,7 +213,9 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
             flip = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, float) - points) < 0
             normals[flip] *= -1
     return Neighbourhood(tree=tree, nbr=np.ascontiguousarray(idx), lengths=dist,
-                         spacing=float(np.median(dist[:, 0])), local=dist[:, k // 2 - 1],
+                         spacing=(typical_spacing(dist) if k >= NEAR_K
+                                  else float(np.median(dist[:, 0]))),
+                         local=dist[:, k // 2 - 1],
                          noise=float(np.median(np.sqrt(np.maximum(least, 0.0)))),
                          normals=normals)
 

@@ -105,6 +105,7 @@ from ..errors import CsdfError
 from ..field import as_field
 from ..fit import FitResult, check_fit, fit
 from ..fit.lie import rotation_angle
+from ..points import NEAR_K, typical_spacing
 from ..pose import Pose
 from ..seeds import rng_arg
 from .neighbours import (
@@ -2250,15 +2251,16 @@ class _Run:
     def _ray_index(self) -> tuple[RayIndex, np.ndarray]:
         """``(index, ranges)``: the scan's unit ray directions for nearest-ray queries
         within the tolerance of a ray match (:class:`.rays.RayIndex`; its ``tol``, in
-        radians as a chord: 1.5 times the median angle to the nearest other ray) and
+        radians as a chord: 1.5 times the median angle to the nearest other ray, not
+        counting near-copies: :func:`csdf.points.typical_spacing`) and
         the points' ranges ``(N,)`` from the viewpoint (scene units); built once."""
         if getattr(self, "_rays", None) is None:
             from scipy.spatial import cKDTree
 
             tree = cKDTree(self.dirs)
             step = max(1, len(self.dirs) // 2000)
-            dd, _ = tree.query(self.dirs[::step], k=2)
-            tol = 1.5 * float(np.median(dd[:, 1]))
+            dd, _ = tree.query(self.dirs[::step], k=NEAR_K + 1)
+            tol = 1.5 * typical_spacing(dd[:, 1:])
             self._rays = (RayIndex(self.dirs, tol, tree),
                           np.linalg.norm(self.P - self.vp, axis=1))
         return self._rays

@@ -1,4 +1,5 @@
-"""Validation of point arrays given to evaluators."""
+"""Validation of point arrays given to evaluators, and a cloud's typical point spacing
+(near-copies not counted)."""
 
 from __future__ import annotations
 

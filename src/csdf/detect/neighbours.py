@@ -115,7 +115,7 @@ def _near_copies(P: np.ndarray, distinct: np.ndarray) -> np.ndarray | None:
     if len(distinct) <= 2 * NEAR_K:
         return None
     D = P[distinct]
-    tree = cKDTree(D)
+    tree = cKDTree(D, balanced_tree=False)
     step = max(1, len(D) // NEAR_SAMPLE)
     dd, _ = tree.query(D[::step], k=NEAR_K + 1)
     if not has_near_copies(dd[:, 1:]):

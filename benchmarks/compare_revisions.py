@@ -18,6 +18,9 @@ ratio new / old (below 1: the new revision is faster). Other suites (``--suite``
   values, gradients and parameter Jacobian at new parameters, on 700 points (a
   cluster); a field's values on 50 points (a sphere tracer's late steps); one robust
   pose-and-shape fit of the chair to 1,200 noisy points with a viewpoint;
+* ``shapes``: polygon-based primitives (an extruded 200-gon, a hexagonal prism, a
+  pyramid): values and values with gradients at 10^6 points, and ``csdf.mesh`` at
+  128^3 (``dc``);
 * ``detect``: ``csdf.detect`` on the benchmark's cluttered scenes
   (``bench_detect.py``'s, seeds ``--first-scene`` on, ``--scenes`` of them), CPU and
   wall seconds per object after a warm-up scene, and whether both revisions return
@@ -28,6 +31,7 @@ Usage::
     .venv/bin/python benchmarks/compare_revisions.py 608cde1 [--rounds 3] [--output F]
     .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite calls
     .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite detect --scenes 5
+    .venv/bin/python benchmarks/compare_revisions.py 9cb5157 --suite shapes
 """
 
 from __future__ import annotations
@@ -157,6 +161,37 @@ print("RESULT " + json.dumps({"detect CPU s / object": cpu / objects,
 '''
 
 
+CHILD_SHAPES = r'''
+import json, time
+import numpy as np
+import csdf
+
+def med(fn, repeats):
+    fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter(); fn(); ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+a = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False)
+rad = 0.5 + 0.15 * np.sin(5.0 * a)
+shapes = {
+    "polygon200": csdf.extrude(csdf.polygon(np.c_[rad * np.cos(a), rad * np.sin(a)]), 0.5),
+    "hex_prism": csdf.hex_prism(0.5, 0.8),
+    "pyramid": csdf.pyramid(0.8, 0.9),
+}
+pts = np.random.default_rng(1).uniform(-0.8, 0.8, (10**6, 3))
+out = {}
+for name, shape in shapes.items():
+    prog = shape.compile()
+    out[f"{name} 1e6 value"] = med(lambda: prog(pts, backend="fast"), 5)
+    out[f"{name} 1e6 value+grad"] = med(lambda: prog.value_and_grad(pts, backend="fast"), 5)
+    out[f"{name} mesh 128 dc"] = med(
+        lambda: csdf.mesh(shape, resolution=128, method="dc", progress=False), 3)
+print("RESULT " + json.dumps(out))
+'''
+
+
 def detect_scenes(first: int, count: int, path: Path) -> list[str]:
     """The benchmark's cluttered scenes ``first .. first + count - 1`` (this tree's
     ``bench_detect.py``) saved to ``path`` for the children; returns the models."""
@@ -188,7 +223,7 @@ def main() -> None:
     ap.add_argument("rev", help="the earlier revision (a commit) to compare against")
     ap.add_argument("--rounds", type=int, default=3, help="child runs per revision")
     ap.add_argument("--output", type=Path, default=None, help="also write Markdown here")
-    ap.add_argument("--suite", choices=("eval", "calls", "detect"), default="eval",
+    ap.add_argument("--suite", choices=("eval", "calls", "shapes", "detect"), default="eval",
                     help="what to time (module docs)")
     ap.add_argument("--first-scene", type=int, default=100,
                     help="detect suite: the first scene's seed")
@@ -200,8 +235,8 @@ def main() -> None:
         ap.error(f"--scenes must be 1-100, got {args.scenes}")
     t_start = time.time()
     with tempfile.TemporaryDirectory(prefix="csdf-ab-") as tmp:
-        code, child_args = {"eval": CHILD, "calls": CHILD_CALLS, "detect": CHILD_DETECT}[
-            args.suite], ()
+        code, child_args = {"eval": CHILD, "calls": CHILD_CALLS, "shapes": CHILD_SHAPES,
+                            "detect": CHILD_DETECT}[args.suite], ()
         if args.suite == "detect":
             data = Path(tmp) / "scenes.npz"
             models = detect_scenes(args.first_scene, args.scenes, data)

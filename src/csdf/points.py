@@ -7,8 +7,8 @@ import numpy as np
 
 from .errors import CsdfError
 
-__all__ = ["as_points", "MAX_POINTS", "typical_spacing", "has_near_copies", "NEAR_K",
-           "NEAR_COPY"]
+__all__ = ["as_points", "MAX_POINTS", "typical_spacing", "sample_spacing", "has_near_copies",
+           "NEAR_K", "NEAR_COPY"]
 
 MAX_POINTS = 2**31 - 1
 #: :func:`typical_spacing` reads each point's distances to this many nearest others
@@ -82,6 +82,17 @@ def typical_spacing(dd: np.ndarray) -> float:
     far = dd[:, NEAR_K - 1]
     apart = dd > NEAR_COPY * far[:, None]  # the NEAR_K-th is always apart
     return float(np.median(dd[np.arange(len(dd)), np.argmax(apart, axis=1)]))
+
+
+def sample_spacing(tree, sample: np.ndarray) -> float:
+    """:func:`typical_spacing` of the cloud in ``tree`` (a :class:`scipy.spatial.cKDTree`)
+    from the neighbours of ``sample`` ``(S, D)``, points of that cloud; a cloud of at
+    most ``NEAR_K`` points gets the median distance to the nearest other point."""
+    if tree.n > NEAR_K:
+        dd, _ = tree.query(sample, k=NEAR_K + 1)
+        return typical_spacing(dd[:, 1:])
+    dd, _ = tree.query(sample, k=2)
+    return float(np.median(dd[:, 1]))
 
 
 def has_near_copies(dd: np.ndarray) -> bool:

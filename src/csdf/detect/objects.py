@@ -105,7 +105,7 @@ from ..errors import CsdfError
 from ..field import as_field
 from ..fit import FitResult, check_fit, fit
 from ..fit.lie import rotation_angle
-from ..points import NEAR_K, typical_spacing
+from ..points import sample_spacing
 from ..pose import Pose
 from ..seeds import rng_arg
 from .neighbours import (
@@ -2252,15 +2252,14 @@ class _Run:
         """``(index, ranges)``: the scan's unit ray directions for nearest-ray queries
         within the tolerance of a ray match (:class:`.rays.RayIndex`; its ``tol``, in
         radians as a chord: 1.5 times the median angle to the nearest other ray, not
-        counting near-copies: :func:`csdf.points.typical_spacing`) and
+        counting near-copies: :func:`csdf.points.sample_spacing`) and
         the points' ranges ``(N,)`` from the viewpoint (scene units); built once."""
         if getattr(self, "_rays", None) is None:
             from scipy.spatial import cKDTree
 
             tree = cKDTree(self.dirs)
             step = max(1, len(self.dirs) // 2000)
-            dd, _ = tree.query(self.dirs[::step], k=NEAR_K + 1)
-            tol = 1.5 * typical_spacing(dd[:, 1:])
+            tol = 1.5 * sample_spacing(tree, self.dirs[::step])
             self._rays = (RayIndex(self.dirs, tol, tree),
                           np.linalg.norm(self.P - self.vp, axis=1))
         return self._rays

@@ -45,7 +45,7 @@ import math
 import numpy as np
 
 from ..errors import CsdfError
-from ..points import NEAR_K, typical_spacing
+from ..points import sample_spacing
 
 __all__ = ["assess", "INLIER_MIN", "RMSE_MAX", "VISIBLE_MAX_UNEXPLAINED", "VIEW_RAYS",
            "GAP_FACTOR", "NEIGHBOURS", "TAN_MAX", "TRACE_ITER", "MIN_VIEW_RAYS", "GRAZING"]
@@ -198,8 +198,7 @@ def _visibility(prog, pvals: dict, backend: str, R: np.ndarray, t: np.ndarray, s
     tree = cKDTree(q2)
     sub = q2 if len(q2) <= 2000 else q2[np.random.default_rng(0).choice(len(q2), 2000,
                                                                          False)]
-    nn, _ = tree.query(sub, k=min(NEAR_K + 1, len(q2)))
-    spacing = typical_spacing(nn[:, 1:]) if nn.shape[1] > NEAR_K else float(np.median(nn[:, 1]))
+    spacing = sample_spacing(tree, sub)
     gap = GAP_FACTOR * max(spacing, 1e-12)
     k = min(NEIGHBOURS, len(q2))
     off, j = tree.query(h2, k=k)

@@ -10,7 +10,7 @@ import math
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from ..points import NEAR_K, typical_spacing
+from ..points import sample_spacing
 from .candidates import Leaf, leaf_area, leaf_surface, same_leaf
 from .search import Scored, Scorer, swap
 from .tree import leaves as tree_leaves
@@ -110,8 +110,7 @@ class View:
         self.r_lo, self.r_hi = float(r.min()), float(r.max())
         uv, ok = self._plane(P)
         sub = uv[ok][rng.choice(int(ok.sum()), size=min(int(ok.sum()), 20000), replace=False)]
-        dd, _ = cKDTree(sub).query(sub, k=NEAR_K + 1 if len(sub) > NEAR_K else 2)
-        gap = typical_spacing(dd[:, 1:]) if dd.shape[1] > NEAR_K else float(np.median(dd[:, 1]))
+        gap = sample_spacing(cKDTree(sub), sub)
         cell = 2.5 * max(gap, 1e-9) * math.sqrt(ok.sum() / len(sub))
         lo, hi = uv[ok].min(axis=0), uv[ok].max(axis=0)
         pad = 0.15 * (hi - lo) + cell

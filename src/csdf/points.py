@@ -80,7 +80,8 @@ def typical_spacing(dd: np.ndarray) -> float:
     if not has_near_copies(dd):
         return first
     far = dd[:, NEAR_K - 1]
-    apart = dd > NEAR_COPY * far[:, None]  # the NEAR_K-th is always apart
+    # the NEAR_K-th is apart unless it is 0 (exact copies): then the nearest, 0
+    apart = dd > NEAR_COPY * far[:, None]
     return float(np.median(dd[np.arange(len(dd)), np.argmax(apart, axis=1)]))
 
 

@@ -50,18 +50,21 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 
-CHILD = r'''
-import json, sys, time
-import numpy as np
-import csdf
-
+#: the median of a call's times after one warm-up call (the timing children's helper)
+MED = r'''
 def med(fn, repeats):
     fn()  # warm: kernels compiled and cached, result memory recycled
     ts = []
     for _ in range(repeats):
         t0 = time.perf_counter(); fn(); ts.append(time.perf_counter() - t0)
     return float(np.median(ts))
+'''
 
+CHILD = r'''
+import json, sys, time
+import numpy as np
+import csdf
+''' + MED + r'''
 r = csdf.param("r", 1.0, 0.5, 1.5)
 c = csdf.cylinder(0.5, 3.0)
 csg = (csdf.sphere(r) & csdf.box(1.5)) - c - c.orient("x") - c.orient("y")
@@ -165,14 +168,7 @@ CHILD_SHAPES = r'''
 import json, time
 import numpy as np
 import csdf
-
-def med(fn, repeats):
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter(); fn(); ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
-
+''' + MED + r'''
 a = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False)
 rad = 0.5 + 0.15 * np.sin(5.0 * a)
 shapes = {

@@ -12,7 +12,9 @@ can hold this to account.
 
 from __future__ import annotations
 
+import gc
 import hashlib
+import mmap
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -135,12 +137,27 @@ def write_part(path: str | None, layout: MeshLayout, part: Part, own_base: int,
               verts, faces)
     if block is not None:
         del verts, faces  # (the views first: a map with exported buffers cannot close)
-        block.close()
+        _close_map(block)
         return None
     blocks = [(layout.vertex_offset(own_base), layout.vertex_records(verts)),
               (layout.face_offset(face_base), layout.face_records(faces))]
     return None if layout.format != ARRAYS and path is not None and write_at(path, blocks) \
         else blocks
+
+
+def _close_map(block: mmap.mmap) -> None:
+    """Unmap ``block`` once this task's views of it are gone. A view can outlive its name
+    for a moment (a cycle, or a frame a profiler or traceback holds): then collect and
+    try again, and if one still holds it, leave the unmapping to that view's end. The
+    records are in the shared pages either way (``MAP_SHARED``), so nothing is lost."""
+    try:
+        block.close()
+    except BufferError:
+        gc.collect()
+        try:
+            block.close()
+        except BufferError:
+            pass
 
 
 def eval_block(points: np.ndarray, blob: bytes, params: dict[str, float], what: str,

@@ -15,6 +15,7 @@ from csdf.detect import surfaces as S
 from csdf.detect.neighbours import (
     components,
     distinct_points,
+    exact_copies,
     linked_edges,
     neighbourhood,
     sparse_points,
@@ -294,6 +295,25 @@ def _noisy_samples(shape, n, seed, noise=0.001):
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     return p + rng.normal(0.0, noise, (len(p), 1)) * q, q
 
+
+
+def test_exact_copies_are_what_numpy_unique_finds():
+    """The hashed grouping against ``np.unique(axis=0)``: copies scattered through the
+    cloud, rows that are each other's permutations, signed zeros; NaN rows equal none."""
+    rng = np.random.default_rng(3)
+    P = rng.integers(0, 4, (5000, 3)).astype(float)  # many copies, many permuted rows
+    P[::11] = -0.0
+    P[7] = [0.0, 0.0, 0.0]
+    _, first, inv = np.unique(P, axis=0, return_index=True, return_inverse=True)
+    assert np.array_equal(exact_copies(P), first[inv.ravel()])
+    assert exact_copies(P)[7] == 0 and P[0].tolist() == [0.0, 0.0, 0.0]
+    Q = rng.normal(size=(200, 3))
+    Q[[4, 9]] = np.nan
+    Q[12] = Q[3]
+    rep = exact_copies(Q)
+    assert rep[4] == 4 and rep[9] == 9 and rep[12] == 3
+    assert np.array_equal(np.delete(rep, 12), np.delete(np.arange(200), 12))
+    assert exact_copies(np.zeros((0, 3))).shape == (0,)
 
 
 def test_repeated_points_are_found_as_the_distinct_ones_with_every_copy():

@@ -19,7 +19,7 @@ from ..errors import CsdfError
 from ..points import NEAR_COPY, NEAR_K, has_near_copies, typical_spacing
 
 __all__ = ["Neighbourhood", "neighbourhood", "knn", "estimate_normals", "points_arg",
-           "viewpoint_arg", "distinct_points", "with_copies",
+           "viewpoint_arg", "distinct_points", "exact_copies", "with_copies",
            "normals_arg", "components",
            "linked_edges", "sparse_points", "K_NORMALS", "MAX_DETECT_POINTS", "LINK",
            "SPARSE"]
@@ -97,15 +97,53 @@ def distinct_points(P: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     distances are copies too (and copies of copies). A cloud without near-copies keeps
     every distinct row. The detectors run on the distinct points and give each result
     every copy (:func:`with_copies`)."""
-    _, first, inverse = np.unique(P, axis=0, return_index=True, return_inverse=True)
-    rep = first[inverse.ravel()]  # (N,) each point's first exact copy
-    folded = _near_copies(P, np.sort(first))
+    rep = exact_copies(P)  # (N,) each point's first exact copy
+    folded = _near_copies(P, np.flatnonzero(rep == np.arange(len(P))))
     if folded is not None:
         rep = folded[rep]
     keep = np.unique(rep)
     if len(keep) == len(P):
         return None
     return keep, np.searchsorted(keep, rep)
+
+
+#: odd 64-bit multipliers of :func:`exact_copies`' row hash
+_ROW_HASH = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9],
+                     dtype=np.uint64)
+
+
+def exact_copies(P: np.ndarray) -> np.ndarray:
+    """``(N,)`` for each row of ``P`` ``(N, D)`` (float64) the index of the first row
+    equal to it (``0.0`` equals ``-0.0``; a row holding NaN equals no other).
+
+    What ``np.unique(P, axis=0, return_index=True, return_inverse=True)`` gives, in a
+    fifth of its time on a million rows: the rows are sorted by a 64-bit hash of their
+    bits (one integer sort, not a sort of rows), and equal rows are then neighbours.
+    When two different rows share a hash (or NaN makes a row unequal to itself) the
+    rows are sorted lexicographically instead."""
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    n = len(P)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    bits = (P + 0.0).view(np.uint64)  # (+ 0.0: -0.0 becomes 0.0, as == has it)
+    h = np.zeros(n, dtype=np.uint64)
+    for j in range(P.shape[1]):
+        h ^= bits[:, j] * _ROW_HASH[j % len(_ROW_HASH)] + np.uint64(j)
+    order = np.argsort(h, kind="stable")
+    S = P[order]
+    same = np.all(S[1:] == S[:-1], axis=1)
+    hs = h[order]
+    if np.any((hs[1:] == hs[:-1]) & ~same):  # a shared hash, or NaN
+        order = np.lexsort(P.T[::-1])
+        S = P[order]
+        same = np.all(S[1:] == S[:-1], axis=1)
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    new[1:] = ~same
+    first = order[new]  # (a stable sort: each group's lowest index comes first)
+    rep = np.empty(n, dtype=np.int64)
+    rep[order] = first[np.cumsum(new) - 1]
+    return rep
 
 
 def _near_copies(P: np.ndarray, distinct: np.ndarray) -> np.ndarray | None:

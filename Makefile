@@ -12,9 +12,13 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[test,plan,dask,openscad]'
 	touch $(STAMP)
 
+# the test suite runs in this many processes (pytest-xdist), each test file in one of
+# them (module fixtures built once); 0 runs it in this process
+TEST_WORKERS ?= 2
+
 test: $(STAMP)
 	$(PY) -m ruff check src tests examples benchmarks docs
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_eval.py

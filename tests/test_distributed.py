@@ -227,3 +227,25 @@ def test_cli_workers(tmp_path):
     r = runner.invoke(app, ["mesh", str(model), "-o", str(tmp_path / "c.ply"),
                             "--workers", "1", "--scheduler", "tcp://127.0.0.1:1"])
     assert r.exit_code != 0 and "not both" in r.output
+
+
+def test_a_shared_block_whose_view_outlives_its_task_is_not_an_error(tmp_path):
+    """``write_part`` unmaps its block after its views are gone; a view that something
+    else still holds (CI once failed on ``BufferError: cannot close exported pointers
+    exist``) leaves the unmapping to that view, and the records stay written."""
+    import mmap
+
+    from csdf.distributed.tasks import _close_map
+
+    path = tmp_path / "block"
+    path.write_bytes(bytes(64))
+    with open(path, "r+b") as f:
+        block = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED)
+    view = np.frombuffer(block, dtype=np.float64, count=4)
+    view[:] = [1.0, 2.0, 3.0, 4.0]
+    _close_map(block)  # the view still exports the buffer: no error
+    assert not block.closed
+    del view
+    _close_map(block)
+    assert block.closed
+    assert np.frombuffer(path.read_bytes(), dtype=np.float64)[:4].tolist() == [1, 2, 3, 4]

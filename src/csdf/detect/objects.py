@@ -114,7 +114,9 @@ from .neighbours import (
     linked_edges,
     neighbourhood,
     normals_arg,
+    offset_noise,
     points_arg,
+    range_noise,
     sparse_points,
     viewpoint_arg,
     with_copies,
@@ -1008,6 +1010,12 @@ class _Run:
             self.support[pl.inliers] = True
             if self.plane is None:  # the largest support: its normal is up
                 self.plane = (nrm, off)
+        if self.plane is None and self.estimate_noise:
+            # no support to read the noise from (an object scanned on its own): each
+            # range against its neighbouring rays' (a single view), else each point's
+            # offset from its neighbours' plane
+            self.sigma = max(self.sigma, range_noise(self.P, self.vp) if self.vp is not None
+                             else offset_noise(self.P, self.nb))
 
     def find_clusters(self) -> None:
         mask = ~self.support & ~sparse_points(self.nb, self.P, self.vp)

@@ -1850,3 +1850,16 @@ def test_an_object_scanned_without_a_floor_is_found_at_the_scans_noise(tmp_path)
     assert r.exit_code == 0, r.output
     found = [i["model"]["zoo"] for i in json.loads(out.read_text())["instances"]]
     assert found == ["chair"], r.output
+
+
+def test_offset_noise_leaves_each_point_out_of_its_own_plane():
+    """A plane sampled 1 cm apart with 2 mm of noise: each point's offset from its
+    neighbours' plane reads the noise; the neighbourhoods' spread, whose planes take
+    in each point's own noise, reads less."""
+    from csdf.detect.neighbours import offset_noise
+
+    rng = np.random.default_rng(4)
+    P = np.c_[rng.uniform(0.0, 1.0, (6000, 2)), rng.normal(0.0, 0.002, 6000)]
+    nb = neighbourhood(P)
+    assert abs(offset_noise(P, nb) - 0.002) < 0.2 * 0.002
+    assert offset_noise(P, nb) > nb.noise

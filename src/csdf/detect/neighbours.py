@@ -20,7 +20,7 @@ from ..points import NEAR_COPY, NEAR_K, has_near_copies, typical_spacing
 
 __all__ = ["Neighbourhood", "neighbourhood", "knn", "estimate_normals", "points_arg",
            "viewpoint_arg", "distinct_points", "exact_copies", "with_copies", "offset_noise",
-           "range_noise",
+           "range_noise", "along_rays", "tangent_frames",
            "normals_arg", "components",
            "linked_edges", "sparse_points", "K_NORMALS", "MAX_DETECT_POINTS", "LINK",
            "SPARSE"]
@@ -259,6 +259,26 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
                          normals=normals)
 
 
+def along_rays(r: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """Offsets ``r`` ``(K,)`` of points from a surface as range errors: a range sensor's
+    error lies along its rays, so a point seen at incidence ``theta`` is off the surface
+    by the range error times ``cos`` ``(K,)`` (``|cos theta|``). Only the rays within 78
+    degrees of the normal (``cos >= 0.2``) are kept and divided; ``r`` unchanged when
+    fewer than 20 are."""
+    keep = cos >= 0.2
+    return r[keep] / cos[keep] if keep.sum() >= 20 else r
+
+
+def tangent_frames(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, v)``, each ``(K, 3)``: two unit vectors perpendicular to each unit direction
+    of ``D`` ``(K, 3)`` and to each other (``u`` off ``z``, or off ``x`` for directions
+    near ``z``)."""
+    ref = np.where(np.abs(D[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    u = np.cross(D, ref)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(D, u)
+
+
 def offset_noise(points: np.ndarray, nb: Neighbourhood, viewpoint=None) -> float:
     """A robust noise level of ``points`` ``(N, 3)`` (scene units) that does not fit the
     noise away: the offset of each of about ``NOISE_SAMPLE`` points from the plane of
@@ -281,11 +301,8 @@ def offset_noise(points: np.ndarray, nb: Neighbourhood, viewpoint=None) -> float
     r = np.abs(np.einsum("ij,ij->i", P[sub] - c, normal))
     if viewpoint is not None:
         ray = P[sub] - np.asarray(viewpoint, dtype=float)
-        cos = np.abs(np.einsum("ij,ij->i", ray, normal)) / np.maximum(
-            np.linalg.norm(ray, axis=1), 1e-300)
-        keep = cos >= 0.2
-        if keep.sum() >= 20:
-            r = r[keep] / cos[keep]
+        r = along_rays(r, np.abs(np.einsum("ij,ij->i", ray, normal)) / np.maximum(
+            np.linalg.norm(ray, axis=1), 1e-300))
     return 1.4826 * float(np.median(r)) if len(r) else 0.0
 
 
@@ -312,10 +329,7 @@ def range_noise(points: np.ndarray, viewpoint, k: int = K_NORMALS) -> float:
     idx = idx[:, 1:]  # (S, k) without the point itself
     d0 = D[sub]
     # tangent coordinates of the neighbours' directions about each point's direction
-    ref = np.where(np.abs(d0[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    e1 = np.cross(d0, ref)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(d0, e1)
+    e1, e2 = tangent_frames(d0)
     dd = D[idx] - d0[:, None, :]  # (S, k, 3)
     X = np.stack([np.ones(idx.shape), np.einsum("skj,sj->sk", dd, e1),
                   np.einsum("skj,sj->sk", dd, e2)], axis=2)  # (S, k, 3)

@@ -109,6 +109,7 @@ from ..points import sample_spacing
 from ..pose import Pose
 from ..seeds import rng_arg
 from .neighbours import (
+    along_rays,
     components,
     distinct_points,
     linked_edges,
@@ -118,6 +119,7 @@ from .neighbours import (
     points_arg,
     range_noise,
     sparse_points,
+    tangent_frames,
     viewpoint_arg,
     with_copies,
 )
@@ -1002,8 +1004,7 @@ class _Run:
                     # a range sensor's noise lies along its rays: a point on a plane
                     # seen at incidence theta is off it by the range error times
                     # cos(theta), and frontal surfaces get the whole range error
-                    cos = np.abs(self.dirs[band] @ nrm)
-                    r = r[cos >= 0.2] / cos[cos >= 0.2] if (cos >= 0.2).sum() >= 20 else r
+                    r = along_rays(r, np.abs(self.dirs[band] @ nrm))
                 self.sigma = max(self.sigma, 1.4826 * float(np.median(r)))
             # the plane's slab: its points and every point within three noise levels
             self.support |= np.abs(d) <= 3.0 * self.sigma
@@ -2036,10 +2037,7 @@ class _Run:
             # parallel rays shifted across the ray by ``spread`` (four ways): the
             # nearest hit of the five is the model's range there, as if the model
             # were dilated by ``spread`` in the sensor's image
-            ref = np.where(np.abs(D[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-            u = np.cross(D, ref)
-            u /= np.linalg.norm(u, axis=1, keepdims=True)
-            v = np.cross(D, u)
+            u, v = tangent_frames(D)
             offsets += [spread * u, -spread * u, spread * v, -spread * v]
         Dm = np.concatenate([D @ R for R, _ in poses])
         tm = np.full(len(Dm), np.inf)

@@ -1852,6 +1852,34 @@ def test_an_object_scanned_without_a_floor_is_found_at_the_scans_noise(tmp_path)
     assert found == ["chair"], r.output
 
 
+@pytest.mark.parametrize("model, noise", [("lamp", "0.003"), ("table", "0.01")])
+def test_an_object_scanned_on_its_own_in_pieces_is_found_once(tmp_path, model, noise):
+    """With no support there are no upright hypotheses to gather an object's pieces:
+    a lamp's scan falls into two clusters (its shade; its stem and base) whose fits
+    each failed, so nothing was found; a table's at 1 cm noise into four (its top and
+    legs), whose top alone was fitted 5 cm too high and whose legs then as a second
+    table. Each cluster is now also fitted joined by its nearest clusters."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from csdf.cli import app
+
+    runner = CliRunner()
+    ply, out = tmp_path / "one.ply", tmp_path / "scene.json"
+    r = runner.invoke(app, ["scan", model, "-o", str(ply), "--noise", noise, "--seed", "1",
+                            "--world"])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["detect", str(ply), "--models", "chair,table,stool,lamp",
+                            "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    found = json.loads(out.read_text())["instances"]
+    assert [i["model"]["zoo"] for i in found] == [model], r.output
+    pose = found[0]["pose"]
+    assert np.linalg.norm(pose["translation"]) < 0.02  # scanned at the origin, upright
+    assert np.asarray(pose["rotation"])[2, 2] > math.cos(math.radians(2.0))
+
+
 def test_offset_noise_leaves_each_point_out_of_its_own_plane():
     """A plane sampled 1 cm apart with 2 mm of noise: each point's offset from its
     neighbours' plane reads the noise; the neighbourhoods' spread, whose planes take

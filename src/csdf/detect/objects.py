@@ -340,6 +340,13 @@ TRIM_OVERHANG = 5.0
 TRIM_FRACTION = 0.1
 #: ... and replaces the winner when its explained mass is over this fraction higher
 TRIM_GAIN = 0.03
+#: without upright hypotheses, a cluster no model explains is tried again joined by
+#: its nearest other clusters (:meth:`_Run.best_joined`) that lie within ``JOIN_GAP``
+#: times the largest model's diameter of it; their gaps are measured on subsamples of
+#: ``JOIN_POINTS`` points
+JOIN_CLUSTERS = True
+JOIN_GAP = 0.5
+JOIN_POINTS = 2000
 #: a cluster whose fits failed with another cluster joined to them as a piece of their
 #: object is searched again once a later detection claims points of that cluster
 #: (:func:`detect`): a stool standing against a lamp was fitted over both and failed;
@@ -883,6 +890,7 @@ def _search(run: _Run, members: np.ndarray, out: list, cap: float) -> set[int]:
         det = run.best_for(free)
         if det is None:
             det = run.best_in_parts(free)
+        det = run.best_joined(free, det)
         if det is None:
             return set(run.joined)
         run.claimed[det.inliers] = True
@@ -2232,6 +2240,51 @@ class _Run:
                 if det is not None:
                     return det
         return None
+
+    def best_joined(self, idx: np.ndarray, single: Detection | None
+                    ) -> Detection | None:
+        """Without upright hypotheses (no support, or ``upright=False``): the points
+        ``idx`` of one cluster joined by the free points of the nearest other clusters
+        (nearest first, by their closest points) while the whole fits within some
+        model's size (:data:`SIZE_SLACK`) and each cluster joined lies within
+        ``JOIN_GAP`` of the largest model's diameter, and :meth:`best_for` of the
+        whole; its detection replaces ``single`` (the detection on ``idx`` alone, or
+        None) when it claims ``min_points`` more points. Returns ``single`` when no
+        cluster joins or the joined fit fails. A lamp scanned on its own shows as two
+        clusters, its shade and its stem with the base (the thin spokes between them
+        hardly seen), and the multistart fit of either alone fails; a table at 1 cm
+        noise as four, its top and legs, and its top alone fits a table 5 cm too
+        high, whose legs' points are left to be fitted as another table. On a support
+        the upright hypotheses gather such pieces themselves (:meth:`_gather`)."""
+        if (self.plane is not None and self.upright) or not JOIN_CLUSTERS:
+            return single
+        from scipy.spatial import cKDTree
+
+        limit = max(2.0 * m.radius * SIZE_SLACK for m in self.models) + 6.0 * self.sigma
+        tree = cKDTree(self.P[self._subsample(idx, JOIN_POINTS)])
+        own = set(np.unique(self.label[idx]).tolist())
+        gaps = []
+        for c in range(len(self.sizes)):
+            if c in own:
+                continue
+            pts = np.flatnonzero((self.label == c) & ~self.claimed)
+            if len(pts) < self.mp:
+                continue
+            gap = float(tree.query(self.P[self._subsample(pts, JOIN_POINTS)])[0].min())
+            if gap <= JOIN_GAP * limit / SIZE_SLACK:
+                gaps.append((gap, c, pts))
+        joined = idx
+        for _gap, _c, pts in sorted(gaps, key=lambda g: (g[0], g[1])):
+            both = np.union1d(joined, pts)
+            if _span(self.P[both]) <= limit:
+                joined = both
+        if len(joined) == len(idx):
+            return single
+        det = self.best_for(joined)
+        if det is None or (single is not None and
+                           len(det.inliers) < len(single.inliers) + self.mp):
+            return single
+        return det
 
     def _own_clusters(self, inl: np.ndarray) -> np.ndarray:
         """``(L,)`` the labels of the clusters holding at least a tenth of a fit's

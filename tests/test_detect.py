@@ -1572,6 +1572,25 @@ def test_rays_break_a_tie_between_a_bookshelfs_front_and_back(bookshelf_side_sca
     assert run._ray_tie(done, (m, right, None))[1] is right
 
 
+def test_a_winner_turned_half_round_is_turned_back_by_its_rays(bookshelf_side_scan):
+    """``_half_turn``: a bookshelf seen nearly side-on, its winner turned half round
+    (front and back swapped, the same sizes), is turned back: the rays score the
+    right turn far higher. The right winner stays as it is, and so does a table's
+    (its half turn is a symmetry)."""
+    run, m, gt, truth = bookshelf_side_scan
+    right, wrong = _verified(run, m, [truth, _half_turned(run, truth)])
+    back = run._half_turn(m, wrong)
+    assert back is not wrong
+    pts = csdf.metrics.model_points(csdf.zoo.load("bookshelf"), 300)
+    assert csdf.metrics.mssd(pts, back[2].pose, gt) < 0.02 * csdf.metrics.diameter(pts)
+    assert back[0] > 0.0 and run._verify(m, back[2])[0]
+    assert run._half_turn(m, right) is right
+    table = _prepared(np.asarray(run.P), ["table"])
+    tm = table.models[0]
+    full, sym, _ = table._doubt(tm)
+    assert sym[int(np.argmin(np.abs(full - math.pi)))]  # so _half_turn leaves it
+
+
 def test_a_rival_at_its_bound_is_held_back_and_then_wins_the_tie(bookshelf_side_scan,
                                                                  monkeypatch):
     """``_trim_rivals``: a verified fit in another pose that explains nearly as much as

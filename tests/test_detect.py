@@ -1876,8 +1876,10 @@ def test_an_object_scanned_on_its_own_in_pieces_is_found_once(tmp_path, model, n
     """With no support there are no upright hypotheses to gather an object's pieces:
     a lamp's scan falls into two clusters (its shade; its stem and base) whose fits
     each failed, so nothing was found; a table's at 1 cm noise into four (its top and
-    legs), whose top alone was fitted 5 cm too high and whose legs then as a second
-    table. Each cluster is now also fitted joined by its nearest clusters."""
+    legs), and its top alone was fitted as a table 5 cm too high (with joining tried
+    only after a cluster failed, its legs were then fitted as a second table). Each
+    cluster is now also fitted joined by its nearest clusters, which competes with
+    its own fit."""
     import json
 
     from typer.testing import CliRunner

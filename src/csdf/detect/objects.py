@@ -2295,8 +2295,10 @@ class _Run:
         clusters, its shade and its stem with the base (the thin spokes between them
         hardly seen), and the multistart fit of either alone fails; a table at 1 cm
         noise as four, its top and legs, and its top alone fits a table 5 cm too
-        high, whose legs' points are left to be fitted as another table. On a support
-        the upright hypotheses gather such pieces themselves (:meth:`_gather`)."""
+        high (which passes, so the joined fit competes with it rather than follow
+        its failure: joined after, the legs were fitted as a second table). On a
+        support the upright hypotheses gather such pieces themselves
+        (:meth:`_gather`)."""
         if (self.plane is not None and self.upright) or not JOIN_CLUSTERS:
             return single
         from scipy.spatial import cKDTree

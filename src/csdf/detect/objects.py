@@ -344,10 +344,10 @@ TRIM_GAIN = 0.03
 #: rays score the turn this many explained rays higher (:meth:`_Run._half_turn`;
 #: None: not tried)
 HALF_TURN_MARGIN: float | None = 5.0
-#: without upright hypotheses, a cluster no model explains is tried again joined by
-#: its nearest other clusters (:meth:`_Run.best_joined`) that lie within ``JOIN_GAP``
-#: times the largest model's diameter of it; their gaps are measured on subsamples of
-#: ``JOIN_POINTS`` points
+#: without upright hypotheses, each cluster is also fitted joined by its nearest other
+#: clusters (:meth:`_Run.best_joined`) that lie within ``JOIN_GAP`` times the largest
+#: model's diameter of it; their gaps are measured on subsamples of ``JOIN_POINTS``
+#: points
 JOIN_CLUSTERS = True
 JOIN_GAP = 0.5
 JOIN_POINTS = 2000
@@ -2305,14 +2305,16 @@ class _Run:
 
         limit = max(2.0 * m.radius * SIZE_SLACK for m in self.models) + 6.0 * self.sigma
         tree = cKDTree(self.P[self._subsample(idx, JOIN_POINTS)])
-        own = set(np.unique(self.label[idx]).tolist())
+        own = np.unique(self.label[idx])
+        free = np.flatnonzero((self.label >= 0) & ~self.claimed
+                              & ~np.isin(self.label, own))
+        labs, counts = np.unique(self.label[free], return_counts=True)
+        order = free[np.argsort(self.label[free], kind="stable")]
         gaps = []
-        for c in range(len(self.sizes)):
-            if c in own:
+        for c, k, n in zip(labs, np.cumsum(counts) - counts, counts):
+            if n < self.mp:
                 continue
-            pts = np.flatnonzero((self.label == c) & ~self.claimed)
-            if len(pts) < self.mp:
-                continue
+            pts = order[k:k + n]  # ascending: a stable sort of ascending indices
             gap = float(tree.query(self.P[self._subsample(pts, JOIN_POINTS)])[0].min())
             if gap <= JOIN_GAP * limit / SIZE_SLACK:
                 gaps.append((gap, c, pts))

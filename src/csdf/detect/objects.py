@@ -344,6 +344,15 @@ TRIM_GAIN = 0.03
 #: rays score the turn this many explained rays higher (:meth:`_Run._half_turn`;
 #: None: not tried)
 HALF_TURN_MARGIN: float | None = 5.0
+#: a cluster that no model standing on the support explains, whose lowest points lie
+#: over ``LIFT_MIN`` noise levels above it, is tried again with the models standing on
+#: the highest surface facing up under it (:meth:`_Run.best_lifted`): at least
+#: ``LIFT_POINTS`` points within ``LIFT_TILT`` degrees of level
+LIFT = True
+LIFT_MIN = 10.0
+LIFT_POINTS = 20
+LIFT_TILT = 20.0
+LIFT_LEVELS = 3
 #: without upright hypotheses, each cluster is also fitted joined by its nearest other
 #: clusters (:meth:`_Run.best_joined`) that lie within ``JOIN_GAP`` times the largest
 #: model's diameter of it; their gaps are measured on subsamples of ``JOIN_POINTS``
@@ -896,6 +905,8 @@ def _search(run: _Run, members: np.ndarray, out: list, cap: float) -> set[int]:
             det = run.best_in_parts(free)
         det = run.best_joined(free, det)
         if det is None:
+            det = run.best_lifted(free)
+        if det is None:
             return set(run.joined)
         run.claimed[det.inliers] = True
         out.append(det)
@@ -953,6 +964,9 @@ class _Run:
         self.support = np.zeros(len(P), dtype=bool)
         self.claimed = np.zeros(len(P), dtype=bool)
         self.plane: tuple[np.ndarray, float] | None = None
+        #: the height above the support of the surface the current hypotheses stand on
+        #: (:meth:`best_lifted`; 0: the support itself)
+        self.lift = 0.0
         self.clusters: list[np.ndarray] = []
         self.label = np.full(len(P), -1)  # cluster of each point (-1: none)
         self.sizes = np.zeros(0, dtype=int)
@@ -1047,8 +1061,9 @@ class _Run:
 
     # -- hypotheses -----------------------------------------------------------------
     def _upright(self, m: _Model, Q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Upright poses ``(R, t)`` of model ``m`` on the support near points ``Q``."""
-        nrm, off = self.plane
+        """Upright poses ``(R, t)`` of model ``m`` on the support near points ``Q``
+        (raised by :attr:`lift`)."""
+        nrm, off = self.plane[0], self._floor()
         Rup = frame_z(nrm)
         poses = []
         for foot in _feet(Q - np.outer(Q @ nrm - off, nrm), m.foot):
@@ -1161,7 +1176,7 @@ class _Run:
         """Step 4 for model ``m``: the best upright hypothesis after pose-only steps,
         and its screening cost (:meth:`_two_sided`)."""
         poses = self._upright(m, self.P[idx])
-        nrm, off = self.plane
+        nrm, off = self.plane[0], self._floor()
         top = float(np.percentile(self.P[idx] @ nrm - off, 99.0))
         # the defaults, and the draws whose height is nearest the cluster's (the top of
         # an object standing on the support is seen from above and rarely occluded)
@@ -1315,8 +1330,9 @@ class _Run:
                ) -> tuple[np.ndarray, np.ndarray]:
         """The pose ``(R (3, 3), t (3,))`` of ``m`` stood upright on the support: its z
         axis along the support's normal, its x axis the old one's projection on the
-        support, its floor (the bounds' lowest z) on the plane."""
-        nrm, off = self.plane
+        support, its floor (the bounds' lowest z) on the plane (raised by
+        :attr:`lift`)."""
+        nrm, off = self.plane[0], self._floor()
         x = R[:, 0] - (R[:, 0] @ nrm) * nrm
         x /= np.linalg.norm(x)
         R = np.stack([x, np.cross(nrm, x), nrm], axis=1)
@@ -1486,7 +1502,8 @@ class _Run:
         return (front / (conf + front) if conf + front else 0.0), confirmed
 
     def _intruders(self, m: _Model, res: FitResult, b: np.ndarray) -> float:
-        """The fraction of the scan points off the support inside the fit ``res``'s box
+        """The fraction of the scan points off the support (and, standing on a surface
+        above it, off that surface) inside the fit ``res``'s box
         (``b`` ``(2, 3)``, model frame, padded by three noise levels) that lie in the
         model's free space in front of it: the model ray-cast along each point's ray
         hits nothing, or hits more than three noise levels beyond the point. A model
@@ -1499,8 +1516,10 @@ class _Run:
 
         pad = 3.0 * self.sigma
         q = (self.P - res.translation) @ res.rotation
-        inb = np.flatnonzero(np.all((q >= b[0] - pad) & (q <= b[1] + pad), axis=1)
-                             & ~self.support)
+        keep = np.all((q >= b[0] - pad) & (q <= b[1] + pad), axis=1) & ~self.support
+        if self.lift > 0.0:  # nor the surface it stands on (:meth:`best_lifted`)
+            keep &= q[:, 2] > b[0, 2] + pad
+        inb = np.flatnonzero(keep)
         if len(inb) == 0:
             return 0.0
         fld = trace_field(m.shape, dict(res.params), m.backend,
@@ -1973,7 +1992,7 @@ class _Run:
         (those whose height is nearest the cluster's top, the defaults first, skipping
         ``init``'s) and appends those that pass verification to ``found`` (items as
         :meth:`_turns`')."""
-        nrm, off = self.plane
+        nrm, off = self.plane[0], self._floor()
         top = float(np.percentile(self.P[idx] @ nrm - off, 99.0))
         order = 1 + np.argsort(np.abs(m.heights[1:] - top), kind="stable")
         used = dict(init.params if isinstance(init, FitResult) else init.get("params") or {})
@@ -2281,6 +2300,79 @@ class _Run:
                 if det is not None:
                     return det
         return None
+
+    def _floor(self) -> float:
+        """The offset of the plane the current hypotheses stand on: the support's,
+        raised by :attr:`lift` along its normal (scene units)."""
+        return self.plane[1] + self.lift
+
+    def best_lifted(self, idx: np.ndarray) -> Detection | None:
+        """When no model standing on the support explains the points ``idx`` of one
+        cluster and they lie over ``LIFT_MIN`` noise levels above it: :meth:`best_for`
+        with the models standing on each surface under them instead
+        (:meth:`_surfaces_under`: a lamp on a table, whose top the table's detection
+        holds), the detection that claims most points, or None. Each level is tried:
+        the highest under a lamp's shade is often the top of its own base, 2.5 cm above
+        the table. Tried only after the support failed, so an object whose lower part
+        an occluder hides (a chair behind a table, its top under the chair's
+        footprint) is placed on the support as before."""
+        if self.plane is None or not self.upright or not LIFT:
+            return None
+        best = None
+        for lift in self._surfaces_under(idx):
+            self.lift = lift
+            try:
+                det = self.best_for(idx)
+            finally:
+                self.lift = 0.0
+            if det is not None and (best is None or len(det.inliers) > len(best.inliers)):
+                best = det
+        return best
+
+    def _surfaces_under(self, idx: np.ndarray) -> list[float]:
+        """The heights above the support (scene units, highest first, at most
+        ``LIFT_LEVELS``) of the surfaces facing up under the points ``idx``: runs of
+        ``3 sigma`` bins of the heights of other points off the support, each bin
+        holding at least ``LIFT_POINTS``, of points whose normals lie within
+        ``LIFT_TILT`` degrees of the support's, below the cluster's lowest points (its
+        first percentile) and over ``LIFT_MIN`` noise levels above the support, inside
+        the cluster's footprint (within its largest distance from its median, along
+        the support); each level the median height of its run. Empty when the
+        cluster's lowest points lie within ``LIFT_MIN`` noise levels of the
+        support."""
+        nrm, off = self.plane
+        h = self.P @ nrm - off
+        low = float(np.percentile(h[idx], 1.0))
+        floor = LIFT_MIN * self.sigma
+        if low <= floor:
+            return []
+        uv = self.P @ frame_z(nrm)[:, :2]
+        c = np.median(uv[idx], axis=0)
+        reach = float(np.linalg.norm(uv[idx] - c, axis=1).max())
+        under = np.ones(len(self.P), dtype=bool)
+        under[idx] = False
+        under &= ~self.support & (h > floor) & (h < low - 3.0 * self.sigma)
+        under &= np.abs(self.N @ nrm) >= math.cos(math.radians(LIFT_TILT))
+        under &= np.linalg.norm(uv - c, axis=1) <= reach
+        hs = h[under]
+        if len(hs) < LIFT_POINTS:
+            return []
+        width = 3.0 * self.sigma
+        b = np.floor((hs - floor) / width).astype(np.int64)
+        counts = np.bincount(b)
+        full = counts >= LIFT_POINTS
+        levels = []
+        k = len(counts) - 1
+        while k >= 0 and len(levels) < LIFT_LEVELS:
+            if not full[k]:
+                k -= 1
+                continue
+            j = k
+            while j - 1 >= 0 and full[j - 1]:
+                j -= 1
+            levels.append(float(np.median(hs[(b >= j) & (b <= k)])))
+            k = j - 1
+        return levels
 
     def best_joined(self, idx: np.ndarray, single: Detection | None
                     ) -> Detection | None:

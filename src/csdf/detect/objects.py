@@ -2309,25 +2309,26 @@ class _Run:
     def best_lifted(self, idx: np.ndarray) -> Detection | None:
         """When no model standing on the support explains the points ``idx`` of one
         cluster and they lie over ``LIFT_MIN`` noise levels above it: :meth:`best_for`
-        with the models standing on each surface under them instead
+        with the models standing on a surface under them instead
         (:meth:`_surfaces_under`: a lamp on a table, whose top the table's detection
-        holds), the detection that claims most points, or None. Each level is tried:
-        the highest under a lamp's shade is often the top of its own base, 2.5 cm above
-        the table. Tried only after the support failed, so an object whose lower part
-        an occluder hides (a chair behind a table, its top under the chair's
-        footprint) is placed on the support as before."""
+        holds): the lowest of those surfaces on which a detection passes, or None.
+        The highest surface under a lamp's shade is often the top of its own base,
+        2.5 cm above the table, where a lamp fitted 2.5 cm high passes too (on a
+        stool's seat it also explained more points there). Tried only after the
+        support failed, so an object whose lower part an occluder hides (a chair
+        behind a table, its top under the chair's footprint) is placed on the
+        support as before."""
         if self.plane is None or not self.upright or not LIFT:
             return None
-        best = None
-        for lift in self._surfaces_under(idx):
+        for lift in self._surfaces_under(idx)[::-1]:
             self.lift = lift
             try:
                 det = self.best_for(idx)
             finally:
                 self.lift = 0.0
-            if det is not None and (best is None or len(det.inliers) > len(best.inliers)):
-                best = det
-        return best
+            if det is not None:
+                return det
+        return None
 
     def _surfaces_under(self, idx: np.ndarray) -> list[float]:
         """The heights above the support (scene units, highest first, at most

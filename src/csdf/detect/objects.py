@@ -346,8 +346,9 @@ TRIM_GAIN = 0.03
 HALF_TURN_MARGIN: float | None = 5.0
 #: a cluster that no model standing on the support explains, whose lowest points lie
 #: over ``LIFT_MIN`` noise levels above it, is tried again with the models standing on
-#: the highest surface facing up under it (:meth:`_Run.best_lifted`): at least
-#: ``LIFT_POINTS`` points within ``LIFT_TILT`` degrees of level
+#: the surfaces facing up under it, the lowest of the ``LIFT_LEVELS`` highest first
+#: (:meth:`_Run.best_lifted`): each at least ``LIFT_POINTS`` points within
+#: ``LIFT_TILT`` degrees of level
 LIFT = True
 LIFT_MIN = 10.0
 LIFT_POINTS = 20
@@ -1063,7 +1064,7 @@ class _Run:
     def _upright(self, m: _Model, Q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Upright poses ``(R, t)`` of model ``m`` on the support near points ``Q``
         (raised by :attr:`lift`)."""
-        nrm, off = self.plane[0], self._floor()
+        nrm, off = self._standing()
         Rup = frame_z(nrm)
         poses = []
         for foot in _feet(Q - np.outer(Q @ nrm - off, nrm), m.foot):
@@ -1176,7 +1177,7 @@ class _Run:
         """Step 4 for model ``m``: the best upright hypothesis after pose-only steps,
         and its screening cost (:meth:`_two_sided`)."""
         poses = self._upright(m, self.P[idx])
-        nrm, off = self.plane[0], self._floor()
+        nrm, off = self._standing()
         top = float(np.percentile(self.P[idx] @ nrm - off, 99.0))
         # the defaults, and the draws whose height is nearest the cluster's (the top of
         # an object standing on the support is seen from above and rarely occluded)
@@ -1332,7 +1333,7 @@ class _Run:
         axis along the support's normal, its x axis the old one's projection on the
         support, its floor (the bounds' lowest z) on the plane (raised by
         :attr:`lift`)."""
-        nrm, off = self.plane[0], self._floor()
+        nrm, off = self._standing()
         x = R[:, 0] - (R[:, 0] @ nrm) * nrm
         x /= np.linalg.norm(x)
         R = np.stack([x, np.cross(nrm, x), nrm], axis=1)
@@ -1743,8 +1744,7 @@ class _Run:
         surf, _ = self._surface_at(m, res.params)
         R, t = np.asarray(res.rotation, dtype=float), np.asarray(res.translation, dtype=float)
         c = R @ (0.5 * (surf.min(axis=0) + surf.max(axis=0))) + t
-        nrm = self.plane[0]
-        half = 2.0 * np.outer(nrm, nrm) - np.eye(3)  # a half turn about nrm
+        half = _yaw_matrix(self.plane[0], math.pi)
         R2, t2 = half @ R, half @ (t - c) + c
         s = self._ray_scores(m, dict(res.params), [(R, t), (R2, t2)], rays,
                              self._own_clusters(top[3]))
@@ -1992,7 +1992,7 @@ class _Run:
         (those whose height is nearest the cluster's top, the defaults first, skipping
         ``init``'s) and appends those that pass verification to ``found`` (items as
         :meth:`_turns`')."""
-        nrm, off = self.plane[0], self._floor()
+        nrm, off = self._standing()
         top = float(np.percentile(self.P[idx] @ nrm - off, 99.0))
         order = 1 + np.argsort(np.abs(m.heights[1:] - top), kind="stable")
         used = dict(init.params if isinstance(init, FitResult) else init.get("params") or {})
@@ -2301,10 +2301,11 @@ class _Run:
                     return det
         return None
 
-    def _floor(self) -> float:
-        """The offset of the plane the current hypotheses stand on: the support's,
-        raised by :attr:`lift` along its normal (scene units)."""
-        return self.plane[1] + self.lift
+    def _standing(self) -> tuple[np.ndarray, float]:
+        """``(normal (3,), offset)`` of the plane the current hypotheses stand on: the
+        support's, raised by :attr:`lift` along its normal (scene units)."""
+        nrm, off = self.plane
+        return nrm, off + self.lift
 
     def best_lifted(self, idx: np.ndarray) -> Detection | None:
         """When no model standing on the support explains the points ``idx`` of one

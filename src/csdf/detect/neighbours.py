@@ -82,11 +82,17 @@ def viewpoint_arg(viewpoint) -> np.ndarray | None:
     return vp
 
 
-def distinct_points(P: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def distinct_points(P: np.ndarray, nb: Neighbourhood | None = None
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
     """Repeated points of a cloud ``P`` ``(N, 3)``: None when every row is distinct and
     the cloud has no near-copies, else ``(keep (K,), owner (N,))``: ``keep`` the
     ascending indices of the first point of each group of copies, ``owner[j]`` the
     position in ``keep`` of the point that stands for point ``j``.
+
+    ``nb``, the :class:`Neighbourhood` of ``P`` itself when the caller needs it anyway,
+    answers the common case without a search of its own (:func:`_without_copies`: 12 ms
+    of a 40k-point cloud's 200 ms in :func:`csdf.detect_primitives`); the answer is the
+    same with or without it.
 
     Copies break the neighbour structure every detector stands on (a point's nearest
     neighbours are its own copies at distance 0, so the sampling scale, the noise and
@@ -98,6 +104,8 @@ def distinct_points(P: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     distances are copies too (and copies of copies). A cloud without near-copies keeps
     every distinct row. The detectors run on the distinct points and give each result
     every copy (:func:`with_copies`)."""
+    if nb is not None and _without_copies(P, nb):
+        return None
     rep = exact_copies(P)  # (N,) each point's first exact copy
     folded = _near_copies(P, np.flatnonzero(rep == np.arange(len(P))))
     if folded is not None:
@@ -107,6 +115,20 @@ def distinct_points(P: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     if len(keep) == len(P):
         return None
     return keep, np.searchsorted(keep, rep)
+
+
+def _without_copies(P: np.ndarray, nb: Neighbourhood) -> bool:
+    """Whether the cloud ``P`` ``(N, 3)`` is known to hold no copies from its own
+    neighbourhood ``nb``: no point's nearest other point lies at distance 0 (no exact
+    copies), and, when :func:`_near_copies` would look for near-copies, they are not
+    found on the same sample of points and the same distances as it uses. False when
+    ``nb`` cannot tell (fewer than ``NEAR_K`` neighbours a point)."""
+    d = nb.lengths
+    if d.ndim != 2 or len(d) != len(P) or d.shape[1] < NEAR_K or np.any(d[:, 0] == 0.0):
+        return False
+    if len(P) <= 2 * NEAR_K:
+        return True
+    return not has_near_copies(d[::max(1, len(P) // NEAR_SAMPLE), :NEAR_K])
 
 
 #: odd 64-bit multipliers of :func:`exact_copies`' row hash

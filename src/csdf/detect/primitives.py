@@ -297,7 +297,10 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
     tol = float(normal_tolerance)
     if not 0.0 < tol < 90.0:
         raise CsdfError(f"normal_tolerance must be an angle in (0, 90) degrees; got {tol}")
-    copies = distinct_points(P)
+    if n < 4:
+        return []
+    nb = neighbourhood(P, viewpoint=vp, want_normals=normals is None)
+    copies = distinct_points(P, nb)
     if copies is not None:
         # repeated points: found on the distinct ones, each detection given every copy
         keep, owner = copies
@@ -309,9 +312,6 @@ def detect_primitives(points, normals=None, kinds=ALL_KINDS, epsilon=None,
         for d in found:
             d.inliers = with_copies(d.inliers, owner)
         return found
-    if n < 4:
-        return []
-    nb = neighbourhood(P, viewpoint=vp, want_normals=normals is None)
     if normals is None:
         N = nb.normals
     else:

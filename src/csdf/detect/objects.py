@@ -917,12 +917,14 @@ def _merge_overlaps(run: _Run, out: list[Detection]) -> list[Detection]:
     if MERGE_OVERLAP is None or run.plane is None or not run.upright:
         return out
     out = list(out)
+    models = {m.name: m for m in run.models}
     i = 0
     while i < len(out):
+        m = models[out[i].model]
         for j in range(i + 1, len(out)):
-            if out[j].model != out[i].model or run.overlap(out[i], out[j]) <= MERGE_OVERLAP:
+            if out[j].model != m.name or run.overlap(m, out[i], out[j]) <= MERGE_OVERLAP:
                 continue
-            one = run.merged(out[i], out[j])
+            one = run.merged(m, out[i], out[j])
             if one is not None:
                 out[i] = one
                 del out[j]
@@ -1856,8 +1858,7 @@ class _Run:
                     start = {"rotation": R, "translation": t + R @ shift, "params": pv}
                     found: list = []
                     self._add_verified(m, idx, start, found, held=(name,))
-                    out += [f for f in found
-                            if not {px, py} & {n for n, _, _ in _at_bound(m, f[2].params)}]
+                    out += _sizes_inside(m, found, (px, py))
         return out
 
     def _trimmed(self, m: _Model, idx: np.ndarray, top: tuple) -> list:
@@ -1906,8 +1907,7 @@ class _Run:
         # a refit that pushes the width or the depth to an end of its range holds a size
         # that no point holds either (a bookshelf's back panel fitted as its side, 0.45
         # m deep, explained 8 % more points than a wider fit)
-        return [f for f in found
-                if not {px, py} & {n for n, _, _ in _at_bound(m, f[2].params)}]
+        return _sizes_inside(m, found, (px, py))
 
     def _seen_right(self, m: _Model, res: FitResult, inl: np.ndarray) -> bool:
         """The last tests of a winner ``res`` of ``m`` with inliers ``inl`` (with a
@@ -1973,10 +1973,9 @@ class _Run:
                 best = cur
         return best
 
-    def overlap(self, a: Detection, b: Detection) -> float:
-        """How much the detections ``a`` and ``b`` (of one model) share space: the
+    def overlap(self, m: _Model, a: Detection, b: Detection) -> float:
+        """How much the detections ``a`` and ``b`` of model ``m`` share space: the
         larger of the fractions of each's surface samples inside the other's box."""
-        m = next(x for x in self.models if x.name == a.model)
         sa, sb = self._surface_at(m, a.params)[0], self._surface_at(m, b.params)[0]
 
         def inside(s: np.ndarray, p: Pose, q: Pose, box: np.ndarray) -> float:
@@ -1987,13 +1986,13 @@ class _Run:
 
         return max(inside(sa, a.pose, b.pose, sb), inside(sb, b.pose, a.pose, sa))
 
-    def merged(self, a: Detection, b: Detection) -> Detection | None:
-        """One detection of the model of ``a`` and ``b`` fitted to both's inliers from
-        each's fit, and each's with its exchangeable sizes traded (:func:`_swaps`),
-        the best by explained mass; or None (and nothing changed) unless that one
+    def merged(self, m: _Model, a: Detection, b: Detection) -> Detection | None:
+        """One detection of model ``m`` (that of ``a`` and ``b``) fitted to both's
+        inliers from each's fit, and each's with its exchangeable sizes traded
+        (:func:`_swaps`), the best by explained mass; or None (and nothing changed)
+        unless that one
         passes verification and the last tests (:meth:`_seen_right`), explains
         ``MERGE_COVER`` of those points, and more points than each alone."""
-        m = next(x for x in self.models if x.name == a.model)
         idx = np.union1d(a.inliers, b.inliers)
         was = self.claimed[idx].copy()
         self.claimed[idx] = False
@@ -2831,6 +2830,13 @@ def _resize(pv: dict, name: str, change: float, slope: float,
     extent by ``change`` (m), at ``slope`` metres of extent per unit of the parameter,
     clipped to its range in ``rng`` (:func:`_ranges`)."""
     pv[name] = float(np.clip(pv[name] + change / slope, *rng[name]))
+
+
+def _sizes_inside(m: _Model, found: list, names: tuple[str, ...]) -> list:
+    """The items of ``found`` (fits of ``m``, as :meth:`_Run._turns`') none of whose
+    parameters ``names`` lies at an end of its range (:func:`_at_bound`)."""
+    return [f for f in found
+            if not set(names) & {n for n, _, _ in _at_bound(m, f[2].params)}]
 
 
 def _at_bound(m: _Model, params: dict) -> list[tuple[str, float, float]]:

@@ -505,7 +505,7 @@ class _Model:
     #: frame), made on first use (:meth:`_Run._turn_profile`)
     fine: np.ndarray | None = None
     #: the bounds' extents at parameter values (see _span_at), filled on first use
-    growth: dict = field(default_factory=dict)
+    spans: dict = field(default_factory=dict)
     #: the model's exchangeable pairs (see _swaps), found on first use
     swaps: list | None = None
 
@@ -545,18 +545,18 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
                   max(radius, _reach(fld, ranged)))
 
 
-def _span_at(m: _Model, name: str, value: float) -> np.ndarray | None:
-    """``(3,)`` the extent of the interval bounds of ``m`` along its axes with the
-    parameter ``name`` at ``value`` and the others at their defaults (None: no bounds
-    there); kept on ``m`` (each costs a bounds search)."""
-    key = (name, value)
-    if key not in m.growth:
-        p = next(q for q in m.fld.program.params if q.name == name)
+def _span_at(m: _Model, p: Any, value: float) -> np.ndarray | None:
+    """``(3,)`` the extent of the interval bounds of ``m`` along its axes with its
+    parameter ``p`` (one of its program's ``params``) at ``value`` and the others at
+    their defaults (None: no bounds there); kept on ``m`` (each costs a bounds search,
+    but the defaults' bounds are ``m``'s own)."""
+    key = (p.name, value)
+    if key not in m.spans:
         b = m.fld.bounds if value == float(p.default) else m.fld.replace(
-            params={name: value}, check_ranges=False).bounds
-        m.growth[key] = None if b is None else np.diff(np.asarray(b, dtype=float),
-                                                        axis=0)[0]
-    return m.growth[key]
+            params={p.name: value}, check_ranges=False).bounds
+        m.spans[key] = None if b is None else np.diff(np.asarray(b, dtype=float),
+                                                       axis=0)[0]
+    return m.spans[key]
 
 
 def _growth(m: _Model, name: str, screen: bool = False) -> np.ndarray:
@@ -575,7 +575,7 @@ def _growth(m: _Model, name: str, screen: bool = False) -> np.ndarray:
     lo, hi = (float(p.default) if screen else float(p.lo)), float(p.hi)
     if not (math.isfinite(hi - lo) and hi > lo):
         return np.zeros(3)
-    a, b = _span_at(m, name, lo), _span_at(m, name, hi)
+    a, b = _span_at(m, p, lo), _span_at(m, p, hi)
     return np.zeros(3) if a is None or b is None else (b - a) / (hi - lo)
 
 
@@ -587,7 +587,8 @@ def _extents(m: _Model, names: Iterable[str] | None = None
     :func:`_growth`) and along the other axis at most ``EXTENT_CROSS`` times as much,
     with those growths; None when the model has no such pair (a stool's seat radius
     widens it both ways), or when ``names`` is given and none of them is the width or
-    the depth (looked at first: each parameter's growth costs a bounds search)."""
+    the depth (looked at first: each parameter's growth costs one or two bounds
+    searches)."""
     def axis(n: str) -> int | None:
         g = _growth(m, n, screen=True)
         if max(g[0], g[1]) < 0.5 * EXTENT_SLOPE:
@@ -603,8 +604,11 @@ def _extents(m: _Model, names: Iterable[str] | None = None
     best: list = [None, None]
     for p in m.fld.program.params:
         a = axis(p.name)
-        if a is not None and (best[a] is None or _growth(m, p.name)[a] > best[a][1]):
-            best[a] = (p.name, float(_growth(m, p.name)[a]))
+        if a is None:
+            continue
+        g = float(_growth(m, p.name)[a])
+        if best[a] is None or g > best[a][1]:
+            best[a] = (p.name, g)
     if best[0] is None or best[1] is None or best[0][0] == best[1][0]:
         return None
     return best[0][0], best[1][0], best[0][1], best[1][1]
@@ -1562,20 +1566,27 @@ class _Run:
         front = int(np.count_nonzero(hit & (r < np.where(hit, tm, 0.0) - tol) & mine))
         return (front / (conf + front) if conf + front else 0.0), confirmed
 
+    def _tracer(self, m: _Model, params: dict, surf: np.ndarray | None = None) -> Any:
+        """``m`` at ``params`` ready to sphere-trace (:func:`csdf.render.trace.trace_field`)
+        in the box of its surface samples ``surf`` (model frame; :meth:`_surface_at` when
+        None) padded by a twentieth of its diagonal and three noise levels."""
+        from ..render.trace import trace_field
+
+        if surf is None:
+            surf, _ = self._surface_at(m, params)
+        lo, hi = surf.min(axis=0), surf.max(axis=0)
+        pad = 0.05 * float(np.linalg.norm(hi - lo)) + 3.0 * self.sigma
+        return trace_field(m.shape, dict(params), m.backend, np.array([lo - pad, hi + pad]),
+                           what="detect", check_ranges=False)
+
     def _first_hits(self, m: _Model, res: FitResult, rays: np.ndarray,
                     surf: np.ndarray | None = None) -> np.ndarray:
         """``(K,)`` the range from the viewpoint to the first hit of the fit ``res`` of
         ``m`` along the rays of the scan points ``rays`` ``(K,)`` (inf: no hit), traced
-        in the box of its surface samples ``surf`` (model frame; :meth:`_surface_at`
-        when None) padded by a twentieth of its diagonal and three noise levels."""
-        from ..render.trace import sphere_trace, trace_field
+        as :meth:`_tracer` (``surf`` its surface samples, or None)."""
+        from ..render.trace import sphere_trace
 
-        if surf is None:
-            surf, _ = self._surface_at(m, res.params)
-        lo, hi = surf.min(axis=0), surf.max(axis=0)
-        pad = 0.05 * float(np.linalg.norm(hi - lo)) + 3.0 * self.sigma
-        fld = trace_field(m.shape, dict(res.params), m.backend,
-                          np.array([lo - pad, hi + pad]), what="detect", check_ranges=False)
+        fld = self._tracer(m, res.params, surf)
         R, t = np.asarray(res.rotation, dtype=float), np.asarray(res.translation, dtype=float)
         return sphere_trace(fld, (self.vp - t) @ R, self.dirs[rays] @ R).t
 
@@ -2290,13 +2301,9 @@ class _Run:
         block more of the rays that saw the shade's inside. (The grown outline sees
         through too, alike at every turn of a model that is symmetric but for its
         thin parts.)"""
-        from ..render.trace import sphere_trace, trace_field
+        from ..render.trace import sphere_trace
 
-        surf, _ = self._surface_at(m, params)
-        lo, hi = surf.min(axis=0), surf.max(axis=0)
-        pad = 0.05 * float(np.linalg.norm(hi - lo)) + 3.0 * self.sigma
-        fld = trace_field(m.shape, params, m.backend, np.array([lo - pad, hi + pad]),
-                          what="detect", check_ranges=False)
+        fld = self._tracer(m, params)
         _, rng_scan = self._ray_index()
         D = self.dirs[rays]
         offsets = [np.zeros((len(rays), 3))]

@@ -307,3 +307,28 @@ def test_parameters_that_start_too_large_are_recovered():
                    estimate="pose,params")
     assert res.params["length"] == pytest.approx(0.15, abs=1e-6)
     assert rotation_angle(res.rotation, R_TRUE) < 1e-6
+
+
+@pytest.mark.parametrize("estimate", [("pose",), ("pose", "scale"), ("pose", "params"),
+                                      ("pose", "scale", "params"), ("params",)])
+def test_lm_system_is_the_normal_equations_of_the_jacobian_to_the_last_bit(estimate):
+    """lm_solve forms J^T W J and J^T W r row by row without the Jacobian (`_system`);
+    the sums must be those of normal_equations on `jacobian`'s columns, bit for bit, so
+    that a fit's result does not depend on which path formed them."""
+    from csdf.fit.lm import State, _linearised, _system, normal_equations
+    from csdf.fit.problem import jacobian, loss_weights, prepare
+
+    shape = csdf.zoo.load("table")
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(700, 3)) * 0.4
+    prob = prepare(shape, P, None, estimate, None, "cauchy", 0.01, "auto")
+    idx = [i for i, p in enumerate(prob.prog.params) if p.name in prob.names]
+    st = State(prob.R @ exp_so3(np.array([0.1, -0.2, 0.05])),
+               prob.t + 0.01, 0.02 if prob.scale else 0.0, prob.values[idx] * 1.01)
+    r, lin = _linearised(prob, P, st, idx, prob.f_scale)
+    _, w = loss_weights(r, prob.f_scale, "cauchy")
+    A, b = _system(prob, lin, w, r)
+    A0, b0 = normal_equations(jacobian(prob.pose, prob.scale, *lin), w, r)
+    assert A.shape == (6 * prob.pose + prob.scale + len(idx),) * 2
+    np.testing.assert_array_equal(A, A0)
+    np.testing.assert_array_equal(b, b0)

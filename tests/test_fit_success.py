@@ -240,3 +240,27 @@ def test_fit_viewpoint_none_and_scipy_in_the_cli(tmp_path):
     assert r.exit_code == 0, r.output
     res = json.loads(out.read_text())
     assert res["viewpoint"] == [0.0, 0.0, 0.0] and res["quality"]["visible_checked"]
+
+
+def test_check_visible_false_leaves_the_visible_test_out_and_fits_the_same():
+    """``check_visible=False`` (a caller that judges the fit itself, as csdf.detect does
+    with check_fit on other points): the fit still uses the viewpoint and gives the same
+    pose; its quality says the visible-surface test was not asked, and success is then
+    judged on inliers and residuals alone."""
+    plate, P, R, t = _plate_scan()
+    n = R @ np.array([0.0, 0.0, 1.0])
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = R, t + 0.045 * n
+    full = csdf.fit(plate, P, init=M, viewpoint=np.zeros(3))
+    lean = csdf.fit(plate, P, init=M, viewpoint=np.zeros(3), check_visible=False)
+    np.testing.assert_array_equal(lean.rotation, full.rotation)
+    np.testing.assert_array_equal(lean.translation, full.translation)
+    assert full.quality["visible_checked"] is True
+    assert lean.quality["visible_checked"] is False
+    assert "check_visible=False" in lean.quality["visible_note"]
+    assert "visible_unexplained" not in lean.quality
+    # the back-face start held there without the viewpoint's re-matching: the lean
+    # result cannot catch it, check_fit still does
+    wrong = csdf.fit(plate, P, init=M, escape=False, check_visible=False)
+    assert wrong.success and wrong.quality["visible_note"] == "no viewpoint"
+    assert check_fit(plate, P, wrong, viewpoint=np.zeros(3)).success is False

@@ -1359,7 +1359,8 @@ class _Run:
                       loss="cauchy", f_scale=self._fs_fit(m),
                       viewpoint=self.vp, multistart=init is None,
                       seed=self.fit_seed, max_iter=40, escape=False,
-                      debias=False, backend=m.backend, check_ranges=False)
+                      debias=False, backend=m.backend, check_ranges=False,
+                      check_visible=False)  # judged by _verify
         except CsdfError:
             return None
         if init is None or self.plane is None:
@@ -1428,7 +1429,8 @@ class _Run:
                        estimate=("params",), params=free, loss="cauchy",
                        f_scale=res.quality.get(
                            "noise_level", self.sigma), viewpoint=self.vp, max_iter=30,
-                       escape=False, debias=False, backend=m.backend, check_ranges=False)
+                       escape=False, debias=False, backend=m.backend, check_ranges=False,
+                       check_visible=False)
         except CsdfError:
             return res
 
@@ -2183,7 +2185,7 @@ class _Run:
                     estimate=("params",), loss="cauchy",
                     f_scale=self._fs_fit(m), viewpoint=self.vp,
                     max_iter=POLISH_ITER, escape=False, debias=False, backend=m.backend,
-                    check_ranges=False)
+                    check_ranges=False, check_visible=False)
         except CsdfError:
             return None
         yaw, dx, dy = (float(r.params[k]) for k in UPRIGHT_PARAMS)

@@ -123,7 +123,8 @@ def auto_continue(prob: Problem, stats: dict, start: tuple, max_iter: int, viewp
 def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
         f_scale=None, multistart=False, seed=None, max_iter=100, inlier_threshold=None,
         backend="auto", viewpoint=None, solver="lm", debias=None,
-        escape=True, *, check_ranges: bool = True, coarse: bool = True) -> FitResult:
+        escape=True, *, check_ranges: bool = True, coarse: bool = True,
+        check_visible: bool = True) -> FitResult:
     """Fit a model to a point cloud: pose, optionally scale and shape parameters.
 
     Args:
@@ -186,6 +187,12 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
             parameter start; the scale is still held when ambiguous), a few
             evaluations instead of dozens; ``multistart`` still runs first when
             asked.
+        check_visible: with a ``viewpoint``, make the success test's visible-surface
+            part (the model ray-cast from the viewpoint; about a tenth of a short fit's
+            time). False leaves it out, as without a viewpoint (``quality
+            ['visible_checked']`` False, ``visible_note`` saying so): for callers that
+            judge the fit otherwise (:func:`check_fit` on other points). The fit
+            itself still uses the viewpoint.
 
     Returns:
         :class:`FitResult`. Its ``success`` says whether the fit explains the cloud
@@ -232,7 +239,7 @@ def fit(shape, points, init=None, estimate=("pose",), params=None, loss="auto",
             prob, stats = auto_continue(prob, stats, start, max_iter, viewpoint,
                                         bool(escape), bool(debias), coarse=bool(coarse))
         return make_result(prob, stats, time.perf_counter() - t0, "csdf", inlier_threshold,
-                           viewpoint)
+                           viewpoint, check_visible=check_visible)
     start = (prob.R, prob.t, prob.s, prob.values.copy())
     prob, stats = solve_scipy_staged(prob, max_iter=max_iter)
     if auto:

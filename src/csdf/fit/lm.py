@@ -65,8 +65,40 @@ try:  # a compiled loop: multi-threaded BLAS on these thin products is slow when
             for j in range(i):
                 A[j, i] = A[i, j]
         return A, b
+    @njit(cache=True, fastmath=False)
+    def _pose_equations_nb(a, gw, X, w, r):  # pragma: no cover - compiled
+        # the rows of jacobian(pose=True, ...) formed one at a time, each summed as
+        # _normal_equations_nb sums them (the same products in the same order)
+        N = r.shape[0]
+        m = X.shape[1]
+        n = 6 + m
+        A = np.zeros((n, n))
+        b = np.zeros(n)
+        row = np.empty(n)
+        for k in range(N):
+            u0, u1, u2 = gw[k, 0], gw[k, 1], gw[k, 2]
+            v0, v1, v2 = a[k, 0], a[k, 1], a[k, 2]
+            row[0] = u1 * v2 - u2 * v1
+            row[1] = u2 * v0 - u0 * v2
+            row[2] = u0 * v1 - u1 * v0
+            row[3] = -u0
+            row[4] = -u1
+            row[5] = -u2
+            for c in range(m):
+                row[6 + c] = X[k, c]
+            wk = w[k]
+            for i in range(n):
+                ji = row[i] * wk
+                b[i] += ji * r[k]
+                for j in range(i + 1):
+                    A[i, j] += ji * row[j]
+        for i in range(n):
+            for j in range(i):
+                A[j, i] = A[i, j]
+        return A, b
 except ImportError:  # pragma: no cover
     _normal_equations_nb = None
+    _pose_equations_nb = None
 
 
 def normal_equations(J: np.ndarray, w: np.ndarray, r: np.ndarray):
@@ -184,6 +216,34 @@ def linearise(prob, P: np.ndarray, st: State, idx):
 
 def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
     """Residuals (N,) and Jacobian (N, n) at state ``st``."""
+    r, lin = _linearised(prob, P, st, idx, fs, vis)
+    return r, jacobian(prob.pose, prob.scale, *lin)
+
+
+def _system(prob, lin: tuple, w: np.ndarray, r: np.ndarray):
+    """``(J^T W J, J^T W r)`` of the Jacobian :func:`jacobian` makes of the
+    linearisation ``lin`` (:func:`_linearised`), weights ``w`` (N,) and residuals ``r``
+    (N,): what :func:`normal_equations` gives on that Jacobian, to the last bit, without
+    forming it when the pose is estimated (its columns are made row by row)."""
+    s, a, f, gw, Jp = lin
+    if not prob.pose or _pose_equations_nb is None:
+        return normal_equations(jacobian(prob.pose, prob.scale, *lin), w, r)
+    cols = []
+    if prob.scale:
+        cols.append(jacobian(False, True, s, a, f, gw, None))
+    if Jp is not None and Jp.shape[1]:
+        cols.append(Jp)
+    X = (np.zeros((len(r), 0)) if not cols else cols[0] if len(cols) == 1
+         else np.concatenate(cols, axis=1))
+    return _pose_equations_nb(np.ascontiguousarray(a), np.ascontiguousarray(gw),
+                              np.ascontiguousarray(X), np.ascontiguousarray(w),
+                              np.ascontiguousarray(r))
+
+
+def _linearised(prob, P, st: State, idx, fs, vis: Visibility | None = None):
+    """Residuals (N,) at state ``st`` and the linearisation ``(s, a, f, gw, Jp)`` that
+    :func:`jacobian` turns into their Jacobian (back-face matches re-matched by
+    ``vis``)."""
     prog = prob.prog
     s, pv, a, f, gw, Jp = linearise(prob, P, st, idx)
     r = s * f
@@ -209,8 +269,7 @@ def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
             gw[sel] = nw
             a[sel] = xw - st.t
             f[sel] = 0.0  # the scale column of a point-to-plane residual: -s n . X
-    Jm = jacobian(prob.pose, prob.scale, s, a, f, gw, Jp)
-    return r, Jm
+    return r, (s, a, f, gw, Jp)
 
 
 def damped_step(prob, A: np.ndarray, b: np.ndarray, lam: float, st: State, lo, hi,
@@ -218,10 +277,12 @@ def damped_step(prob, A: np.ndarray, b: np.ndarray, lam: float, st: State, lo, h
     """One Levenberg-Marquardt step: ``(A + lam D) dx = -b`` with ``D`` the diagonal of
     ``A`` (floored), ``lam`` grown tenfold while the system is singular, the rotation
     part capped at ``max_rotation`` (rad); returns ``(dx, the moved state, lam)``."""
-    D = np.maximum(np.diag(A), 1e-12 * max(np.trace(A), 1e-300))
+    D = np.maximum(A.diagonal(), 1e-12 * max(np.trace(A), 1e-300))
     while True:
+        M = A.copy()
+        M.flat[::len(A) + 1] += lam * D  # A + lam diag(D)
         try:
-            dx = -np.linalg.solve(A + lam * np.diag(D), b)
+            dx = -np.linalg.solve(M, b)
             break
         except np.linalg.LinAlgError:
             lam *= 10.0
@@ -244,7 +305,7 @@ def lm_solve(prob, P: np.ndarray, st: State, idx: list[int], fs: float, max_iter
     span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
     lo, hi = lo - slack * span, hi + slack * span
     lam = 1e-3
-    r, Jm = evaluate(prob, P, st, idx, fs, vis)
+    r, lin = _linearised(prob, P, st, idx, fs, vis)
     cost, w = loss_weights(r, fs, prob.loss)
     kscale = 6 if prob.pose else 0
 
@@ -255,21 +316,21 @@ def lm_solve(prob, P: np.ndarray, st: State, idx: list[int], fs: float, max_iter
     nev = 1
     converged = False
     while nev < max_iter:
-        A, b = normal_equations(Jm, w, r)
+        A, b = _system(prob, lin, w, r)
         if prior and prob.scale:
             A[kscale, kscale] += prior * prior
             b[kscale] += prior * prior * st.sigma
         accepted = False
         while nev < max_iter:
             dx, new, lam = damped_step(prob, A, b, lam, st, lo, hi, 1.0)
-            r2, J2 = evaluate(prob, P, new, idx, fs, vis)
+            r2, lin2 = _linearised(prob, P, new, idx, fs, vis)
             nev += 1
             c2, w2 = loss_weights(r2, fs, prob.loss)
             c2 = with_prior(c2, new.sigma)
             if c2 <= cost:
                 pred = -(b @ dx) - 0.5 * dx @ (A @ dx)
                 rel = (cost - c2) / max(cost, 1e-300)
-                st, r, Jm, w = new, r2, J2, w2
+                st, r, lin, w = new, r2, lin2, w2
                 small = rel < tol or (pred > 0 and cost - c2 < tol * cost)
                 cost = c2
                 lam = max(lam / 3.0, 1e-9)

@@ -256,13 +256,15 @@ def loss_weights(r: np.ndarray, fs: float, loss: str) -> tuple[float, np.ndarray
 
 
 def make_result(prob: Problem, stats: dict, seconds: float, method: str,
-                inlier_threshold: float | None, viewpoint=None) -> FitResult:
+                inlier_threshold: float | None, viewpoint=None, *,
+                check_visible: bool = True) -> FitResult:
     """The :class:`FitResult` of ``prob``'s current state, scored by its signed-distance
     residuals; ``stats`` holds ``nfev``, ``converged``, ``notes`` and optionally
     ``cost`` and ``loss``; ``seconds`` is the wall time; ``inlier_threshold`` in scene
     units (default ``3 f_scale``); ``viewpoint`` (3,) or None for the success test
     (:func:`csdf.fit.quality.assess`, timed in ``quality['seconds']`` and included in
-    the result's ``seconds``)."""
+    the result's ``seconds``); ``check_visible`` False leaves its visible-surface part
+    out though a viewpoint is given."""
     r = residuals(prob, prob.R, prob.t, prob.s, prob.values)
     thr = 3.0 * prob.f_scale if inlier_threshold is None else float(inlier_threshold)
     inl = np.abs(r) <= thr
@@ -270,7 +272,10 @@ def make_result(prob: Problem, stats: dict, seconds: float, method: str,
     t0 = time.perf_counter()
     pv = {p.name: float(v) for p, v in zip(prob.prog.params, prob.values)}
     ok, quality = assess(prob.prog, pv, prob.backend, prob.R, prob.t, prob.s, prob.bounds,
-                         prob.points, r, thr, prob.f_scale, viewpoint)
+                         prob.points, r, thr, prob.f_scale,
+                         viewpoint if check_visible else None)
+    if viewpoint is not None and not check_visible:
+        quality["visible_note"] = "not asked (check_visible=False)"
     quality["seconds"] = time.perf_counter() - t0
     return FitResult(
         rotation=prob.R.copy(), translation=prob.t.copy(), scale=float(prob.s),

@@ -395,15 +395,17 @@ def primitives(n_seeds: int, use_cgal: bool, repeat: int = 3) -> list[str]:
                 cgal_rows["total"] += 1
         print(f"  primitives seed {seed}: {times[-1] * 1000:.0f} ms (median of "
               f"{len(runs)}), {len(dets)} found")
+    ours = statistics.median(times)
+    theirs = statistics.median(cgal_rows["times"]) if cgal_rows["total"] else None
     out = ["| method | right kind | radius / offset error, median (max) | ms per scene "
-           "(median) |", "|---|---|---|---|"]
+           "(median) | time / CGAL's (same run) |", "|---|---|---|---|---|"]
     out.append(f"| csdf.detect_primitives | {kinds_ok}/{total} | "
                f"{1000 * statistics.median(errs):.3f} mm ({1000 * max(errs):.3f} mm) | "
-               f"{1000 * statistics.median(times):.0f} |")
-    if cgal_rows["total"]:
+               f"{1000 * ours:.0f} | {'-' if theirs is None else f'{ours / theirs:.2f}'} |")
+    if theirs is not None:
         out.append(f"| CGAL Efficient RANSAC (no boxes: a box is 3-6 planes) | "
-                   f"{cgal_rows['ok']}/{cgal_rows['total']} | - | "
-                   f"{1000 * statistics.median(cgal_rows['times']):.0f} |")
+                   f"{cgal_rows['ok']}/{cgal_rows['total']} | - | {1000 * theirs:.0f} "
+                   "| 1 |")
     out.append("")
     out.append("| kind | right | error median (max), mm | bound median (max), mm "
                "| error / bound, median (max) | errors > 0.2 mm (expected at the bound) |")

@@ -2066,3 +2066,43 @@ def test_offset_noise_leaves_each_point_out_of_its_own_plane():
     nb = neighbourhood(P)
     assert abs(offset_noise(P, nb) - 0.002) < 0.2 * 0.002
     assert offset_noise(P, nb) > nb.noise
+
+
+def test_prepared_models_are_kept_on_disk_and_detect_the_same(clutter, tmp_path,
+                                                              monkeypatch):
+    """A model prepared for detection (mesh, samples, parameter bank, and what is made on
+    first use) is kept in the cache folder; a new process (the in-process models
+    dropped) reads it instead of preparing the model again and detects exactly the same.
+    A file that cannot be read is made anew; ``CSDF_MODEL_CACHE=0`` keeps nothing."""
+    import importlib
+
+    O = importlib.import_module("csdf.detect.objects")
+    MC = importlib.import_module("csdf.detect.modelcache")
+    monkeypatch.setattr(MC, "kernel_cache_dir", lambda: tmp_path)
+    monkeypatch.setattr(O, "_MODELS", {})
+    P = clutter[0]
+    first = csdf.detect(P, ["stool", "table"], viewpoint=(0, 0, 0), seed=0)
+    files = sorted((tmp_path / "detect-models").glob("*.npz"))
+    assert len(files) == 2
+    O._MODELS.clear()
+
+    def no_meshing(*a, **k):
+        raise AssertionError("a kept model was prepared again")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(csdf.metrics, "model_points", no_meshing)
+        again = csdf.detect(P, ["stool", "table"], viewpoint=(0, 0, 0), seed=0)
+    assert [d.model for d in again] == [d.model for d in first]
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a.pose.matrix, b.pose.matrix)
+        assert a.params == b.params and np.array_equal(a.inliers, b.inliers)
+    # a damaged file is made anew
+    files[0].write_bytes(b"not a zip file")
+    O._MODELS.clear()
+    third = csdf.detect(P, ["stool", "table"], viewpoint=(0, 0, 0), seed=0)
+    np.testing.assert_array_equal(third[0].pose.matrix, first[0].pose.matrix)
+    assert MC.load(files[0].stem) is not None
+    # other settings, another entry; the cache turned off keeps nothing
+    assert MC.entry_key(b"x", (1,)) != MC.entry_key(b"x", (2,))
+    monkeypatch.setenv("CSDF_MODEL_CACHE", "0")
+    assert MC.directory() is None and MC.load(files[0].stem) is None

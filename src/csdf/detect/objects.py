@@ -112,6 +112,7 @@ from ..fit.lie import rotation_angle
 from ..points import sample_spacing
 from ..pose import Pose
 from ..seeds import rng_arg
+from . import modelcache
 from .neighbours import (
     along_rays,
     components,
@@ -508,6 +509,69 @@ class _Model:
     spans: dict = field(default_factory=dict)
     #: the model's exchangeable pairs (see _swaps), found on first use
     swaps: list | None = None
+    #: the name of its entry in the disk cache (:mod:`.modelcache`; None: not kept)
+    key: str | None = None
+    #: which parts filled on first use the kept entry holds (:func:`_filled`)
+    kept: tuple = ()
+
+
+def _prep_settings() -> tuple:
+    """The settings a prepared model depends on (part of its disk cache key)."""
+    return ("detect-model-1", MODEL_RESOLUTION, SURFACE_SAMPLES, PARAM_BANK, BANK_MARGIN,
+            HEIGHT_COLUMNS, HEIGHT_LEVELS, HEIGHT_REACH)
+
+
+def _filled(m: _Model) -> tuple:
+    """Which of ``m``'s parts made on first use are there: ``(fine, how many spans,
+    swaps)``."""
+    return (m.fine is not None, len(m.spans), m.swaps is not None)
+
+
+def _keep(m: _Model) -> None:
+    """Write ``m``'s prepared data, with the parts made on first use so far, to its disk
+    cache entry (:mod:`.modelcache`)."""
+    if m.key is None:
+        return
+    arrays = {"bounds": m.bounds, "centre": m.centre, "surface": m.surface,
+              "normals": m.normals, "heights": m.heights}
+    if m.fine is not None:
+        arrays["fine"] = m.fine
+    meta = {"radius": float(m.radius), "foot": float(m.foot), "reach": float(m.reach),
+            "starts": [None if s is None else {k: float(v) for k, v in s.items()}
+                       for s in m.starts],
+            "spans": [[n, float(v), None if e is None else [float(x) for x in e]]
+                      for (n, v), e in m.spans.items()],
+            "swaps": None if m.swaps is None else [[a, b, float(t)] for a, b, t in m.swaps]}
+    modelcache.store(m.key, arrays, meta)
+    m.kept = _filled(m)
+
+
+def _kept_model(name: str, shape: Any, source: Any, fld: Any, key: str) -> _Model | None:
+    """The model prepared from its disk cache entry ``key``, or None (none, or one that
+    does not hold what a prepared model needs)."""
+    hit = modelcache.load(key)
+    if hit is None:
+        return None
+    a, meta = hit
+    try:
+        m = _Model(name, shape, source, a["bounds"], a["centre"], float(meta["radius"]), fld,
+                   fld.backend, a["surface"], a["normals"],
+                   [None if s is None else {str(k): float(v) for k, v in s.items()}
+                    for s in meta["starts"]],
+                   float(meta["foot"]), a["heights"], float(meta["reach"]),
+                   fine=a.get("fine"),
+                   spans={(str(n), float(v)): None if e is None else np.asarray(e, float)
+                          for n, v, e in meta["spans"]},
+                   swaps=None if meta["swaps"] is None else [
+                       (str(x), str(y), float(t)) for x, y, t in meta["swaps"]],
+                   key=key)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
+    if (m.bounds.shape != (2, 3) or m.centre.shape != (3,) or m.surface.ndim != 2
+            or m.surface.shape != m.normals.shape or len(m.heights) != len(m.starts)):
+        return None
+    m.kept = _filled(m)
+    return m
 
 
 def _model(name: str, shape: Any, source: Any) -> _Model:
@@ -515,6 +579,10 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
 
     try:
         fld = as_field(shape, what="detect")  # the sweep backend: compiled once per model
+        key = modelcache.entry_key(fld.program.to_bytes(), _prep_settings())
+        kept = _kept_model(name, shape, source, fld, key)
+        if kept is not None:
+            return kept
         b = fld.bounds
     except CsdfError:
         raise CsdfError(f"detect: model {name!r} has no finite bounds (an unbounded or "
@@ -540,9 +608,11 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
                 1 - 2 * BANK_MARGIN) * u[i, k])) for i, p in enumerate(ranged)})
     heights = _heights(fld, starts, b)
     radius = float(np.linalg.norm(v - c, axis=1).max())
-    return _Model(name, shape, source, b, c, radius, fld, fld.backend, surf, g, starts,
-                  float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights,
-                  max(radius, _reach(fld, ranged)))
+    m = _Model(name, shape, source, b, c, radius, fld, fld.backend, surf, g, starts,
+               float(np.linalg.norm(v[:, :2] - c[:2], axis=1).max()), heights,
+               max(radius, _reach(fld, ranged)), key=key)
+    _keep(m)
+    return m
 
 
 def _span_at(m: _Model, p: Any, value: float) -> np.ndarray | None:
@@ -875,6 +945,9 @@ def detect(points, models, normals=None, viewpoint=None, max_instances=None, see
                       min_points, upright)
         for d in out:
             d.inliers = with_copies(d.inliers, owner)
+    for m in ms:  # what this call made on first use kept for the next process
+        if m.key is not None and _filled(m) != m.kept:
+            _keep(m)
     hint = None if out else unit_hint(P, ms)
     if hint is not None:
         warnings.warn(f"detect found nothing: {hint}", UserWarning, stacklevel=2)

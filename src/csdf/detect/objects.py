@@ -97,6 +97,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import struct
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -546,6 +547,16 @@ def _keep(m: _Model) -> None:
     m.kept = _filled(m)
 
 
+def _cache_key(prog: Any) -> str | None:
+    """The disk cache entry of a model's program (:mod:`.modelcache`; its bytecode holds
+    everything it computes, mesh data included), or None when the program cannot be
+    written as bytecode."""
+    try:
+        return modelcache.entry_key(prog.to_bytes(), _prep_settings())
+    except (ValueError, OverflowError, struct.error):
+        return None
+
+
 def _kept_model(name: str, shape: Any, source: Any, fld: Any, key: str) -> _Model | None:
     """The model prepared from its disk cache entry ``key``, or None (none, or one that
     does not hold what a prepared model needs)."""
@@ -579,8 +590,8 @@ def _model(name: str, shape: Any, source: Any) -> _Model:
 
     try:
         fld = as_field(shape, what="detect")  # the sweep backend: compiled once per model
-        key = modelcache.entry_key(fld.program.to_bytes(), _prep_settings())
-        kept = _kept_model(name, shape, source, fld, key)
+        key = _cache_key(fld.program)
+        kept = None if key is None else _kept_model(name, shape, source, fld, key)
         if kept is not None:
             return kept
         b = fld.bounds

@@ -815,7 +815,8 @@ def _cached_model(name: str, shape: Any, source: Any) -> _Model:
     took about half a second a call for the five furniture models, a tenth of a
     scene's time. The entry holds the shape and source, so their ids stay theirs; the
     oldest entry goes when ``MODEL_CACHE`` are held. A model file is read anew each
-    call (a new shape), so it is prepared anew."""
+    call (a new shape); :func:`_model` then reads what was prepared for the same
+    bytecode from disk (:mod:`.modelcache`), as it does in a new process."""
     key = (id(shape), name, source if isinstance(source, str) else id(source))
     hit = _MODELS.get(key)
     if hit is not None and hit[0] is shape and hit[1] is source:

@@ -65,6 +65,7 @@ try:  # a compiled loop: multi-threaded BLAS on these thin products is slow when
             for j in range(i):
                 A[j, i] = A[i, j]
         return A, b
+
     @njit(cache=True, fastmath=False)
     def _pose_equations_nb(a, gw, X, w, r):  # pragma: no cover - compiled
         # the rows of jacobian(pose=True, ...) formed one at a time, each summed as

@@ -2168,21 +2168,21 @@ class _Run:
         to their middle; only those whose surface between the two (outside both
         detections' boxes) the sensor could not see for nearer points
         (``MERGE_HIDDEN`` of it, and at least ``MERGE_HIDDEN_SAMPLES`` surface samples
-        there; with a viewpoint). Empty when there are none: two objects side by side with nothing
-        in front of the space between them stay two."""
+        there; with a viewpoint). Empty when there are none: two objects side by side
+        with nothing in front of the space between them stay two."""
         ext = _extents(m)
         if ext is None or self.vp is None or a.fit is None or b.fit is None:
             return []
         names, slopes = (ext[0], ext[1]), (ext[2], ext[3])
         rng = _ranges(m)
         fs = self._fs_wide(m)
-        boxes = []
-        for d in (a, b):
-            s = self._surface_at(m, d.params)[0]
-            boxes.append((np.asarray(d.pose.rotation, float), np.asarray(
-                d.pose.translation, float), s.min(axis=0) - fs, s.max(axis=0) + fs))
-        world = [s @ R.T + t for (R, t, _, _), s in zip(boxes, (
-            self._surface_at(m, d.params)[0] for d in (a, b)))]
+        surfs = [self._surface_at(m, d.params)[0] for d in (a, b)]
+        poses = [(np.asarray(d.pose.rotation, float), np.asarray(d.pose.translation, float))
+                 for d in (a, b)]
+        boxes = [(R, t, s.min(axis=0) - fs, s.max(axis=0) + fs)
+                 for (R, t), s in zip(poses, surfs)]
+        world = [s @ R.T + t for (R, t), s in zip(poses, surfs)]
+        ca, cb = (w.mean(axis=0) for w in world)
         starts = [d.fit for d in (a, b)]
         starts += [e for f in list(starts) for x, y, turn in _swaps(m)
                    if (e := _exchanged(m, f, x, y, turn)) is not None]
@@ -2190,7 +2190,6 @@ class _Run:
         for f in starts:
             R, t = np.asarray(f.rotation, float), np.asarray(f.translation, float)
             c = R @ m.centre + t
-            ca, cb = (wc.mean(axis=0) for wc in world)
             u = (cb - ca) @ R  # the line between the two in this fit's model frame
             ax = 0 if abs(u[0]) >= abs(u[1]) else 1
             if abs(u[ax]) < 0.5 * float(np.linalg.norm(u)):

@@ -17,6 +17,7 @@ Where: ``detect-models`` in the compiled evaluator's cache (``$CSDF_CACHE_DIR``,
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -33,22 +34,18 @@ __all__ = ["ENV", "directory", "entry_key", "load", "store"]
 #: the environment variable that turns the cache off when set to ``0``
 ENV = "CSDF_MODEL_CACHE"
 
-_DIGEST: list[str] = []
-
-
+@functools.cache
 def _code_digest() -> str:
     """SHA-256 of csdf's Python sources (each file's path in the package and its bytes),
     computed once per process: a prepared model depends on the meshing, sampling and
     bounds code as well as on this package's."""
-    if not _DIGEST:
-        root = Path(__file__).resolve().parent.parent
-        h = hashlib.sha256()
-        for p in sorted(root.rglob("*.py")):
-            h.update(p.relative_to(root).as_posix().encode())
-            h.update(b"\0")
-            h.update(p.read_bytes())
-        _DIGEST.append(h.hexdigest())
-    return _DIGEST[0]
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*.py")):
+        h.update(p.relative_to(root).as_posix().encode())
+        h.update(b"\0")
+        h.update(p.read_bytes())
+    return h.hexdigest()
 
 
 def entry_key(program: bytes, settings: tuple) -> str:

@@ -2090,10 +2090,7 @@ class _Run:
             return top
         px, py, sx, sy = ext
         defaults = _defaults(m)
-        forms = [top[2]]
-        if COMPLETE_SWAPPED:
-            forms += [f for a, b, turn in _swaps(m)
-                      if (f := _exchanged(m, top[2], a, b, turn)) is not None]
+        forms = _traded_too(m, [top[2]]) if COMPLETE_SWAPPED else [top[2]]
         floor = (1.0 - COMPLETE_LOSS) * top[0]
         best = top
         for res in forms:
@@ -2151,14 +2148,9 @@ class _Run:
         """How much the detections ``a`` and ``b`` of model ``m`` share space: the
         larger of the fractions of each's surface samples inside the other's box."""
         sa, sb = self._surface_at(m, a.params)[0], self._surface_at(m, b.params)[0]
-
-        def inside(s: np.ndarray, p: Pose, q: Pose, box: np.ndarray) -> float:
-            w = s @ np.asarray(p.rotation).T + np.asarray(p.translation)
-            u = (w - np.asarray(q.translation)) @ np.asarray(q.rotation)
-            return float(np.mean(np.all((u >= box.min(axis=0)) & (u <= box.max(axis=0)),
-                                        axis=1)))
-
-        return max(inside(sa, a.pose, b.pose, sb), inside(sb, b.pose, a.pose, sa))
+        wa, wb = a.pose.apply(sa), b.pose.apply(sb)
+        return max(float(np.mean(_in_box(wa, b.pose, sb.min(axis=0), sb.max(axis=0)))),
+                   float(np.mean(_in_box(wb, a.pose, sa.min(axis=0), sa.max(axis=0)))))
 
     def spanning(self, m: _Model, a: Detection, b: Detection) -> list[FitResult]:
         """Starts for one fit of model ``m`` over the detections ``a`` and ``b`` that
@@ -2177,17 +2169,11 @@ class _Run:
         rng = _ranges(m)
         fs = self._fs_wide(m)
         surfs = [self._surface_at(m, d.params)[0] for d in (a, b)]
-        poses = [(np.asarray(d.pose.rotation, float), np.asarray(d.pose.translation, float))
-                 for d in (a, b)]
-        boxes = [(R, t, s.min(axis=0) - fs, s.max(axis=0) + fs)
-                 for (R, t), s in zip(poses, surfs)]
-        world = [s @ R.T + t for (R, t), s in zip(poses, surfs)]
+        boxes = [(d.pose, s.min(axis=0) - fs, s.max(axis=0) + fs) for d, s in zip((a, b), surfs)]
+        world = [d.pose.apply(s) for d, s in zip((a, b), surfs)]
         ca, cb = (w.mean(axis=0) for w in world)
-        starts = [d.fit for d in (a, b)]
-        starts += [e for f in list(starts) for x, y, turn in _swaps(m)
-                   if (e := _exchanged(m, f, x, y, turn)) is not None]
         out = []
-        for f in starts:
+        for f in _traded_too(m, [a.fit, b.fit]):
             R, t = np.asarray(f.rotation, float), np.asarray(f.translation, float)
             c = R @ m.centre + t
             u = (cb - ca) @ R  # the line between the two in this fit's model frame
@@ -2212,11 +2198,7 @@ class _Run:
                                         params=params)
             # its surface between the two: hidden from the sensor?
             S = surf @ R.T + start.translation
-            between = np.ones(len(S), dtype=bool)
-            for Rb, tb, blo, bhi in boxes:
-                q = (S - tb) @ Rb
-                between &= ~np.all((q >= blo) & (q <= bhi), axis=1)
-            X = S[between]
+            X = S[~np.any([_in_box(S, *box) for box in boxes], axis=0)]
             if len(X) < MERGE_HIDDEN_SAMPLES or np.mean(self._occluded(X, fs)) < MERGE_HIDDEN:
                 continue
             out.append(start)
@@ -2234,12 +2216,10 @@ class _Run:
         was = self.claimed[idx].copy()
         self.claimed[idx] = False
         if starts is None:
-            starts = [d.fit for d in (a, b) if d.fit is not None]
             # each also with its exchangeable sizes traded (the same surface turned a
             # quarter): the two halves of a table were each fitted a quarter turned,
             # their long side its width, whose range stopped the fit of both at 1.2 m
-            starts += [e for f in list(starts) for x, y, turn in _swaps(m)
-                       if (e := _exchanged(m, f, x, y, turn)) is not None]
+            starts = _traded_too(m, [d.fit for d in (a, b) if d.fit is not None])
         best = None
         for start in starts:
             res = self._candidate(m, idx, start, stand=True)
@@ -3046,6 +3026,21 @@ def _exchanged(m: _Model, res: FitResult, a: str, b: str, turn: float
         return None
     return dataclasses.replace(res, rotation=np.asarray(res.rotation, dtype=float)
                                @ _rz(turn), params=dict(res.params, **{a: vb, b: va}))
+
+
+def _in_box(W: np.ndarray, pose: Pose, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``(K,)`` which of the points ``W`` ``(K, 3)`` (scene frame) lie in the box
+    ``[lo, hi]`` (each ``(3,)``) of a model's frame placed by ``pose``."""
+    u = pose.apply_inverse(W)
+    return np.all((u >= lo) & (u <= hi), axis=1)
+
+
+def _traded_too(m: _Model, fits: list[FitResult]) -> list[FitResult]:
+    """``fits`` of ``m``, then each with every pair of its exchangeable sizes traded
+    (:func:`_swaps`, :func:`_exchanged`; a trade whose values leave their ranges is
+    left out)."""
+    return list(fits) + [e for f in fits for x, y, turn in _swaps(m)
+                         if (e := _exchanged(m, f, x, y, turn)) is not None]
 
 
 def _defaults(m: _Model) -> dict[str, float]:

@@ -207,8 +207,9 @@ def _polished(run: O._Run, m, mine: np.ndarray, tres, tr: dict, err) -> str:
     """Where the detector's upright polish (``_Run._polish``) takes the truth ``tres``
     (a fit result at the true pose and parameters) of the object ``tr`` whose scan
     points are ``mine``: its MSSD over the diameter (``err``), its turn away from the
-    truth about the support's normal (degrees) and its parameters; "-" when the model
-    cannot be polished (no support, or not a 3D shape)."""
+    truth about the model's own z axis (degrees; the support's normal for a model
+    standing on it) and its parameters; "-" when no polish comes out (not a 3D shape,
+    too few points near it, a failed fit)."""
     pol = run._polish(m, mine, tres)
     if pol is None:
         return "-"

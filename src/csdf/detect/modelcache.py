@@ -34,6 +34,7 @@ __all__ = ["ENV", "directory", "entry_key", "load", "store"]
 #: the environment variable that turns the cache off when set to ``0``
 ENV = "CSDF_MODEL_CACHE"
 
+
 @functools.cache
 def _code_digest() -> str:
     """SHA-256 of csdf's Python sources (each file's path in the package and its bytes),

@@ -1544,11 +1544,79 @@ def test_a_kept_lamp_fit_is_turned_by_its_own_rays(monkeypatch):
 
     _, P, error = _cropped_scan("lamp_turned_at_its_own_parameters", "lamp")
     monkeypatch.setattr(O, "ORIG_TURNS", False)
-    before = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0)
+    # the wrong turn is kept though unsettled (the default leaves it out): the turn
+    # itself is what this compares
+    before = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0, keep_unsettled=True)
     monkeypatch.setattr(O, "ORIG_TURNS", True)
-    after = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0)
+    after = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0, keep_unsettled=True)
     assert [d.model for d in before] == [d.model for d in after] == ["lamp"]
     assert error(before[0].pose) > 0.1 and error(after[0].pose) < 0.05
+    assert not before[0].settled and after[0].settled
+
+def test_a_lamp_whose_turn_the_scan_does_not_settle_is_left_out(tmp_path):
+    """Benchmark scene 32 (cropped: its fourth object, a lamp, and the floor within
+    1 m): the lamp is found but turned wrong (0.185 of its diameter off), its rays
+    lead the turns 20 degrees or more away by under ``SETTLED_RAYS`` points and its
+    points prefer another turn. ``detect`` leaves it out by default; with
+    ``keep_unsettled`` it comes back marked; the CLI says so and keeps it when asked."""
+    from typer.testing import CliRunner
+
+    from csdf.cli import app
+    from csdf.io import write_points
+
+    _, P, error = _cropped_scan("lamp_turn_unsettled", "lamp")
+    assert csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0) == []
+    kept = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0, keep_unsettled=True)
+    assert [(d.model, d.settled) for d in kept] == [("lamp", False)]
+    assert error(kept[0].pose) > 0.1
+    assert kept[0].to_dict()["settled"] is False and "turn unsettled" in repr(kept[0])
+    ply = tmp_path / "scan.ply"
+    write_points(ply, P, viewpoint=(0.0, 0.0, 0.0))
+    out = tmp_path / "scene.json"
+    r = CliRunner().invoke(app, ["detect", str(ply), "--models", "lamp", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "1 more detection(s) left out" in r.output and len(csdf.Scene.load(out)) == 0
+    r = CliRunner().invoke(app, ["detect", str(ply), "--models", "lamp", "-o", str(out),
+                                 "--keep-unsettled"])
+    assert r.exit_code == 0 and "unsettled" in r.output and "left out" not in r.output
+    assert len(csdf.Scene.load(out)) == 1
+
+
+def _as_detection(m, res, inliers):
+    return csdf.Detection(model=m.name, pose=res.pose, params=dict(res.params), score=1.0,
+                          inliers=inliers, shape=m.shape, fit=res)
+
+
+def test_a_lamps_turn_is_settled_at_its_spokes_and_not_between_them(lamp_scan):
+    """Seen from above into the shade, the true turn's rays lead every turn 20 degrees
+    or more away by far; turned by 60 degrees (the spokes halfway between the true
+    ones) the rays and the points both prefer another turn."""
+    from csdf.detect import objects as O
+
+    _, inst, run, m, _, truth = lamp_scan
+    idx = max(run.clusters, key=lambda c: int(np.sum(inst[c] == 1)))
+    assert run.turn_settled(_as_detection(m, truth, idx))
+    turned = dataclasses.replace(
+        truth, rotation=O._yaw_matrix(run.plane[0], math.radians(60.0)) @ truth.rotation)
+    claimed = run.claimed.copy()
+    assert not run.turn_settled(_as_detection(m, turned, idx))
+    assert np.array_equal(run.claimed, claimed)  # the inliers' claims are as they were
+
+
+def test_a_model_whose_turn_moves_much_of_it_is_always_settled(chair_scan):
+    """A chair's turn is not in doubt (it moves much of its surface): a chair turned a
+    quarter round is settled; its turn is judged by the fit, not here."""
+    from csdf.detect import objects as O
+
+    P, inst, gt = chair_scan
+    run = _prepared(P, ["chair"])
+    m = run.models[0]
+    res = csdf.fit(m.shape, P[inst == 1][:200], init={
+        "rotation": O._yaw_matrix(run.plane[0], math.pi / 2) @ gt.rotation,
+        "translation": gt.translation}, estimate=("pose",), max_iter=1, escape=False,
+        coarse=False)
+    assert run.turn_settled(_as_detection(m, res, np.flatnonzero(inst == 1)))
+
 
 @pytest.fixture(scope="module")
 def bookshelf_side_scan():
@@ -1813,7 +1881,8 @@ def test_a_box_squeezed_into_a_lamp_is_dropped(monkeypatch, limit):
 
     z, P, _ = _cropped_scan("box_taken_for_a_lamp")
     monkeypatch.setattr(O, "MAX_AT_BOUND", limit)
-    dets = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0)
+    # kept even when unsettled: a box shows no spokes, and the squeezed fit is judged here
+    dets = csdf.detect(P, ["lamp"], viewpoint=(0, 0, 0), seed=0, keep_unsettled=True)
     if limit is not None:
         assert dets == []
         return

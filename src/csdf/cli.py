@@ -1162,6 +1162,11 @@ def detect(
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random choice."),
     picture: Path | None = typer.Option(None, "--picture", help="Also write a PNG: the "
                                         "scan with each detection's model drawn over it."),
+    keep_unsettled: bool = typer.Option(False, "--keep-unsettled", help="Also keep the "
+                                        "detections whose turn about the floor's normal "
+                                        "the scan does not settle (a lamp whose spokes "
+                                        "were not seen): the object is there, its turn "
+                                        "a guess."),
 ):
     """Find known models in a cluttered scan (csdf.detect) and write them as a scene."""
 
@@ -1186,22 +1191,30 @@ def detect(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UserWarning)
             dets = detect_fn(P, models, normals=N, viewpoint=vp,
-                             max_instances=max_instances, seed=seed, noise=noise)
+                             max_instances=max_instances, seed=seed, noise=noise,
+                             keep_unsettled=True)
         seconds = time.perf_counter() - t0
+        unsettled = sum(not d.settled for d in dets)
+        if not keep_unsettled:
+            dets = [d for d in dets if d.settled]
         img = None
         if picture is not None:
             from .detect.picture import detections_picture
 
             img = detections_picture(cloud.points, dets, vp)
         detections_to_scene(dets).save(output)
-        table = Table("model", "position", "score", "points")
+        table = Table("model", "position", "score", "points", "turn")
         for d in dets:
             table.add_row(d.model, ", ".join(f"{v:.3f}" for v in d.pose.translation),
-                          f"{d.score:.2f}", str(len(d.inliers)))
+                          f"{d.score:.2f}", str(len(d.inliers)),
+                          "settled" if d.settled else "unsettled")
         out.print(table)
         out.print(f"{output}: {len(dets)} detections in {seconds:.2f} s"
                   + ("" if vp is not None else " (no viewpoint: free space not checked; "
                      "give --viewpoint for a single-view scan)"), soft_wrap=True)
+        if unsettled and not keep_unsettled:
+            out.print(f"note: {unsettled} more detection(s) left out: the scan does not "
+                      f"settle their turn (--keep-unsettled keeps them)", soft_wrap=True)
         for w in caught:
             if str(w.message).startswith("detect found nothing"):
                 out.print(f"note: {w.message}", soft_wrap=True, markup=False)

@@ -241,11 +241,12 @@ def objects(n_scenes: int, use_open3d: bool, cache: str | None = None,
             if name == "csdf.detect":
                 dets, sec, left_out = _csdf_objects(sc)
                 cpu += time.process_time() - c0
-                both = dets + left_out
-                m2 = _matches(both, sc["truth"])
-                for k, v in enumerate((len(m2), len(sc["truth"]), len(both) - len(m2), sec,
-                                       1)):
-                    kept[k] += v
+                both = _matches(dets + left_out, sc["truth"])
+                kept[0] += len(both)
+                kept[1] += len(sc["truth"])
+                kept[2] += len(dets) + len(left_out) - len(both)
+                kept[3] += sec
+                kept[4] += 1
             else:
                 dets, sec = _open3d_objects(sc, clouds)
             matches = _matches(dets, sc["truth"])

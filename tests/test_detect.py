@@ -1556,8 +1556,9 @@ def test_a_kept_lamp_fit_is_turned_by_its_own_rays(monkeypatch):
 def test_a_lamp_whose_turn_the_scan_does_not_settle_is_left_out(tmp_path):
     """Benchmark scene 32 (cropped: its fourth object, a lamp, and the floor within
     1 m): the lamp is found but turned wrong (0.185 of its diameter off), its rays
-    lead the turns 20 degrees or more away by under ``SETTLED_RAYS`` points and its
-    points prefer another turn. ``detect`` leaves it out by default; with
+    lead the turns 20 degrees or more away by under ``SETTLED_RAYS`` points, and its
+    points and its rays cast without the spread prefer another turn. ``detect``
+    leaves it out by default; with
     ``keep_unsettled`` it comes back marked; the CLI says so and keeps it when asked."""
     from typer.testing import CliRunner
 

@@ -87,9 +87,10 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
     found and after a merge): a detection of a model whose turn is in doubt (step 8)
     is scored at its own parameters at turns ``RAY_STEP`` degrees apart over one
     period of its symmetry, by its rays and by the explained mass of the points about
-    it. When its rays lead every turn ``SETTLED_APART`` degrees or more away by under
-    ``SETTLED_RAYS`` explained points and the points prefer such a turn, its turn is
-    a guess: it is marked (:attr:`Detection.settled` False) and left out of the
+    it, and by its rays cast without the spread. When its rays lead every turn
+    ``SETTLED_APART`` degrees or more away by under ``SETTLED_RAYS`` explained points,
+    and the points and the plain rays (by ``SETTLED_PLAIN_RAYS``) prefer such a turn,
+    its turn is a guess: it is marked (:attr:`Detection.settled` False) and left out of the
     result unless ``keep_unsettled`` (its points stay claimed).
 
 Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``, drawn
@@ -2452,10 +2453,7 @@ class _Run:
         occluder is no evidence about the model): at most ``RAY_INSIDE`` of those
         within the sphere and ``RAY_BACKGROUND`` of those behind it (seeded
         subsamples)."""
-        surf, _ = self._surface_at(m, res.params)
-        mid = 0.5 * (surf.min(axis=0) + surf.max(axis=0))
-        cw = res.pose.apply(mid[None])[0]
-        rad = float(np.linalg.norm(surf - mid, axis=1).max()) + 3.0 * self.sigma
+        cw, rad = self._sphere(m, res)
         v = cw - self.vp
         dist = float(np.linalg.norm(v))
         if dist <= rad:
@@ -2687,7 +2685,7 @@ class _Run:
         its own parameters twice: by the sensor's rays (:meth:`_yaw_scan_rays`, as
         :meth:`_resolve_yaw` chose the turn) and by the explained mass
         (:func:`_gain`) of the scan points off the support within its bounding
-        sphere (:meth:`_near_points`). It is settled when the rays score it
+        sphere (:meth:`_sphere`). It is settled when the rays score it
         ``SETTLED_RAYS`` explained points more than every turn ``SETTLED_APART``
         degrees or more away, or the points score it at least as high as every such
         turn, or the rays cast without the spread (the model's own outline) score it
@@ -2712,40 +2710,47 @@ class _Run:
         if not apart.any() or len(rays) == 0:
             return True
         own = self._own_clusters(det.inliers)
+        params = dict(res.params)
+        t = np.asarray(res.translation, dtype=float)
+        poses = [(_yaw_matrix(self.plane[0], th) @ res.rotation, t) for th in angles]
 
-        def lead(spread: float) -> float:
-            # the rays' lead of the detection's turn, in explained points
-            was = self.claimed[det.inliers].copy()
-            self.claimed[det.inliers] = False
-            try:
-                s, _ = self._yaw_scan_rays(m, res, rays, angles, own, spread)
-            finally:
-                self.claimed[det.inliers] = was
-            return float(s[0] - s[apart].max()) / GAIN_CAP_LOG
+        def lead(s: np.ndarray) -> float:
+            # the detection's turn's lead over every turn apart from it
+            return float(s[0] - s[apart].max())
 
-        if lead(RAY_SPREAD * self.sigma) >= SETTLED_RAYS:
-            return True
-        near = self._near_points(m, res)
-        fld = m.fld.replace(params=dict(res.params), check_ranges=False)
-        nrm = self.plane[0]
-        R0, t = np.asarray(res.rotation, dtype=float), np.asarray(res.translation, dtype=float)
-        q = np.concatenate([(self.P[near] - t) @ (_yaw_matrix(nrm, th) @ R0)
-                            for th in angles])
-        d = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(angles), len(near))
-        g = _gain(d, self.sigma).sum(axis=1)
-        if g[0] >= g[apart].max():
-            return True
-        return lead(0.0) >= SETTLED_PLAIN_RAYS
+        was = self.claimed[det.inliers].copy()
+        self.claimed[det.inliers] = False
+        try:
+            if lead(self._ray_scores(m, params, poses, rays, own, RAY_SPREAD * self.sigma)
+                    ) >= SETTLED_RAYS * GAIN_CAP_LOG:
+                return True
+            cw, rad = self._sphere(m, res)
+            near = np.flatnonzero(~self.support
+                                  & (np.linalg.norm(self.P - cw, axis=1) <= rad))
+            if lead(self._point_gains(m, params, poses, near)) >= 0.0:
+                return True
+            return lead(self._ray_scores(m, params, poses, rays, own)
+                        ) >= SETTLED_PLAIN_RAYS * GAIN_CAP_LOG
+        finally:
+            self.claimed[det.inliers] = was
 
-    def _near_points(self, m: _Model, res: FitResult) -> np.ndarray:
-        """``(K,)`` indices of the scan points off the support within the bounding
-        sphere of the fit ``res`` of ``m`` (about the centre of its surface samples'
-        box), widened by three noise levels, claimed or not."""
+    def _point_gains(self, m: _Model, params: dict, poses: list, idx: np.ndarray
+                     ) -> np.ndarray:
+        """``(H,)`` the summed :func:`_gain` of the scan points ``idx`` ``(K,)`` at
+        their unsigned distances from ``m`` at ``params`` in each pose ``(R, t)``."""
+        fld = m.fld.replace(params=params, check_ranges=False)
+        q = np.concatenate([(self.P[idx] - t) @ R for R, t in poses])
+        d = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(poses), len(idx))
+        return _gain(d, self.sigma).sum(axis=1)
+
+    def _sphere(self, m: _Model, res: FitResult) -> tuple[np.ndarray, float]:
+        """``(centre (3,), radius)``: the bounding sphere of the fit ``res`` of ``m``
+        about the centre of its surface samples' box (scene frame), widened by three
+        noise levels."""
         surf, _ = self._surface_at(m, res.params)
         mid = 0.5 * (surf.min(axis=0) + surf.max(axis=0))
         rad = float(np.linalg.norm(surf - mid, axis=1).max()) + 3.0 * self.sigma
-        cw = res.pose.apply(mid[None])[0]
-        return np.flatnonzero(~self.support & (np.linalg.norm(self.P - cw, axis=1) <= rad))
+        return res.pose.apply(mid[None])[0], rad
 
     def best_in_parts(self, idx: np.ndarray) -> Detection | None:
         """When no model explains the points ``idx`` as one object, the band test
@@ -2961,16 +2966,12 @@ class _Run:
         near = np.flatnonzero(~self.claimed & ~self.support & (
             np.linalg.norm(self.P - cw, axis=1) <= 1.1 * rad + 3 * self.sigma))
         near = self._subsample(near, SCAN_POINTS)
-        fld = m.fld.replace(params=params, check_ranges=False)
         angles = 2.0 * math.pi * np.arange(YAW_STEPS) / YAW_STEPS
         poses = []
         for th in angles:
             Rt = _yaw_matrix(nrm, th)
             poses.append((Rt @ R, Rt @ (t - cw) + cw))
-        Q = self.P[near]
-        q = np.concatenate([(Q - tt) @ RR for RR, tt in poses])
-        d = np.abs(np.asarray(fld.value(q), dtype=float)).reshape(len(poses), len(near))
-        score = _gain(d, self.sigma).sum(axis=1)
+        score = self._point_gains(m, params, poses, near)
         if self.vp is not None and len(near):
             rays, rng_scan = self._ray_index()
             Xw = np.stack([surf @ RR.T + tt for RR, tt in poses])  # (Y, K, 3)

@@ -202,7 +202,7 @@ def diagnose(seed: int, sc: dict, verbose: bool = False) -> dict:
         print(f" FP det {i}: {d.model} score {d.score:.2f} {len(d.inliers)} inliers = "
               f"{_owner(inst[d.inliers], sc)}; nearest same-model truth mssd/d "
               f"{near[0]:.3f}")
-        if np.isfinite(near[0]):
+        if np.isfinite(near[0]) and d.fit is not None:
             print("    " + _against_truth(run, d, sc))
         causes["false positive"] = causes.get("false positive", 0) + 1
     return causes

@@ -2534,10 +2534,14 @@ class _Run:
         the axis its author built it about, a lamp's or a stool's; the centre of sampled
         surface points is off it by the samples' scatter, and a turn about that would
         move the whole model.)"""
-        nrm = self.plane[0]
-        t = np.asarray(res.translation, dtype=float)
-        poses = [(_yaw_matrix(nrm, th) @ res.rotation, t) for th in angles]
+        poses = self._turned_in_place(res, angles)
         return self._ray_scores(m, dict(res.params), poses, rays, own, spread), poses
+
+    def _turned_in_place(self, res: FitResult, angles: np.ndarray) -> list:
+        """The poses ``(R, t)`` of the fit ``res`` turned about the support's normal
+        through its own origin by each of ``angles`` ``(Y,)`` (radians)."""
+        t = np.asarray(res.translation, dtype=float)
+        return [(_yaw_matrix(self.plane[0], th) @ res.rotation, t) for th in angles]
 
     def _turn_profile(self, m: _Model, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """How turns ``angles`` ``(Y,)`` (radians) about the model's own z axis move its
@@ -2711,8 +2715,7 @@ class _Run:
             return True
         own = self._own_clusters(det.inliers)
         params = dict(res.params)
-        t = np.asarray(res.translation, dtype=float)
-        poses = [(_yaw_matrix(self.plane[0], th) @ res.rotation, t) for th in angles]
+        poses = self._turned_in_place(res, angles)
 
         def lead(s: np.ndarray) -> float:
             # the detection's turn's lead over every turn apart from it

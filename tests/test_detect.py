@@ -175,6 +175,34 @@ def test_normals_and_components():
     assert np.allclose(np.abs(n2[:, 2]), 1)
 
 
+def test_closed_form_normals_agree_with_lapack_and_fall_back_where_ill_defined():
+    """The compiled closed-form principal axes (``_pca_normals``) give LAPACK's least
+    eigenvector (up to sign) and eigenvalue on curved, flat and noisy neighbourhoods,
+    and LAPACK's answer itself where the axis is ill-defined: neighbours along a line,
+    or all at one point."""
+    from scipy.spatial import cKDTree
+
+    from csdf.detect.neighbours import _pca_normals, knn
+
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(6000, 3))
+    sphere = u / np.linalg.norm(u, axis=1, keepdims=True) * 0.3
+    flat = np.c_[rng.uniform(-1, 1, (6000, 2)), rng.normal(0, 1e-3, 6000)] + [3, 0, 0]
+    line = np.c_[np.linspace(0, 1, 300), np.zeros((300, 2))] + [0, 3, 0]
+    dup = np.repeat([[0.0, 0.0, 5.0]], 40, axis=0)
+    P = np.concatenate([sphere, flat, line, dup])
+    _, idx = knn(P, cKDTree(P), 12)
+    Q = P[idx]
+    c = Q - Q.mean(axis=1, keepdims=True)
+    w, v = np.linalg.eigh(np.matmul(c.transpose(0, 2, 1), c) / 12)
+    normals, least = _pca_normals(P, idx)
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-12)
+    assert np.abs(np.einsum("ij,ij->i", normals, v[:, :, 0])).min() > 1 - 1e-9
+    assert np.allclose(least, w[:, 0], rtol=0, atol=1e-12 * w[:, 2].max())
+    ill = slice(12000, None)  # the line and the copies: LAPACK's own axes
+    assert np.array_equal(normals[ill], v[ill, :, 0]) and np.array_equal(least[ill], w[ill, 0])
+
+
 def test_frustum_outliers_are_sparse_and_do_not_join_surfaces():
     # two patches 3 m from the sensor, 0.6 m apart, and outliers scattered through the
     # frustum between them: linked by their own scale they would chain the patches

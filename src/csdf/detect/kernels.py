@@ -13,7 +13,7 @@ from numba import njit
 
 __all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
-           "bounds", "ray_nearest", "ray_nearest_point",
+           "bounds", "ray_nearest", "ray_nearest_point", "pca_normals",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
 
 
@@ -547,3 +547,103 @@ def ray_nearest_point(X: np.ndarray, o: np.ndarray, P: np.ndarray, order: np.nda
             best[i] = k
             bd[i] = dmin
     return best, bd
+
+
+@njit(cache=True, nogil=True)
+def pca_normals(P: np.ndarray, nbr: np.ndarray, start: int, stop: int,
+                normals: np.ndarray, least: np.ndarray, ok: np.ndarray) -> None:
+    """For each point ``i`` in ``[start, stop)``: the least eigenvalue ``least[i]`` and
+    its unit eigenvector ``normals[i]`` of the covariance of its neighbours
+    ``P[nbr[i]]`` (``P`` ``(N, 3)``, ``nbr`` ``(N, k)``; divided by ``k``; squared
+    scene units), in closed form.
+
+    The eigenvalue is the least root of the characteristic cubic (its trigonometric
+    solution); the eigenvector is the longest cross product of two rows of the
+    covariance less that root, which spans the null space when the root is simple; the
+    eigenvalue is then refined as the vector's Rayleigh quotient. ``ok[i]`` is False
+    where the two least eigenvalues are within ``1e-4`` of the trace of each other
+    (neighbours along a line, or all at one point): the axis is ill-defined there and
+    the caller decides it otherwise (``normals[i]``, ``least[i]`` left unset)."""
+    k = nbr.shape[1]
+    for i in range(start, stop):
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        for c in range(k):
+            j = nbr[i, c]
+            mx += P[j, 0]
+            my += P[j, 1]
+            mz += P[j, 2]
+        mx /= k
+        my /= k
+        mz /= k
+        a00 = 0.0
+        a01 = 0.0
+        a02 = 0.0
+        a11 = 0.0
+        a12 = 0.0
+        a22 = 0.0
+        for c in range(k):
+            j = nbr[i, c]
+            dx = P[j, 0] - mx
+            dy = P[j, 1] - my
+            dz = P[j, 2] - mz
+            a00 += dx * dx
+            a01 += dx * dy
+            a02 += dx * dz
+            a11 += dy * dy
+            a12 += dy * dz
+            a22 += dz * dz
+        a00 /= k
+        a01 /= k
+        a02 /= k
+        a11 /= k
+        a12 /= k
+        a22 /= k
+        tr = a00 + a11 + a22
+        q = tr / 3.0
+        p1 = a01 * a01 + a02 * a02 + a12 * a12
+        d0 = a00 - q
+        d1 = a11 - q
+        d2 = a22 - q
+        p = math.sqrt(max((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1) / 6.0, 0.0))
+        if p > 0.0:
+            det = (d0 * (d1 * d2 - a12 * a12) - a01 * (a01 * d2 - a12 * a02)
+                   + a02 * (a01 * a12 - d1 * a02)) / (p * p * p)
+            phi = math.acos(min(max(det / 2.0, -1.0), 1.0)) / 3.0
+            lam = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+        else:
+            lam = q
+        b00 = a00 - lam
+        b11 = a11 - lam
+        b22 = a22 - lam
+        # rows (b00, a01, a02), (a01, b11, a12), (a02, a12, b22); their cross products
+        x0 = a01 * a12 - a02 * b11
+        y0 = a02 * a01 - b00 * a12
+        z0 = b00 * b11 - a01 * a01
+        x1 = a01 * b22 - a02 * a12
+        y1 = a02 * a02 - b00 * b22
+        z1 = b00 * a12 - a01 * a02
+        x2 = b11 * b22 - a12 * a12
+        y2 = a12 * a02 - a01 * b22
+        z2 = a01 * a12 - b11 * a02
+        n0 = x0 * x0 + y0 * y0 + z0 * z0
+        n1 = x1 * x1 + y1 * y1 + z1 * z1
+        n2 = x2 * x2 + y2 * y2 + z2 * z2
+        if n1 > n0 and n1 >= n2:
+            x0, y0, z0, n0 = x1, y1, z1, n1
+        elif n2 > n0:
+            x0, y0, z0, n0 = x2, y2, z2, n2
+        if not (tr > 0.0 and n0 > (1e-4 * tr * tr) ** 2):
+            ok[i] = False
+            continue
+        s = 1.0 / math.sqrt(n0)
+        x0 *= s
+        y0 *= s
+        z0 *= s
+        normals[i, 0] = x0
+        normals[i, 1] = y0
+        normals[i, 2] = z0
+        least[i] = (a00 * x0 * x0 + a11 * y0 * y0 + a22 * z0 * z0
+                    + 2.0 * (a01 * x0 * y0 + a02 * x0 * z0 + a12 * y0 * z0))
+        ok[i] = True

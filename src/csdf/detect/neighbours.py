@@ -260,17 +260,14 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
         raise CsdfError(f"a cloud of {n} points is too small to estimate normals")
     dist, idx = knn(points, tree, k)
     # the noise level from a fixed subsample (every point when normals are wanted)
-    sub = np.arange(n) if want_normals else np.arange(0, n, max(1, n // NOISE_SAMPLE))
-    nb = points[idx[sub]]  # (S, k, 3)
-    centred = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.matmul(centred.transpose(0, 2, 1), centred) / k
     normals = None
     if not want_normals:
-        least = _least_eigenvalues(cov)
+        sub = np.arange(0, n, max(1, n // NOISE_SAMPLE))
+        nb = points[idx[sub]]  # (S, k, 3)
+        centred = nb - nb.mean(axis=1, keepdims=True)
+        least = _least_eigenvalues(np.matmul(centred.transpose(0, 2, 1), centred) / k)
     else:
-        w, v = np.linalg.eigh(cov)
-        least = w[:, 0]
-        normals = v[:, :, 0]
+        normals, least = _pca_normals(points, idx)
         if viewpoint is not None:
             flip = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, float) - points) < 0
             normals[flip] *= -1
@@ -364,6 +361,33 @@ def range_noise(points: np.ndarray, viewpoint, k: int = K_NORMALS) -> float:
     h = Ainv[:, 0, 0]  # the leverage of the prediction at the point (tangent 0, 0)
     r = np.abs(rng[sub] - coef[:, 0]) / np.sqrt(1.0 + h)
     return 1.4826 * float(np.median(r)) if len(r) else 0.0
+
+
+def _pca_normals(points: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least principal axis ``(N, 3)`` (unit, unoriented) and the least eigenvalue
+    ``(N,)`` (squared scene units) of the covariance of each point's neighbours
+    ``points[idx[i]]`` (``points`` ``(N, 3)``, ``idx`` ``(N, k)``): in closed form,
+    compiled, on every core (:func:`.kernels.pca_normals`); LAPACK's ``eigh`` for the
+    few whose axis the closed form leaves ill-defined (neighbours along a line)."""
+    from ..parallel import run_parallel
+    from .kernels import pca_normals
+
+    n = len(points)
+    P = np.ascontiguousarray(points, dtype=float)
+    nbr = np.ascontiguousarray(idx)
+    normals = np.empty((n, 3))
+    least = np.empty(n)
+    ok = np.empty(n, dtype=bool)
+    run_parallel(lambda r: pca_normals(P, nbr, r[0], r[1], normals, least, ok), n, 1)
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        nb = P[nbr[bad]]
+        centred = nb - nb.mean(axis=1, keepdims=True)
+        w, v = np.linalg.eigh(np.matmul(centred.transpose(0, 2, 1), centred)
+                              / nbr.shape[1])
+        least[bad] = w[:, 0]
+        normals[bad] = v[:, :, 0]
+    return normals, least
 
 
 def _least_eigenvalues(A: np.ndarray) -> np.ndarray:

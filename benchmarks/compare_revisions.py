@@ -24,7 +24,11 @@ ratio new / old (below 1: the new revision is faster). Other suites (``--suite``
 * ``detect``: ``csdf.detect`` on the benchmark's cluttered scenes
   (``bench_detect.py``'s, seeds ``--first-scene`` on, ``--scenes`` of them), CPU and
   wall seconds per object after a warm-up scene, and whether both revisions return
-  the same detections (poses to 1e-9).
+  the same detections (poses to 1e-9);
+* ``normals``: ``csdf.estimate_normals`` on those scans (the median over them) and
+  ``csdf.detect_primitives`` on the benchmark's first 40k-point primitive scene with
+  its normals estimated, and whether both revisions find the same primitives (kinds
+  and inliers).
 
 Usage::
 
@@ -32,6 +36,7 @@ Usage::
     .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite calls
     .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite detect --scenes 5
     .venv/bin/python benchmarks/compare_revisions.py 9cb5157 --suite shapes
+    .venv/bin/python benchmarks/compare_revisions.py 80ad40a --suite normals --scenes 3
 """
 
 from __future__ import annotations
@@ -163,6 +168,29 @@ print("RESULT " + json.dumps({"detect CPU s / object": cpu / objects,
                               "_detections": h.hexdigest()}))
 '''
 
+CHILD_NORMALS = r'''
+import hashlib, json, sys, time
+import numpy as np
+import csdf
+''' + MED + r'''
+data = np.load(sys.argv[1])
+clouds = [data[f"points_{i}"] for i in range(int(data["count"]))]
+prim = data["primitive"]
+vp = (0.0, 0.0, 0.0)
+h = hashlib.sha1()
+for d in csdf.detect_primitives(prim, seed=0):
+    h.update(d.kind.encode())
+    h.update(np.asarray(d.inliers).tobytes())
+out = {
+    "estimate_normals, one scan (median over the scans)": float(np.median(
+        [med(lambda: csdf.estimate_normals(P, viewpoint=vp), 5) for P in clouds])),
+    "detect_primitives, 40k points, normals estimated": med(
+        lambda: csdf.detect_primitives(prim, seed=0), 5),
+    "_detections": h.hexdigest(),
+}
+print("RESULT " + json.dumps(out))
+'''
+
 
 CHILD_SHAPES = r'''
 import json, time
@@ -188,13 +216,16 @@ print("RESULT " + json.dumps(out))
 '''
 
 
-def detect_scenes(first: int, count: int, path: Path) -> list[str]:
+def detect_scenes(first: int, count: int, path: Path, primitive: bool = False) -> list[str]:
     """The benchmark's cluttered scenes ``first .. first + count - 1`` (this tree's
-    ``bench_detect.py``) saved to ``path`` for the children; returns the models."""
+    ``bench_detect.py``) saved to ``path`` for the children, with its primitive scene
+    of seed 0 (``primitive``); returns the models."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    from detect_scenes import CLUTTER_MODELS, clutter_scene
+    from detect_scenes import CLUTTER_MODELS, clutter_scene, primitive_scene
 
     arrays: dict = {}
+    if primitive:
+        arrays["primitive"] = np.asarray(primitive_scene(0)["points"], dtype=np.float64)
     objects = 0
     for i in range(count):
         sc = clutter_scene(first + i)
@@ -219,12 +250,14 @@ def main() -> None:
     ap.add_argument("rev", help="the earlier revision (a commit) to compare against")
     ap.add_argument("--rounds", type=int, default=3, help="child runs per revision")
     ap.add_argument("--output", type=Path, default=None, help="also write Markdown here")
-    ap.add_argument("--suite", choices=("eval", "calls", "shapes", "detect"), default="eval",
+    ap.add_argument("--suite", choices=("eval", "calls", "shapes", "detect", "normals"),
+                    default="eval",
                     help="what to time (module docs)")
     ap.add_argument("--first-scene", type=int, default=100,
-                    help="detect suite: the first scene's seed")
+                    help="detect and normals suites: the first scene's seed")
     ap.add_argument("--scenes", type=int, default=5,
-                    help="detect suite: scenes timed (the first detected once before too, "
+                    help="detect and normals suites: scenes timed (the first detected once "
+                    "before too, "
                     "to warm up)")
     args = ap.parse_args()
     if not 1 <= args.scenes <= 100:
@@ -232,10 +265,11 @@ def main() -> None:
     t_start = time.time()
     with tempfile.TemporaryDirectory(prefix="csdf-ab-") as tmp:
         code, child_args = {"eval": CHILD, "calls": CHILD_CALLS, "shapes": CHILD_SHAPES,
-                            "detect": CHILD_DETECT}[args.suite], ()
-        if args.suite == "detect":
+                            "detect": CHILD_DETECT, "normals": CHILD_NORMALS}[args.suite], ()
+        if args.suite in ("detect", "normals"):
             data = Path(tmp) / "scenes.npz"
-            models = detect_scenes(args.first_scene, args.scenes, data)
+            models = detect_scenes(args.first_scene, args.scenes, data,
+                                   primitive=args.suite == "normals")
             child_args = (str(data), ",".join(models))
         wt = Path(tmp) / "old"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),

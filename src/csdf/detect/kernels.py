@@ -561,9 +561,11 @@ def pca_normals(P: np.ndarray, nbr: np.ndarray, start: int, stop: int,
     solution); the eigenvector is the longest cross product of two rows of the
     covariance less that root, which spans the null space when the root is simple; the
     eigenvalue is then refined as the vector's Rayleigh quotient. ``ok[i]`` is False
-    where the two least eigenvalues are within ``1e-4`` of the trace of each other
-    (neighbours along a line, or all at one point): the axis is ill-defined there and
-    the caller decides it otherwise (``normals[i]``, ``least[i]`` left unset)."""
+    where that longest cross product, about ``(l1 - l0) (l2 - l0)`` for eigenvalues
+    ``l0 <= l1 <= l2``, is no longer than ``1e-4`` times the squared trace: the two
+    least eigenvalues nearly equal (neighbours along a line, or all at one point), the
+    axis ill-defined, and the caller decides it otherwise (``normals[i]`` and
+    ``least[i]`` left unset)."""
     k = nbr.shape[1]
     for i in range(start, stop):
         mx = 0.0

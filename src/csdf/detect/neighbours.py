@@ -262,10 +262,7 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
     # the noise level from a fixed subsample (every point when normals are wanted)
     normals = None
     if not want_normals:
-        sub = np.arange(0, n, max(1, n // NOISE_SAMPLE))
-        nb = points[idx[sub]]  # (S, k, 3)
-        centred = nb - nb.mean(axis=1, keepdims=True)
-        least = _least_eigenvalues(np.matmul(centred.transpose(0, 2, 1), centred) / k)
+        _, least = _pca_normals(points, idx[::max(1, n // NOISE_SAMPLE)])
     else:
         normals, least = _pca_normals(points, idx)
         if viewpoint is not None:
@@ -313,11 +310,8 @@ def offset_noise(points: np.ndarray, nb: Neighbourhood, viewpoint=None) -> float
     P = np.asarray(points, dtype=float)
     n = len(P)
     sub = np.arange(0, n, max(1, n // NOISE_SAMPLE))
-    Q = P[nb.nbr[sub]]  # (S, k, 3)
-    c = Q.mean(axis=1)
-    centred = Q - c[:, None, :]
-    _, v = np.linalg.eigh(np.matmul(centred.transpose(0, 2, 1), centred))
-    normal = v[:, :, 0]
+    c = P[nb.nbr[sub]].mean(axis=1)  # (S, 3)
+    normal, _ = _pca_normals(P, nb.nbr[sub])
     r = np.abs(np.einsum("ij,ij->i", P[sub] - c, normal))
     if viewpoint is not None:
         ray = P[sub] - np.asarray(viewpoint, dtype=float)
@@ -364,15 +358,16 @@ def range_noise(points: np.ndarray, viewpoint, k: int = K_NORMALS) -> float:
 
 
 def _pca_normals(points: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The least principal axis ``(N, 3)`` (unit, unoriented) and the least eigenvalue
-    ``(N,)`` (squared scene units) of the covariance of each point's neighbours
-    ``points[idx[i]]`` (``points`` ``(N, 3)``, ``idx`` ``(N, k)``): in closed form,
-    compiled, on every core (:func:`.kernels.pca_normals`); LAPACK's ``eigh`` for the
-    few whose axis the closed form leaves ill-defined (neighbours along a line)."""
+    """The least principal axis ``(S, 3)`` (unit, unoriented) and the least eigenvalue
+    ``(S,)`` (squared scene units) of the covariance of each row's neighbours
+    ``points[idx[i]]`` (``points`` ``(N, 3)``, ``idx`` ``(S, k)``: every point's, or a
+    subsample's): in closed form, compiled, on every core
+    (:func:`.kernels.pca_normals`); LAPACK's ``eigh`` for the few whose axis the closed
+    form leaves ill-defined (neighbours along a line)."""
     from ..parallel import run_parallel
     from .kernels import pca_normals
 
-    n = len(points)
+    n = len(idx)
     P = np.ascontiguousarray(points, dtype=float)
     nbr = np.ascontiguousarray(idx)
     normals = np.empty((n, 3))
@@ -388,22 +383,6 @@ def _pca_normals(points: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.nd
         least[bad] = w[:, 0]
         normals[bad] = v[:, :, 0]
     return normals, least
-
-
-def _least_eigenvalues(A: np.ndarray) -> np.ndarray:
-    """The least eigenvalue of each symmetric ``(3, 3)`` matrix of ``A`` ``(S, 3, 3)``,
-    in closed form (the trigonometric solution of the characteristic cubic)."""
-    q = np.trace(A, axis1=1, axis2=2) / 3.0
-    p1 = A[:, 0, 1] ** 2 + A[:, 0, 2] ** 2 + A[:, 1, 2] ** 2
-    d = np.diagonal(A, axis1=1, axis2=2) - q[:, None]
-    p = np.sqrt(np.maximum((np.sum(d * d, axis=1) + 2.0 * p1) / 6.0, 0.0))
-    B = A - q[:, None, None] * np.eye(3)
-    safe = np.where(p > 0, p, 1.0)
-    det = (B[:, 0, 0] * (B[:, 1, 1] * B[:, 2, 2] - B[:, 1, 2] * B[:, 2, 1])
-           - B[:, 0, 1] * (B[:, 1, 0] * B[:, 2, 2] - B[:, 1, 2] * B[:, 2, 0])
-           + B[:, 0, 2] * (B[:, 1, 0] * B[:, 2, 1] - B[:, 1, 1] * B[:, 2, 0])) / safe ** 3
-    phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
-    return np.where(p > 0, q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0), q)
 
 
 def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarray]:

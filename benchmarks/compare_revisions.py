@@ -28,7 +28,11 @@ ratio new / old (below 1: the new revision is faster). Other suites (``--suite``
 * ``normals``: ``csdf.estimate_normals`` on those scans (the median over them) and
   ``csdf.detect_primitives`` on the benchmark's first 40k-point primitive scene with
   its normals estimated, and whether both revisions find the same primitives (kinds
-  and inliers).
+  and inliers);
+* ``primitives``: ``csdf.detect_primitives`` on ``bench_detect.py``'s primitive scenes
+  (40k points, normals given; seeds ``--first-scene`` on, ``--scenes`` of them), the
+  median over the scenes of each scene's median of 3, and whether both revisions find
+  the same primitives (kinds, inliers, rmse to 8 digits).
 
 Usage::
 
@@ -37,6 +41,8 @@ Usage::
     .venv/bin/python benchmarks/compare_revisions.py a1c9e75 --suite detect --scenes 5
     .venv/bin/python benchmarks/compare_revisions.py 9cb5157 --suite shapes
     .venv/bin/python benchmarks/compare_revisions.py 80ad40a --suite normals --scenes 3
+    .venv/bin/python benchmarks/compare_revisions.py c2fcb78 --suite primitives \
+        --first-scene 0 --scenes 20
 """
 
 from __future__ import annotations
@@ -192,6 +198,28 @@ print("RESULT " + json.dumps(out))
 '''
 
 
+CHILD_PRIMITIVES = r'''
+import hashlib, json, sys, time
+import numpy as np
+import csdf
+''' + MED + r'''
+data = np.load(sys.argv[1])
+scenes = [(data[f"points_{i}"], data[f"normals_{i}"]) for i in range(int(data["count"]))]
+csdf.detect_primitives(scenes[0][0], scenes[0][1], seed=0)  # warm caches
+h = hashlib.sha1()
+times = []
+for P, N in scenes:
+    for d in csdf.detect_primitives(P, N, seed=0):
+        h.update(d.kind.encode())
+        h.update(np.asarray(d.inliers).tobytes())
+        h.update(f"{d.rmse:.8e}".encode())
+    times.append(med(lambda: csdf.detect_primitives(P, N, seed=0), 3))
+out = {"detect_primitives, 40k points, normals given (median over the scenes)":
+       float(np.median(times)), "_detections": h.hexdigest()}
+print("RESULT " + json.dumps(out))
+'''
+
+
 CHILD_SHAPES = r'''
 import json, time
 import numpy as np
@@ -235,6 +263,20 @@ def detect_scenes(first: int, count: int, path: Path, primitive: bool = False) -
     return list(CLUTTER_MODELS)
 
 
+def primitive_scenes(first: int, count: int, path: Path) -> None:
+    """The benchmark's primitive scenes ``first .. first + count - 1`` (points and
+    normals) saved to ``path`` for the children."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from detect_scenes import primitive_scene
+
+    arrays: dict = {}
+    for i in range(count):
+        sc = primitive_scene(first + i)
+        arrays[f"points_{i}"] = np.asarray(sc["points"], dtype=np.float64)
+        arrays[f"normals_{i}"] = np.asarray(sc["normals"], dtype=np.float64)
+    np.savez(path, count=count, **arrays)
+
+
 def run_child(src: Path, code: str = CHILD, args: tuple[str, ...] = ()) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(src))
     res = subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True,
@@ -250,13 +292,15 @@ def main() -> None:
     ap.add_argument("rev", help="the earlier revision (a commit) to compare against")
     ap.add_argument("--rounds", type=int, default=3, help="child runs per revision")
     ap.add_argument("--output", type=Path, default=None, help="also write Markdown here")
-    ap.add_argument("--suite", choices=("eval", "calls", "shapes", "detect", "normals"),
+    ap.add_argument("--suite", choices=("eval", "calls", "shapes", "detect", "normals",
+                                        "primitives"),
                     default="eval",
                     help="what to time (module docs)")
     ap.add_argument("--first-scene", type=int, default=100,
-                    help="detect and normals suites: the first scene's seed")
+                    help="detect, normals and primitives suites: the first scene's seed")
     ap.add_argument("--scenes", type=int, default=5,
-                    help="detect and normals suites: scenes timed (the first detected once "
+                    help="detect, normals and primitives suites: scenes timed (the first "
+                    "detected once "
                     "before too, "
                     "to warm up)")
     args = ap.parse_args()
@@ -265,12 +309,17 @@ def main() -> None:
     t_start = time.time()
     with tempfile.TemporaryDirectory(prefix="csdf-ab-") as tmp:
         code, child_args = {"eval": CHILD, "calls": CHILD_CALLS, "shapes": CHILD_SHAPES,
-                            "detect": CHILD_DETECT, "normals": CHILD_NORMALS}[args.suite], ()
+                            "detect": CHILD_DETECT, "normals": CHILD_NORMALS,
+                            "primitives": CHILD_PRIMITIVES}[args.suite], ()
         if args.suite in ("detect", "normals"):
             data = Path(tmp) / "scenes.npz"
             models = detect_scenes(args.first_scene, args.scenes, data,
                                    primitive=args.suite == "normals")
             child_args = (str(data), ",".join(models))
+        elif args.suite == "primitives":
+            data = Path(tmp) / "primitives.npz"
+            primitive_scenes(args.first_scene, args.scenes, data)
+            child_args = (str(data),)
         wt = Path(tmp) / "old"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),
                         args.rev], check=True, capture_output=True)

@@ -72,6 +72,43 @@ def test_cone_and_torus_from_oriented_points():
     assert len(good) == 1 and np.allclose(good[0, [0, 1, 2, 6, 7]], [*c, 0.3, 0.08])
 
 
+def test_torus_cubic_roots_are_the_companion_matrixs_eigenvalues():
+    # the closed-form roots behind tori_from against the eigenvalues of the companion
+    # matrix: three real roots, one real and a complex pair, a double root
+    from csdf.detect.minimal import _cubic_roots
+
+    rng = np.random.default_rng(11)
+    for roots in [rng.uniform(-3, 3, 3) for _ in range(200)] + [
+            [0.5, 0.5, -2.0], [1.0, 1.0, 1.0], [0.0, 2.0, -1e-3]]:
+        a, b, c = np.poly(roots)[1:]
+        x = _cubic_roots(a, b, c)
+        assert all(x[3:])
+        assert np.allclose(sorted(x[:3]), sorted(roots), atol=1e-6)
+    for _ in range(200):  # one real root and a complex pair
+        r, re, im = rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(0.1, 3)
+        a, b, c = np.real(np.poly([r, re + 1j * im, re - 1j * im]))[1:]
+        x = _cubic_roots(a, b, c)
+        assert x[3] and not x[4] and not x[5]
+        assert math.isclose(x[0], r, abs_tol=1e-9) and math.isclose(x[1], re, abs_tol=1e-9)
+
+
+def test_the_neighbour_graph_lists_each_linked_edge_once_at_both_ends():
+    from csdf.detect.kernels import linked_graph
+
+    rng = np.random.default_rng(12)
+    P = rng.normal(size=(2000, 3))
+    nb = neighbourhood(P, want_normals=False)
+    linked = linked_edges(nb, radius=float(np.median(nb.lengths)))
+    start, adj = linked_graph(nb.nbr, linked)
+    want = [set() for _ in range(len(P))]
+    for i, c in zip(*np.nonzero(linked)):
+        want[i].add(int(nb.nbr[i, c]))
+        want[int(nb.nbr[i, c])].add(int(i))
+    for i in range(len(P)):
+        row = adj[start[i]:start[i + 1]].tolist()
+        assert len(row) == len(set(row)) and set(row) == want[i]
+
+
 def test_surface_distances_are_exact():
     # the compiled distances against csdf's exact primitives (sphere, torus), the
     # unbounded cylinder, the plane, and a brute-force nearest point on a cone's nappe

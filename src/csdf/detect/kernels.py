@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["component_roots", "largest_component", "linked_graph", "grow_inliers",
+__all__ = ["component_roots", "largest_component", "best_counts", "linked_graph", "grow_inliers",
            "seeded_components", "surface_values", "inlier_counts", "knn_cells", "within_ball",
            "bounds", "ray_nearest", "ray_nearest_point", "pca_normals",
            "PLANE", "SPHERE", "CYLINDER", "CONE", "TORUS"]
@@ -164,6 +164,50 @@ def inlier_counts(kind: int, H: np.ndarray, P: np.ndarray, N: np.ndarray, eps: f
 
 
 @njit(cache=True, nogil=True)
+def best_counts(kind: np.ndarray, H: np.ndarray, P: np.ndarray, N: np.ndarray, eps: float,
+                cos_tol: float, first: int, k: int, z: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Inlier counts on growing prefixes (Schnabel et al.'s scoring on subsets): every
+    hypothesis, row ``i`` of ``H`` ``(T, 8)`` (its kind's row, padded) of kind
+    ``kind[i]``, is counted on the first ``first`` points of ``P``, ``N`` ``(S, 3)``,
+    the survivors on twice as many, and so on up to all ``S``; after each step a
+    hypothesis is dropped when ``count + z sqrt(count)`` is below ``c - z sqrt(c)``,
+    ``c`` the ``k``-th largest count among the survivors (when more than ``k``
+    survive). Returns the counts ``(T,)`` (over the points each was counted on) and
+    which survived ``(T,)``."""
+    T = H.shape[0]
+    S = P.shape[0]
+    counts = np.zeros(T, dtype=np.int64)
+    alive = np.ones(T, dtype=np.bool_)
+    ct = np.zeros(T)
+    st = np.zeros(T)
+    for i in range(T):
+        if kind[i] == CONE:
+            ct[i] = math.cos(H[i, 6])
+            st[i] = math.sin(H[i, 6])
+    a, b = 0, min(first, S)
+    while a < S:
+        for i in range(T):
+            if alive[i]:
+                n = 0
+                for j in range(a, b):
+                    if _is_inlier(kind[i], H[i], ct[i], st[i], P, N, j, eps, cos_tol):
+                        n += 1
+                counts[i] += n
+        if b >= S:
+            break
+        live = np.flatnonzero(alive)
+        if live.shape[0] > k:
+            c = np.sort(counts[live])[live.shape[0] - k]
+            floor = c - z * math.sqrt(c)
+            for i in live:
+                if counts[i] + z * math.sqrt(counts[i]) < floor:
+                    alive[i] = False
+        a, b = b, min(2 * b, S)
+    return counts, alive
+
+
+@njit(cache=True, nogil=True)
 def largest_component(sel: np.ndarray, nbr: np.ndarray, linked: np.ndarray,
                       mask: np.ndarray) -> np.ndarray:
     """The points of the largest connected component (sorted indices) of the masked
@@ -213,9 +257,6 @@ def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.nd
     nx, ny, nz = dims[0], dims[1], dims[2]
     bd = np.empty(k)
     bi = np.empty(k, dtype=np.int64)
-    # the block's rows (dy, dz), the point's own first
-    ry = np.array([0, -1, 1, 0, 0, -1, 1, -1, 1], dtype=np.int64)
-    rz = np.array([0, 0, 0, -1, 1, -1, -1, 1, 1], dtype=np.int64)
     h2 = h * h
     slack = 1e-9 * h  # cell boundaries as computed may be off by rounding
     for c in range(c0, c1):
@@ -226,59 +267,88 @@ def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.nd
         bx = origin[0] + ix * h  # the cell's lower corner
         by = origin[1] + iy * h
         bz = origin[2] + iz * h
+        last = np.inf  # the k-th distance (squared) of the cell's previous point
         for a in range(cstart[c], cstart[c + 1]):
-            px, py, pz = S[a, 0], S[a, 1], S[a, 2]
-            # each side's gap: the least distance to the neighbouring cell that way
-            gxl = max(px - bx - slack, 0.0)
-            gxh = max(bx + h - px - slack, 0.0)
-            gyl = max(py - by - slack, 0.0)
-            gyh = max(by + h - py - slack, 0.0)
-            gzl = max(pz - bz - slack, 0.0)
-            gzh = max(bz + h - pz - slack, 0.0)
-            m = 0
-            worst = np.inf  # the k-th distance so far (squared)
-            for r in range(9):
-                y = iy + ry[r]
-                z = iz + rz[r]
-                if y < 0 or y >= ny or z < 0 or z >= nz:
-                    continue
-                g = 0.0
-                if ry[r] < 0:
-                    g += gyl * gyl
-                elif ry[r] > 0:
-                    g += gyh * gyh
-                if rz[r] < 0:
-                    g += gzl * gzl
-                elif rz[r] > 0:
-                    g += gzh * gzh
-                if g >= worst:
-                    continue
-                x0 = ix - 1 if ix > 0 and g + gxl * gxl < worst else ix
-                x1 = ix + 1 if ix < nx - 1 and g + gxh * gxh < worst else ix
-                base = nx * (y + ny * z)
-                for b in range(first[base + x0], first[base + x1 + 1]):
-                    dx = S[b, 0] - px
-                    dy = S[b, 1] - py
-                    dz = S[b, 2] - pz
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 >= worst or b == a:
-                        continue
-                    s = m if m < k else k - 1
-                    while s > 0 and bd[s - 1] > d2:
-                        bd[s] = bd[s - 1]
-                        bi[s] = bi[s - 1]
-                        s -= 1
-                    bd[s] = d2
-                    bi[s] = b
-                    if m < k:
-                        m += 1
-                    if m == k:
-                        worst = bd[k - 1]
+            # first within a radius a quarter beyond the previous point's k-th
+            # neighbour (neighbours in one cell have alike ones): far fewer candidates
+            # enter the sorted list; when fewer than k lie within it, again unbounded
+            m = _block_search(S, first, a, ix, iy, iz, nx, ny, nz, bx, by, bz, h, slack,
+                              1.5625 * last, k, bd, bi)
+            if m < k and last < np.inf:
+                m = _block_search(S, first, a, ix, iy, iz, nx, ny, nz, bx, by, bz, h,
+                                  slack, np.inf, k, bd, bi)
+            last = bd[k - 1] if m == k else np.inf
             i = order[a]
             for q in range(m):
                 out_d[i, q] = math.sqrt(bd[q])
                 out_i[i, q] = order[bi[q]]
             exact[i] = m == k and bd[k - 1] <= h2
+
+
+#: the rows ``(dy, dz)`` of a 3 x 3 x 3 block of cells, the middle one first
+_ROW_Y = np.array([0, -1, 1, 0, 0, -1, 1, -1, 1], dtype=np.int64)
+_ROW_Z = np.array([0, 0, 0, -1, 1, -1, -1, 1, 1], dtype=np.int64)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _block_search(S: np.ndarray, first: np.ndarray, a: int, ix: int, iy: int, iz: int,
+                  nx: int, ny: int, nz: int, bx: float, by: float, bz: float, h: float,
+                  slack: float, bound: float, k: int, bd: np.ndarray, bi: np.ndarray
+                  ) -> int:
+    """The nearest neighbours of point ``a`` of ``S`` (in cell ``(ix, iy, iz)`` whose
+    lower corner is ``(bx, by, bz)``) among the points of its 3 x 3 x 3 block of cells
+    closer than ``sqrt(bound)``: the first ``m <= k`` of ``bd`` (squared distances,
+    ascending) and ``bi`` (rows of ``S``); returns ``m``. Rows of cells, and cells at
+    either end of a row, that lie no nearer than the ``k``-th distance so far are
+    skipped."""
+    px, py, pz = S[a, 0], S[a, 1], S[a, 2]
+    # each side's gap: the least distance to the neighbouring cell that way
+    gxl = max(px - bx - slack, 0.0)
+    gxh = max(bx + h - px - slack, 0.0)
+    gyl = max(py - by - slack, 0.0)
+    gyh = max(by + h - py - slack, 0.0)
+    gzl = max(pz - bz - slack, 0.0)
+    gzh = max(bz + h - pz - slack, 0.0)
+    m = 0
+    worst = bound  # the k-th distance so far (squared), or the bound
+    for r in range(9):
+        y = iy + _ROW_Y[r]
+        z = iz + _ROW_Z[r]
+        if y < 0 or y >= ny or z < 0 or z >= nz:
+            continue
+        g = 0.0
+        if _ROW_Y[r] < 0:
+            g += gyl * gyl
+        elif _ROW_Y[r] > 0:
+            g += gyh * gyh
+        if _ROW_Z[r] < 0:
+            g += gzl * gzl
+        elif _ROW_Z[r] > 0:
+            g += gzh * gzh
+        if g >= worst:
+            continue
+        x0 = ix - 1 if ix > 0 and g + gxl * gxl < worst else ix
+        x1 = ix + 1 if ix < nx - 1 and g + gxh * gxh < worst else ix
+        base = nx * (y + ny * z)
+        for b in range(first[base + x0], first[base + x1 + 1]):
+            dx = S[b, 0] - px
+            dy = S[b, 1] - py
+            dz = S[b, 2] - pz
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= worst or b == a:
+                continue
+            s = m if m < k else k - 1
+            while s > 0 and bd[s - 1] > d2:
+                bd[s] = bd[s - 1]
+                bi[s] = bi[s - 1]
+                s -= 1
+            bd[s] = d2
+            bi[s] = b
+            if m < k:
+                m += 1
+            if m == k:
+                worst = bd[k - 1]
+    return m
 
 
 @njit(cache=True, nogil=True)
@@ -393,7 +463,9 @@ def linked_graph(nbr: np.ndarray, linked: np.ndarray) -> tuple[np.ndarray, np.nd
     """The undirected graph of the linked neighbour edges (``nbr``, ``linked``
     ``(N, k)``, as in :func:`component_roots`) in compressed rows: ``start`` ``(N + 1,)``
     and ``adj`` ``(E,)``, the neighbours of point ``i`` being
-    ``adj[start[i]:start[i + 1]]`` (an edge found from both ends is listed twice)."""
+    ``adj[start[i]:start[i + 1]]``, each once (an edge found from both ends, as most
+    k-nearest-neighbour edges are, is listed once: searches over the graph meet a
+    third fewer entries)."""
     n, k = nbr.shape
     deg = np.zeros(n + 1, dtype=np.int64)
     for i in range(n):
@@ -412,7 +484,19 @@ def linked_graph(nbr: np.ndarray, linked: np.ndarray) -> tuple[np.ndarray, np.nd
                 fill[i] += 1
                 adj[fill[j]] = i
                 fill[j] += 1
-    return start, adj
+    # each row's repeats dropped (in place, first listing kept), rows packed
+    seen = np.full(n, -1, dtype=np.int64)
+    out = np.zeros(n + 1, dtype=np.int64)
+    w = 0
+    for i in range(n):
+        for e in range(start[i], start[i + 1]):
+            j = adj[e]
+            if seen[j] != i:
+                seen[j] = i
+                adj[w] = j
+                w += 1
+        out[i + 1] = w
+    return out, adj[:w].copy()
 
 
 @njit(cache=True, nogil=True)

@@ -56,6 +56,7 @@ from ..errors import CsdfError
 from ..fit import fit
 from ..seeds import rng_arg
 from .kernels import (
+    best_counts,
     bounds,
     grow_inliers,
     largest_component,
@@ -88,7 +89,6 @@ from .surfaces import (
     cones_from,
     cylinders_from,
     frame_z,
-    inlier_counts,
     planes_from,
     spheres_from,
     tori_from,
@@ -362,22 +362,39 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
         fidx = np.flatnonzero(free)
     seeds = fidx[ctx.rng.integers(0, len(fidx), count)]
     lev = ctx.rng.integers(0, len(ctx.levels), count)
-    out = []
+    blocks = []
     for li in range(len(ctx.levels)):
         sel = seeds[lev == li]
         if not len(sel):
             continue
         idx, tree = ctx.levels[li]
         k = min(SAMPLE_NEIGHBOURS, len(idx))
-        _, nn = tree.query(ctx.P[sel], k=k)
-        nn = idx[np.asarray(nn).reshape(len(sel), k)]
-        keys = ctx.rng.random(nn.shape)
-        keys[~free[nn] | (nn == sel[:, None])] = np.inf
-        order = np.argsort(keys, axis=1)[:, :3]
-        pick = np.take_along_axis(nn, order, axis=1)
-        good = np.isfinite(np.take_along_axis(keys, order, axis=1)).all(axis=1)
-        out.append(np.concatenate([sel[good, None], pick[good]], axis=1))
-    return np.concatenate(out) if out else np.zeros((0, 4), dtype=int)
+        if li == 0 and k - 1 <= ctx.nb.nbr.shape[1]:
+            # every point: the seed and its nearest neighbours are known
+            nn = np.concatenate([sel[:, None], ctx.nb.nbr[sel, :k - 1]], axis=1)
+        else:
+            _, nn = tree.query(ctx.P[sel], k=k)
+            nn = idx[np.asarray(nn).reshape(len(sel), k)]
+        blocks.append((sel, nn))
+    if not blocks:
+        return np.zeros((0, 4), dtype=int)
+    if len({nn.shape[1] for _, nn in blocks}) > 1:  # a level smaller than k points
+        return np.concatenate([_pick_three(ctx, sel, nn, free) for sel, nn in blocks])
+    return _pick_three(ctx, np.concatenate([b[0] for b in blocks]),
+                       np.concatenate([b[1] for b in blocks]), free)
+
+
+def _pick_three(ctx: _Ctx, sel: np.ndarray, nn: np.ndarray, free: np.ndarray
+                ) -> np.ndarray:
+    """``(M, 4)`` rows of seed ``sel`` ``(M,)`` and three of its candidates ``nn``
+    ``(M, k)`` drawn at random among the free ones but itself; rows with fewer than
+    three such are dropped."""
+    keys = ctx.rng.random(nn.shape)
+    keys[~free[nn] | (nn == sel[:, None])] = np.inf
+    order = np.argsort(keys, axis=1)[:, :3]
+    pick = np.take_along_axis(nn, order, axis=1)
+    good = np.isfinite(np.take_along_axis(keys, order, axis=1)).all(axis=1)
+    return np.concatenate([sel[good, None], pick[good]], axis=1)
 
 
 def _hypotheses(ctx: _Ctx, S: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -418,31 +435,27 @@ def _best_hypotheses(ctx: _Ctx, hyps: dict[str, np.ndarray], sub: np.ndarray, k:
     hypothesis is dropped when its count plus ``SCORE_Z`` standard deviations (Poisson)
     stays below the ``k``-th best count less as many of its own: it cannot be among the
     best. The survivors' counts are over all of ``sub``."""
-    P = np.ascontiguousarray(ctx.P[sub])
-    N = np.ascontiguousarray(ctx.N[sub])
     kinds = [kd for kd, H in hyps.items() if len(H)]
-    alive = {kd: np.arange(len(hyps[kd])) for kd in kinds}
-    counts = {kd: np.zeros(len(hyps[kd]), dtype=np.int64) for kd in kinds}
-    a, b = 0, min(SCORE_FIRST, len(sub))
-    while kinds and a < len(sub):
-        for kd in kinds:
-            live = alive[kd]
-            counts[kd][live] += inlier_counts(kd, hyps[kd][live], P[a:b], N[a:b], ctx.eps,
-                                              ctx.cos_tol)
-        if b >= len(sub):
-            break
-        every = np.concatenate([counts[kd][alive[kd]] for kd in kinds])
-        if len(every) > k:
-            ck = float(np.partition(every, len(every) - k)[len(every) - k])
-            floor = ck - SCORE_Z * math.sqrt(ck)
-            for kd in kinds:
-                c = counts[kd][alive[kd]].astype(float)
-                alive[kd] = alive[kd][c + SCORE_Z * np.sqrt(c) >= floor]
-        a, b = b, min(2 * b, len(sub))
-    rank = {kd: i for i, kd in enumerate(KINDS)}
-    out = [(int(counts[kd][i]), kd, int(i)) for kd in kinds for i in alive[kd]]
-    out.sort(key=lambda x: (-x[0], rank[x[1]], x[2]))
-    return out[:k]
+    if not kinds:
+        return []
+    T = sum(len(hyps[kd]) for kd in kinds)
+    H = np.zeros((T, 8))
+    kind = np.empty(T, dtype=np.int64)
+    row = np.empty(T, dtype=np.int64)
+    a = 0
+    for kd in kinds:
+        m = len(hyps[kd])
+        H[a:a + m, :hyps[kd].shape[1]] = hyps[kd]
+        kind[a:a + m] = KIND_ID[kd]
+        row[a:a + m] = np.arange(m)
+        a += m
+    counts, alive = best_counts(kind, H, np.ascontiguousarray(ctx.P[sub]),
+                                np.ascontiguousarray(ctx.N[sub]), ctx.eps, ctx.cos_tol,
+                                SCORE_FIRST, k, SCORE_Z)
+    live = np.flatnonzero(alive)
+    # most first; a tie to the simpler kind (KIND_ID follows KINDS), then the earlier row
+    top = live[np.lexsort((row[live], kind[live], -counts[live]))[:k]]
+    return [(int(counts[i]), KINDS[kind[i]], int(row[i])) for i in top]
 
 
 @dataclass(eq=False)
@@ -469,13 +482,16 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
            else ctx.rng.choice(fidx, SUBSET, replace=False))
     scale = len(fidx) / len(sub)
     hyps = _hypotheses(ctx, S)
-    out = []
+    todo = []
     for cnt, kind, i in _best_hypotheses(ctx, {k: H for k, (H, _) in hyps.items()}, sub,
                                          FULL_SCORES):
         if cnt * scale < 0.5 * ctx.min_points:
             break
-        h = hyps[kind][0][i]
-        inl = _connected_inliers(ctx, kind, h, free, S[hyps[kind][1][i]])
+        todo.append((kind, hyps[kind][0][i], S[hyps[kind][1][i]]))
+
+    out = []
+    for kind, h, seeds in todo:
+        inl = _connected_inliers(ctx, kind, h, free, seeds)
         if kind == "plane":  # refitted by least squares: three close points tilt it
             for _ in range(PLANE_REFITS):
                 if len(inl) < 3:
@@ -931,20 +947,30 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         return found
     link = (2.0 * ctx.conn if ctx.conn is not None
             else 4.0 * float(np.median(ctx.nb.local)))
-    box = {}
+    box, pts, plane, spread = {}, {}, {}, {}
     for i in planes:
-        lo, hi = bounds(ctx.P[found[i].inliers])
+        pts[i] = ctx.P[found[i].inliers]
+        lo, hi = bounds(pts[i])
         box[i] = (lo - link, hi + link)
+        plane[i] = (np.asarray(found[i].params["normal"]), found[i].params["offset"])
+        spread[i] = float(np.abs(pts[i] @ plane[i][0] - plane[i][1]).max())
 
-    def near_box(i: int, j: int) -> np.ndarray:
-        """The points of plane ``i`` in plane ``j``'s box grown by ``link``."""
-        Q = ctx.P[found[i].inliers]
-        return Q[np.all((Q >= box[j][0]) & (Q <= box[j][1]), axis=1)]
+    def near(i: int, j: int) -> np.ndarray:
+        """The points of plane ``i`` that may lie within ``link`` of one of plane
+        ``j``'s: in ``j``'s box grown by ``link``, and within ``link`` of the slab of
+        ``j``'s plane that holds its points."""
+        Q = pts[i]
+        Q = Q[np.all((Q >= box[j][0]) & (Q <= box[j][1]), axis=1)]
+        nj, oj = plane[j]
+        return Q[np.abs(Q @ nj - oj) <= link + spread[j]]
 
     def touch(i: int, j: int) -> bool:
         """Whether a point of plane ``j`` lies within ``link`` of one of plane ``i``
-        (only the points in each other's grown boxes are compared)."""
-        a, b = near_box(i, j), near_box(j, i)
+        (only the points that :func:`near` keeps are compared)."""
+        if np.any(box[i][0] > box[j][1] - 2.0 * link) or np.any(box[j][0] > box[i][1]
+                                                               - 2.0 * link):
+            return False  # (neither has a point in the other's grown box)
+        a, b = near(i, j), near(j, i)
         if not len(a) or not len(b):
             return False
         if len(a) < len(b):

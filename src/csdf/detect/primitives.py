@@ -691,10 +691,13 @@ def _connected_inliers(ctx: _Ctx, kind: str, h: np.ndarray, free: np.ndarray,
 
 
 def _lsq_plane(Q: np.ndarray) -> np.ndarray:
-    """The least-squares plane ``(normal, offset)`` ``(4,)`` of points ``Q`` ``(K, 3)``."""
+    """The least-squares plane ``(normal, offset)`` ``(4,)`` of points ``Q`` ``(K, 3)``:
+    through their centroid, normal to the least principal axis of their scatter matrix
+    (a ``3 x 3`` eigenproblem, not a ``K x 3`` singular value decomposition)."""
     c = Q.mean(axis=0)
-    _, _, Vt = np.linalg.svd(Q - c, full_matrices=False)
-    return np.append(Vt[2], Vt[2] @ c)
+    D = Q - c
+    _, v = np.linalg.eigh(D.T @ D)
+    return np.append(v[:, 0], v[:, 0] @ c)
 
 
 def _plane_detection(ctx: _Ctx, inl: np.ndarray) -> PrimitiveDetection:

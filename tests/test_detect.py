@@ -144,6 +144,39 @@ def test_surface_distances_are_exact():
     assert np.array_equal(S.inlier_counts("sphere", H, P, N, 0.05, 0.5), want)
 
 
+def test_scoring_on_growing_prefixes_drops_only_hypotheses_that_cannot_win():
+    # kernels.best_counts against the rule it documents, counted with the distances
+    from csdf.detect.kernels import best_counts
+
+    rng = np.random.default_rng(13)
+    P = rng.uniform(-0.5, 0.5, (700, 3))
+    N = rng.normal(size=P.shape)
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    hyps = {"plane": np.c_[np.tile([0.0, 0.0, 1.0], (6, 1)), rng.uniform(-0.3, 0.3, 6)],
+            "sphere": np.c_[rng.uniform(-0.2, 0.2, (6, 3)), rng.uniform(0.1, 0.4, 6)]}
+    eps, cos_tol, first, k, z = 0.05, 0.3, 100, 2, 3.0
+    H = np.zeros((12, 8))
+    H[:6, :4], H[6:, :4] = hyps["plane"], hyps["sphere"]
+    kind = np.repeat([S.KIND_ID["plane"], S.KIND_ID["sphere"]], 6)
+    counts, alive = best_counts(kind, H, P, N, eps, cos_tol, first, k, z)
+    inl = np.concatenate([(np.abs(d) <= eps) & (c >= cos_tol) for d, c in
+                          (S.surface_distance(kd, h, P, N) for kd, h in hyps.items())])
+    want = np.zeros(12, dtype=int)
+    live = np.ones(12, dtype=bool)
+    a, b = 0, first
+    while True:
+        want[live] += inl[live, a:b].sum(axis=1)
+        if b >= len(P):
+            break
+        if live.sum() > k:
+            c = np.sort(want[live])[live.sum() - k]
+            live &= want + z * np.sqrt(want) >= c - z * math.sqrt(c)
+        a, b = b, min(2 * b, len(P))
+    assert np.array_equal(alive, live) and np.array_equal(counts, want)
+    assert 0 < live.sum() < 12  # some were dropped, the best kept
+    assert want[live].max() == inl.sum(axis=1).max()
+
+
 def test_knn_on_the_grid_is_the_trees():
     from scipy.spatial import cKDTree
 

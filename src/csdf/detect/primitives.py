@@ -370,7 +370,8 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
         idx, tree = ctx.levels[li]
         k = min(SAMPLE_NEIGHBOURS, len(idx))
         if li == 0 and k - 1 <= ctx.nb.nbr.shape[1]:
-            # every point: the seed and its nearest neighbours are known
+            # level 0 holds every point: what the tree would return, the seed and
+            # then its nearest neighbours, is the neighbourhood's
             nn = np.concatenate([sel[:, None], ctx.nb.nbr[sel, :k - 1]], axis=1)
         else:
             _, nn = tree.query(ctx.P[sel], k=k)

@@ -369,6 +369,22 @@ def test_detect_primitives_finds_every_kind(prim_scene):
     assert len(allin) == len(np.unique(allin))
 
 
+def test_detect_primitives_finds_nothing_in_a_volume_of_noise():
+    # a shell through a scattered cloud gathers points whose normals agree only by
+    # chance (_agreement); a sphere's surface among the same noise is still found
+    for s in (2, 3, 4):  # clouds where cylinders and a torus were found before the test
+        P = np.random.default_rng(s).uniform(-1, 1, (5000, 3))
+        assert csdf.detect_primitives(P, seed=0) == []
+    rng = np.random.default_rng(14)
+    u = rng.normal(size=(3000, 3))
+    shell = 0.4 * u / np.linalg.norm(u, axis=1, keepdims=True) + rng.normal(0, 0.002,
+                                                                            (3000, 3))
+    dets = csdf.detect_primitives(np.concatenate([shell, rng.uniform(-1, 1, (1500, 3))]),
+                                  seed=0)
+    assert [d.kind for d in dets] == ["sphere"]
+    assert abs(dets[0].params["radius"] - 0.4) < 0.005
+
+
 def test_detect_primitives_is_deterministic_and_filters_kinds(prim_scene):
     P, N, _ = prim_scene
     a = csdf.detect_primitives(P, N, seed=3, kinds="plane,sphere")

@@ -491,16 +491,13 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
            else ctx.rng.choice(fidx, SUBSET, replace=False))
     scale = len(fidx) / len(sub)
     hyps = _hypotheses(ctx, S)
-    todo = []
+    out = []
     for cnt, kind, i in _best_hypotheses(ctx, {k: H for k, (H, _) in hyps.items()}, sub,
                                          FULL_SCORES):
         if cnt * scale < 0.5 * ctx.min_points:
             break
-        todo.append((kind, hyps[kind][0][i], S[hyps[kind][1][i]]))
-
-    out = []
-    for kind, h, seeds in todo:
-        inl = _connected_inliers(ctx, kind, h, free, seeds)
+        h = hyps[kind][0][i]
+        inl = _connected_inliers(ctx, kind, h, free, S[hyps[kind][1][i]])
         if kind == "plane":  # refitted by least squares: three close points tilt it
             for _ in range(PLANE_REFITS):
                 if len(inl) < 3:

@@ -300,9 +300,7 @@ def main() -> None:
                     help="detect, normals and primitives suites: the first scene's seed")
     ap.add_argument("--scenes", type=int, default=5,
                     help="detect, normals and primitives suites: scenes timed (the first "
-                    "detected once "
-                    "before too, "
-                    "to warm up)")
+                    "detected once before too, to warm up)")
     args = ap.parse_args()
     if not 1 <= args.scenes <= 100:
         ap.error(f"--scenes must be 1-100, got {args.scenes}")

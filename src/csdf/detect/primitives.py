@@ -370,7 +370,7 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
         fidx = np.flatnonzero(free)
     seeds = fidx[ctx.rng.integers(0, len(fidx), count)]
     lev = ctx.rng.integers(0, len(ctx.levels), count)
-    blocks = []
+    sels, nns = [], []
     for li in range(len(ctx.levels)):
         sel = seeds[lev == li]
         if not len(sel):
@@ -384,20 +384,14 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
         else:
             _, nn = tree.query(ctx.P[sel], k=k)
             nn = idx[np.asarray(nn).reshape(len(sel), k)]
-        blocks.append((sel, nn))
-    if not blocks:
+        sels.append(sel)
+        nns.append(nn)
+    if not sels:
         return np.zeros((0, 4), dtype=int)
-    if len({nn.shape[1] for _, nn in blocks}) > 1:  # a level smaller than k points
-        return np.concatenate([_pick_three(ctx, sel, nn, free) for sel, nn in blocks])
-    return _pick_three(ctx, np.concatenate([b[0] for b in blocks]),
-                       np.concatenate([b[1] for b in blocks]), free)
-
-
-def _pick_three(ctx: _Ctx, sel: np.ndarray, nn: np.ndarray, free: np.ndarray
-                ) -> np.ndarray:
-    """``(M, 4)`` rows of seed ``sel`` ``(M,)`` and three of its candidates ``nn``
-    ``(M, k)`` drawn at random among the free ones but itself; rows with fewer than
-    three such are dropped."""
+    # every level has the same k: levels past the first hold 64 points or more, and a
+    # cloud of fewer than 256 has no level past the first
+    sel, nn = np.concatenate(sels), np.concatenate(nns)
+    # three candidates drawn at random among the free ones but the seed itself
     keys = ctx.rng.random(nn.shape)
     keys[~free[nn] | (nn == sel[:, None])] = np.inf
     order = np.argsort(keys, axis=1)[:, :3]
@@ -415,21 +409,20 @@ def _hypotheses(ctx: _Ctx, S: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndar
     want = set(ctx.kinds)
     rows = np.arange(len(S))
     out = {}
-    with np.errstate(all="ignore"):
-        H, ok = planes_from(p[:, :3], nrm[:, :3], ctx.cos_tol)
-        out["plane"] = H[ok], rows[ok]
-        if "sphere" in want:
-            H, ok = spheres_from(p[:, :2], nrm[:, :2], eps, rmax)
-            out["sphere"] = H[ok], rows[ok]
-        if "cylinder" in want:
-            H, ok = cylinders_from(p[:, :2], nrm[:, :2], eps, rmax)
-            out["cylinder"] = H[ok], rows[ok]
-        if "cone" in want:
-            H, ok = cones_from(p[:, :3], nrm[:, :3], eps, rmax)
-            out["cone"] = H[ok], rows[ok]
-        if "torus" in want:
-            H, ok = tori_from(p, nrm, eps, rmax)  # up to three a sample
-            out["torus"] = H[ok], np.repeat(rows, 3)[ok]
+    H, ok = planes_from(p[:, :3], nrm[:, :3], ctx.cos_tol)
+    out["plane"] = H[ok], rows[ok]
+    if "sphere" in want:
+        H, ok = spheres_from(p[:, :2], nrm[:, :2], eps, rmax)
+        out["sphere"] = H[ok], rows[ok]
+    if "cylinder" in want:
+        H, ok = cylinders_from(p[:, :2], nrm[:, :2], eps, rmax)
+        out["cylinder"] = H[ok], rows[ok]
+    if "cone" in want:
+        H, ok = cones_from(p[:, :3], nrm[:, :3], eps, rmax)
+        out["cone"] = H[ok], rows[ok]
+    if "torus" in want:
+        H, ok = tori_from(p, nrm, eps, rmax)  # up to three a sample
+        out["torus"] = H[ok], np.repeat(rows, 3)[ok]
     return out
 
 
@@ -611,15 +604,8 @@ def _flat_share(ctx: _Ctx, det: PrimitiveDetection) -> float:
 def _agreement(ctx: _Ctx, det: PrimitiveDetection, free: np.ndarray) -> float:
     """The share of the unexplained points within ``epsilon`` of a solid detection's
     surface whose normals agree with it (1 when there are none)."""
-    kind, R, t, vals = det.solid
-    c, rad = bounding_sphere(kind, R, t, vals)
-    fidx = np.flatnonzero(free)
-    near = fidx[within_ball(ctx.P, fidx, c, rad + ctx.eps)]
-    if not len(near):
-        return 1.0
-    d, g = solid_values(kind, R, t, vals, ctx.P[near])
-    close = np.abs(d) <= ctx.eps
-    agree = np.abs(np.einsum("ij,ij->i", g, ctx.N[near])) >= ctx.cos_tol
+    _, d, agree = _close_to_solid(ctx, *det.solid, np.flatnonzero(free), 1.0)
+    close = d <= ctx.eps
     return float((close & agree).sum() / max(int(close.sum()), 1))
 
 
@@ -761,22 +747,31 @@ def _initial_solid(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray
     return frame_z(a), h[:3].copy(), {"major": float(h[6]), "minor": float(h[7])}
 
 
+def _close_to_solid(ctx: _Ctx, kind: str, R, t, values, idx: np.ndarray, band: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The points ``idx`` ``(K,)`` within the solid's bounding sphere grown by ``band``
+    times ``epsilon`` (the others are not evaluated): their positions in ``idx``
+    ``(M,)``, their unsigned distances to the solid ``(M,)`` (scene units) and whether
+    their normals lie within the tolerance of its gradient ``(M,)``."""
+    c, rad = bounding_sphere(kind, R, t, values)
+    idx = np.asarray(idx, dtype=np.int64)
+    near = np.flatnonzero(within_ball(ctx.P, idx, c, rad + band * ctx.eps))
+    if not len(near):
+        return near, np.zeros(0), np.zeros(0, dtype=bool)
+    d, g = solid_values(kind, R, t, values, ctx.P[idx[near]])
+    agree = np.abs(np.einsum("ij,ij->i", g, ctx.N[idx[near]])) >= ctx.cos_tol
+    return near, np.abs(d), agree
+
+
 def _on_solid(ctx: _Ctx, kind: str, R, t, values, idx: np.ndarray, band: float = 1.0
               ) -> tuple[np.ndarray, np.ndarray]:
     """Which points ``idx`` ``(K,)`` are inliers of the solid: within ``band`` times
     ``epsilon`` of it, their normals within the tolerance of its gradient (``(K,)``
-    bool), and the distances of those inliers (scene units, unsigned). Points outside
-    the solid's bounding sphere grown by that band are not evaluated."""
-    c, rad = bounding_sphere(kind, R, t, values)
-    idx = np.asarray(idx, dtype=np.int64)
-    near = np.flatnonzero(within_ball(ctx.P, idx, c, rad + band * ctx.eps))
+    bool), and the distances of those inliers (scene units, unsigned)
+    (:func:`_close_to_solid`)."""
+    near, d, agree = _close_to_solid(ctx, kind, R, t, values, idx, band)
+    ok = (d <= band * ctx.eps) & agree
     out = np.zeros(len(idx), dtype=bool)
-    if not len(near):
-        return out, np.zeros(0)
-    d, g = solid_values(kind, R, t, values, ctx.P[idx[near]])
-    d = np.abs(d)
-    ok = (d <= band * ctx.eps) & (np.abs(np.einsum("ij,ij->i", g, ctx.N[idx[near]]))
-                                  >= ctx.cos_tol)
     out[near[ok]] = True
     return out, d[ok]
 

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from .backends import BACKENDS, check_mesh_calls
+from .backends import BACKENDS, check_mesh_calls, select
 from .backends import fast as _fast_backend
 from .backends.cexport import to_c, to_numpy
 from .backends.glsl import albedo_functions, glsl_float, glsl_params, shadertoy, to_glsl
@@ -62,7 +62,7 @@ __all__ = [
     "check_bounds", "params_in_ranges", "AUTO_FAST_POINTS", "to_glsl", "shadertoy", "glsl_params",
     "to_c", "to_numpy",
     "glsl_float", "albedo_functions", "numba_available", "kernel_cache_dir",
-    "evaluate_intervals",
+    "evaluate_intervals", "step_evaluator",
 ]
 
 #: point sets at least this large get the compiled backend under ``'auto'``
@@ -586,6 +586,24 @@ class Field:
         """This field's program as GLSL (:func:`csdf.to_glsl`; parameters as
         uniforms, no pose)."""
         return to_glsl(self.program, name=name, gradient=gradient)
+
+
+def step_evaluator(program: Program, backend: str, mode: str
+                   ) -> Callable[[np.ndarray, np.ndarray], dict[str, np.ndarray]]:
+    """``f(pts, pvals) -> {'value': (N,), 'grad': (N, 3), 'jac': (N, P)}`` (the keys of
+    ``mode``, as :meth:`csdf.Program.value_grad_param_jacobian` and its kin give them) for
+    a solver that evaluates one program many times: ``pts`` (N, 3) float64 C-contiguous
+    model-frame points, ``pvals`` (P,) float64 every parameter's value, ranges not
+    checked. The same numbers as the program's own methods with ``backend``, without
+    their per-call checks; the compiled evaluator's kernel is looked up once."""
+    if backend == "fast" and not program.data:
+        return _fast_backend.bound_evaluator(program, mode)
+
+    def f(pts: np.ndarray, pvals: np.ndarray) -> dict[str, np.ndarray]:
+        return select(backend, pts.shape[0], program, mode).evaluate(program, pts, pvals,
+                                                                     mode)
+
+    return f
 
 
 def as_field(model: Any, params: Mapping[str, float] | None = None, pose: Any = None, *,

@@ -33,7 +33,8 @@ from ..parallel import MIN_PER_THREAD, run_parallel
 from .codegen import BLOCK, generate, structure_key
 from .lowering import lowered, numba_available
 
-__all__ = ["evaluate", "serial_values", "available", "is_ready", "cache_dir", "kernel_mode"]
+__all__ = ["evaluate", "bound_evaluator", "serial_values", "available", "is_ready", "cache_dir",
+           "kernel_mode"]
 
 _MEM: dict[str, object] = {}
 _LOCK = threading.Lock()
@@ -149,12 +150,18 @@ def _uniform_rows(low, pvals: np.ndarray, wrt: bool, dtype
 
 def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, np.ndarray]:
     """Same contract as :func:`csdf.backends.numpy_backend.evaluate`."""
+    kernel, u, du, spatial, wrt, nan = _prepare(prog, pvals, mode, pts.dtype)
+    return _run_kernel(kernel, u, du, spatial, wrt, nan, pts, len(prog.params), mode)
+
+
+def _run_kernel(kernel, u: np.ndarray, du: np.ndarray, spatial: bool, wrt: bool, nan: bool,
+                pts: np.ndarray, P: int, mode: str) -> dict[str, np.ndarray]:
+    """The results of :func:`evaluate` from a prepared kernel and its uniform inputs
+    (:func:`_prepare`) on points ``pts`` (N, 3), C-contiguous."""
     dtype = pts.dtype
     n = pts.shape[0]
-    kernel, u, du, spatial, wrt, nan = _prepare(prog, pvals, mode, dtype)
     out = result_array((n,), dtype)  # (recycled memory for large results: csdf.memory)
     grad = result_array((n, 3), dtype) if spatial else np.empty((0, 3), dtype)
-    P = len(prog.params)
     jac = result_array((n, P), dtype) if wrt else np.empty((0, P), dtype)
     if n and n < 2 * MIN_PER_THREAD:  # one range (run_parallel's), on this thread
         kernel(pts, u, du, out, grad, jac, 0, n)
@@ -169,6 +176,32 @@ def evaluate(prog, pts: np.ndarray, pvals: np.ndarray, mode: str) -> dict[str, n
         for arr in res.values():
             arr[:] = np.nan
     return res
+
+
+def bound_evaluator(prog, mode: str) -> Callable[[np.ndarray, np.ndarray],
+                                                 dict[str, np.ndarray]]:
+    """``f(pts, pvals)`` giving what ``evaluate(prog, pts, pvals, mode)`` gives, to the
+    bit, with the kernel looked up once and the uniform inputs of the last parameter
+    vector kept: for a solver that evaluates one program many times on float64 points
+    ``pts`` (N, 3), C-contiguous, with parameter vectors ``pvals`` (P,) float64 (a
+    fit's steps, microseconds apart)."""
+    low = lowered(prog)
+    kmode = kernel_mode(mode)
+    kernel = _kernel(low, kmode)
+    spatial = kmode != "value"
+    wrt = kmode == "all"
+    P = len(prog.params)
+    last: list = [None, None]
+
+    def f(pts: np.ndarray, pvals: np.ndarray) -> dict[str, np.ndarray]:
+        key = pvals.tobytes()
+        if key != last[0]:
+            last[1] = _uniform_rows(low, pvals, wrt, np.float64)
+            last[0] = key
+        u, du, nan = last[1]
+        return _run_kernel(kernel, u, du, spatial, wrt, nan, pts, P, mode)
+
+    return f
 
 
 def serial_values(prog, pvals: np.ndarray) -> Callable[..., np.ndarray]:

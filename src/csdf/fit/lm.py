@@ -196,23 +196,21 @@ class Visibility:
 
 
 def linearise(prob, P: np.ndarray, st: State, idx):
-    """The model at points ``P`` (N, 3) posed by ``st``: ``(s, parameter values {name:
-    value}, a = P - t (N, 3), values f (N,), world gradients (N, 3), scaled parameter
+    """The model at points ``P`` (N, 3) posed by ``st``: ``(s, all parameter values
+    (P,), a = P - t (N, 3), values f (N,), world gradients (N, 3), scaled parameter
     derivatives s df/dc (N, k) or None)``."""
     s = math.exp(st.sigma)
     values = prob.values.copy()
     values[idx] = st.cvals
-    pv = dict(zip(prob.pnames, values))
     a = P - st.t
-    q = (a @ st.R) / s
+    q = np.ascontiguousarray((a @ st.R) / s, dtype=np.float64)
     if idx:
-        f, g, J = prob.prog.value_grad_param_jacobian(q, pv, backend=prob.backend,
-                                                      check_ranges=False)
-        Jp = s * np.asarray(J)[:, idx]
+        res = prob.evaluator("all")(q, values)
+        Jp = s * res["jac"][:, idx]
     else:
-        f, g = prob.prog.value_and_grad(q, pv, backend=prob.backend, check_ranges=False)
+        res = prob.evaluator("grad")(q, values)
         Jp = None
-    return s, pv, a, np.asarray(f, dtype=float), np.asarray(g) @ st.R.T, Jp
+    return s, values, a, res["value"], res["grad"] @ st.R.T, Jp
 
 
 def evaluate(prob, P, st: State, idx, fs, vis: Visibility | None = None):
@@ -246,9 +244,10 @@ def _linearised(prob, P, st: State, idx, fs, vis: Visibility | None = None):
     :func:`jacobian` turns into their Jacobian (back-face matches re-matched by
     ``vis``)."""
     prog = prob.prog
-    s, pv, a, f, gw, Jp = linearise(prob, P, st, idx)
+    s, values, a, f, gw, Jp = linearise(prob, P, st, idx)
     r = s * f
     if vis is not None:
+        pv = dict(zip(prob.pnames, values))
         if vis.sel is None:
             vis.match(prob, P, st, pv, gw, fs)
         sel, X = vis.sel, vis.X

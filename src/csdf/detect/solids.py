@@ -25,7 +25,7 @@ from functools import cache
 import numpy as np
 
 from ..expr import param
-from ..field import as_field, choose_backend
+from ..field import as_field, choose_backend, step_evaluator
 from ..shapes import box, capped_cone, cylinder, sphere, torus
 
 __all__ = ["canonical", "SOLID_PARAMS", "posed", "solid_values", "SOLID_BACKEND",
@@ -72,12 +72,21 @@ def solid_values(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.nd
     """Signed distances ``(S,)`` and unit outward gradients ``(S, 3)`` (scene frame) of
     the solid of ``kind`` with sizes ``values``, placed by rotation ``R`` and
     translation ``t`` (``p = R q + t``), at points ``P`` ``(S, 3)``."""
-    _, fld = canonical(kind)
-    f, g = fld.program.value_and_grad((P - t) @ R, values, backend=SOLID_BACKEND,
-                                      check_ranges=False)
-    g = np.asarray(g, dtype=float) @ R.T
+    names, ev = _evaluator(kind)
+    q = np.ascontiguousarray((np.asarray(P, dtype=np.float64) - t) @ R)
+    res = ev(q, np.array([values.get(n, 1.0) for n in names], dtype=np.float64))
+    g = res["grad"] @ R.T
     g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-    return np.asarray(f, dtype=float), g
+    return res["value"], g
+
+
+@cache
+def _evaluator(kind: str):
+    """``(parameter names in the program's order, values-and-gradients evaluator)`` of
+    the canonical solid of ``kind`` (:func:`csdf.field.step_evaluator`: the detector
+    evaluates its solids some hundreds of times a scan)."""
+    prog = canonical(kind)[1].program
+    return [p.name for p in prog.params], step_evaluator(prog, SOLID_BACKEND, "grad")
 
 
 def away_from_edges(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.ndarray

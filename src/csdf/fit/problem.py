@@ -70,7 +70,7 @@ class Problem:
         return [q.name for q in self.prog.params]
 
     def evaluator(self, mode: str):
-        """The program's evaluator in ``mode`` (``'grad'`` or ``'all'``) for this
+        """The program's evaluator in ``mode`` (``'value'``, ``'grad'`` or ``'all'``) for this
         problem's backend (:func:`csdf.field.step_evaluator`), made once:
         ``f(q (N, 3) model-frame points, all parameter values (P,))`` -> dict."""
         ev = self._evaluators.get(mode)
@@ -204,9 +204,8 @@ def merge_values(prob: Problem, idx: list[int], cvals: np.ndarray) -> np.ndarray
 def residuals(prob: Problem, R, t, s, values) -> np.ndarray:
     """Signed distances (N,) (scene units) of the points to the model posed by ``R``
     (3, 3), ``t`` (3,), ``s`` with parameter values ``values`` (P,)."""
-    q = ((prob.points - t) @ R) / s
-    pv = dict(zip((p.name for p in prob.prog.params), values))
-    return s * prob.prog(q, pv, backend=prob.backend, check_ranges=False)
+    q = np.ascontiguousarray(((prob.points - t) @ R) / s, dtype=np.float64)
+    return s * prob.evaluator("value")(q, np.asarray(values, dtype=np.float64))["value"]
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:

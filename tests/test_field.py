@@ -15,6 +15,7 @@ from csdf.field import (
     choose_backend,
     field_bounds,
     numba_available,
+    step_evaluator,
 )
 
 
@@ -132,6 +133,33 @@ def test_serial_values_matches_value():
     else:
         assert serial is None
     assert as_field(csdf.sphere(1.0), backend="numpy").serial_values() is None
+
+
+@pytest.mark.parametrize("backend", ["fast", "numpy", "auto"])
+def test_step_evaluator_gives_the_programs_own_numbers(backend):
+    """csdf.field.step_evaluator (a fit's per-step evaluator) gives what the program's
+    methods give with the same backend, to the bit, in every mode, and again after the
+    parameters change (the compiled one keeps the last vector's uniform inputs)."""
+    if backend == "fast" and not numba_available():
+        pytest.skip("needs Numba")
+    r, k = csdf.param("r", 0.8, 0.1, 2.0), csdf.param("k", 0.2, 0.0, 1.0)
+    prog = csdf.union(csdf.sphere(r), csdf.box((r, 0.5, 0.3)).translate((0.4, 0, 0)),
+                      k=k).compile()
+    pts = np.ascontiguousarray(np.random.default_rng(5).uniform(-1.5, 1.5, (700, 3)))
+    evs = {mode: step_evaluator(prog, backend, mode) for mode in ("value", "grad", "all")}
+    for pv in ({"r": 0.8, "k": 0.2}, {"r": 1.1, "k": 0.05}, {"r": 0.8, "k": 0.2}):
+        vec = prog.param_values(pv)
+        f, g, J = prog.value_grad_param_jacobian(pts, pv, backend=backend)
+        got = evs["all"](pts, vec)
+        np.testing.assert_array_equal(got["value"], f)
+        np.testing.assert_array_equal(got["grad"], g)
+        np.testing.assert_array_equal(got["jac"], J)
+        f2, g2 = prog.value_and_grad(pts, pv, backend=backend)
+        got = evs["grad"](pts, vec)
+        np.testing.assert_array_equal(got["value"], f2)
+        np.testing.assert_array_equal(got["grad"], g2)
+        np.testing.assert_array_equal(evs["value"](pts, vec)["value"],
+                                      prog(pts, pv, backend=backend))
 
 
 def test_a_field_of_a_field_keeps_its_evaluator():

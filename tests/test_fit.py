@@ -332,3 +332,22 @@ def test_lm_system_is_the_normal_equations_of_the_jacobian_to_the_last_bit(estim
     assert A.shape == (6 * prob.pose + prob.scale + len(idx),) * 2
     np.testing.assert_array_equal(A, A0)
     np.testing.assert_array_equal(b, b0)
+
+
+def test_compiled_huber_weights_are_the_numpy_rule():
+    """loss_weights' compiled Huber pass gives the cost and weights of the NumPy rule
+    (``_rho_w``) to the bit, NaN residuals included."""
+    from csdf.fit.problem import _rho_w, loss_weights
+
+    r = np.random.default_rng(3).normal(0.0, 2.0, 5000)
+    r[[3, 17]] = [np.nan, 0.0]
+    fs = 0.7
+    rho, w = _rho_w((r / fs) ** 2, "huber")
+    cost, w2 = loss_weights(r, fs, "huber")
+    np.testing.assert_array_equal(w2, w)
+    assert cost == 0.5 * fs * fs * float(np.sum(rho)) or (np.isnan(cost)
+                                                           and np.isnan(np.sum(rho)))
+    cost, w2 = loss_weights(r[~np.isnan(r)], fs, "huber")
+    rho, w = _rho_w((r[~np.isnan(r)] / fs) ** 2, "huber")
+    np.testing.assert_array_equal(w2, w)
+    assert cost == 0.5 * fs * fs * float(np.sum(rho))

@@ -135,11 +135,11 @@ class State:
         return State(R, t, sigma, c)
 
 
-def _raycast(prog, pv, backend, c_m: np.ndarray, D_m: np.ndarray, centre: np.ndarray,
+def _raycast(values_at, c_m: np.ndarray, D_m: np.ndarray, centre: np.ndarray,
              radius: float, tol: float, steps: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """First hits of rays ``c_m + u D_m`` (model frame, ``D_m`` unit (M, 3)) on the zero set
-    by sphere tracing from the entry of the bounding sphere; returns the hit distances
-    ``u`` (M,) and a mask of rays that hit."""
+    of the field ``values_at(x (K, 3)) -> (K,)`` by sphere tracing from the entry of the
+    bounding sphere; returns the hit distances ``u`` (M,) and a mask of rays that hit."""
     oc = c_m - centre
     bproj = D_m @ oc
     disc = bproj * bproj - (oc @ oc - radius * radius)
@@ -153,7 +153,7 @@ def _raycast(prog, pv, backend, c_m: np.ndarray, D_m: np.ndarray, centre: np.nda
         if len(idx) == 0:
             break
         x = c_m + u[idx, None] * D_m[idx]
-        f = np.asarray(prog(x, pv, backend=backend, check_ranges=False))
+        f = values_at(x)
         done = f < tol
         hit[idx[done]] = True
         u[idx[~done]] += 0.9 * f[~done]
@@ -178,9 +178,11 @@ class Visibility:
     def reset(self) -> None:
         self.sel = self.X = None
 
-    def match(self, prob, P, st: State, pv: dict, gw: np.ndarray, fs: float) -> None:
+    def match(self, prob, P, st: State, values: np.ndarray, gw: np.ndarray, fs: float
+              ) -> None:
         """Find the points whose nearest surface faces away from the sensor (model
-        gradients ``gw`` (N, 3) in the scene frame) and their rays' first hits."""
+        gradients ``gw`` (N, 3) in the scene frame; all parameter values ``values``
+        (P,)) and their rays' first hits."""
         s = math.exp(st.sigma)
         d = P - self.viewpoint
         d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
@@ -189,8 +191,9 @@ class Visibility:
         if len(back):
             c_m = ((self.viewpoint - st.t) @ st.R) / s
             D_m = d[back] @ st.R
-            u, hit = _raycast(prob.prog, pv, prob.backend, c_m, D_m, prob.centre,
-                              self.radius / s, 0.05 * fs / s)
+            ev = prob.evaluator("value")
+            u, hit = _raycast(lambda x: ev(np.ascontiguousarray(x), values)["value"], c_m,
+                              D_m, prob.centre, self.radius / s, 0.05 * fs / s)
             self.sel = back[hit]
             self.X = c_m + u[hit, None] * D_m[hit]
 
@@ -243,23 +246,21 @@ def _linearised(prob, P, st: State, idx, fs, vis: Visibility | None = None):
     """Residuals (N,) at state ``st`` and the linearisation ``(s, a, f, gw, Jp)`` that
     :func:`jacobian` turns into their Jacobian (back-face matches re-matched by
     ``vis``)."""
-    prog = prob.prog
     s, values, a, f, gw, Jp = linearise(prob, P, st, idx)
     r = s * f
     if vis is not None:
-        pv = dict(zip(prob.pnames, values))
         if vis.sel is None:
-            vis.match(prob, P, st, pv, gw, fs)
+            vis.match(prob, P, st, values, gw, fs)
         sel, X = vis.sel, vis.X
         if len(sel):
             # back-face matches: point-to-plane residual at the ray's first hit instead
+            Xc = np.ascontiguousarray(X, dtype=np.float64)
             if idx:
-                fh, gh, Jh = prog.value_grad_param_jacobian(X, pv, backend=prob.backend,
-                                                            check_ranges=False)
-                Jp[sel] = s * Jh[:, idx]
+                res = prob.evaluator("all")(Xc, values)
+                Jp[sel] = s * res["jac"][:, idx]
             else:
-                fh, gh = prog.value_and_grad(X, pv, backend=prob.backend, check_ranges=False)
-            gh = np.asarray(gh)
+                res = prob.evaluator("grad")(Xc, values)
+            fh, gh = res["value"], res["grad"]
             n = gh / np.maximum(np.linalg.norm(gh, axis=1), 1e-300)[:, None]
             nw = n @ st.R.T
             xw = s * X @ st.R.T + st.t

@@ -162,6 +162,34 @@ def test_step_evaluator_gives_the_programs_own_numbers(backend):
                                       prog(pts, pv, backend=backend))
 
 
+def test_field_values_after_the_first_call_are_the_programs():
+    """A compiled field's value calls after the first skip the program call's checks
+    (Field._values_at): the same numbers as the program's own call, for a posed field
+    too, and float32 or batched points still take the checked path."""
+    if not numba_available():
+        pytest.skip("needs Numba")
+    r = csdf.param("r", 0.8, 0.1, 2.0)
+    shape = csdf.union(csdf.sphere(r), csdf.box((0.6, 0.5, 0.3)).translate((0.4, 0, 0)), k=0.1)
+    prog = shape.compile()
+    pts = np.ascontiguousarray(np.random.default_rng(6).uniform(-1.5, 1.5, (900, 3)))
+    f = as_field(shape, {"r": 1.1}, backend="fast")
+    assert f._values_at is None
+    first = f.value(pts)
+    assert f._values_at is not None
+    want = prog(pts, {"r": 1.1}, backend="fast")
+    np.testing.assert_array_equal(first, want)
+    np.testing.assert_array_equal(f.value(pts), want)
+    np.testing.assert_array_equal(f.value(pts.reshape(30, 30, 3)), want.reshape(30, 30))
+    np.testing.assert_array_equal(f.value(pts.astype(np.float32)),
+                                  prog(pts.astype(np.float32), {"r": 1.1}, backend="fast"))
+    posed = as_field(shape, {"r": 1.1}, pose=Pose.from_rotvec((0.1, 0.2, 0.3), (0.5, 0, 0), 2.0),
+                     backend="fast")
+    posed.value(pts)
+    np.testing.assert_array_equal(posed.value(pts),
+                                  2.0 * prog(posed.pose.apply_inverse(pts), {"r": 1.1},
+                                             backend="fast"))
+
+
 def test_a_field_of_a_field_keeps_its_evaluator():
     """Field(field, bounds=...) (what csdf.mesh makes of a given field) keeps the
     field's backend, as the docs say; a per-call choice ('auto') is made anew."""

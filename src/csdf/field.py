@@ -326,6 +326,9 @@ class Field:
             # chosen anew: a sweep needs one evaluator for all its calls)
             self._auto, self.backend = model._auto, model.backend
         self._cells: Any = None  # the CellTapes of pruned evaluation, made on first use
+        #: the compiled evaluator's values with no per-call checks, made after the first
+        #: call that ran it (its kernel then built): see :meth:`_call`
+        self._values_at: Any = None
         self._region: tuple[np.ndarray, int | None] | None = None
         self._bounds_given = None if bounds is None else check_bounds(bounds)
         self._model_bounds: np.ndarray | None = self._bounds_given
@@ -456,6 +459,13 @@ class Field:
         return np.ascontiguousarray(points.reshape(-1, 3))
 
     def _call(self, method: str, p: np.ndarray):
+        if (method == "__call__" and self._values_at is not None
+                and self.backend == "fast" and type(p) is np.ndarray and p.ndim == 2
+                and p.shape[1] == 3 and p.dtype == np.float64 and p.flags.c_contiguous):
+            # the values of the compiled evaluator without the checks of a program's
+            # call (points, parameter values, backend): the same kernel and numbers; a
+            # tracer or search makes thousands of small calls
+            return self._values_at(p, self.pvals)["value"]
         q = self._pruned_points(p) if method in ("__call__", "gradient",
                                                  "value_and_grad") else None
         if q is not None:
@@ -469,7 +479,11 @@ class Field:
         fn = getattr(self.program, method)
         # the values were checked (or accepted) when the field was made
         try:
-            return fn(p, self.params, backend=self.backend, check_ranges=False)
+            out = fn(p, self.params, backend=self.backend, check_ranges=False)
+            if (method == "__call__" and self._values_at is None and self.backend == "fast"
+                    and not self.program.data and not self.pruned()):
+                self._values_at = _fast_backend.bound_evaluator(self.program, "value")
+            return out
         except CsdfError:
             raise
         except Exception as exc:  # a kernel the fast backend cannot build: same values elsewhere

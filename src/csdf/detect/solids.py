@@ -72,9 +72,9 @@ def solid_values(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.nd
     """Signed distances ``(S,)`` and unit outward gradients ``(S, 3)`` (scene frame) of
     the solid of ``kind`` with sizes ``values``, placed by rotation ``R`` and
     translation ``t`` (``p = R q + t``), at points ``P`` ``(S, 3)``."""
-    names, ev = _evaluator(kind)
+    defaults, ev = _evaluator(kind)
     q = np.ascontiguousarray((np.asarray(P, dtype=np.float64) - t) @ R)
-    res = ev(q, np.array([values.get(n, 1.0) for n in names], dtype=np.float64))
+    res = ev(q, np.array([values.get(n, v) for n, v in defaults], dtype=np.float64))
     g = res["grad"] @ R.T
     g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     return res["value"], g
@@ -82,11 +82,12 @@ def solid_values(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.nd
 
 @cache
 def _evaluator(kind: str):
-    """``(parameter names in the program's order, values-and-gradients evaluator)`` of
-    the canonical solid of ``kind`` (:func:`csdf.field.step_evaluator`: the detector
-    evaluates its solids some hundreds of times a scan)."""
+    """``(each parameter's (name, default) in the program's order, values-and-gradients
+    evaluator)`` of the canonical solid of ``kind`` (:func:`csdf.field.step_evaluator`:
+    the detector evaluates its solids some hundreds of times a scan)."""
     prog = canonical(kind)[1].program
-    return [p.name for p in prog.params], step_evaluator(prog, SOLID_BACKEND, "grad")
+    return ([(p.name, float(p.default)) for p in prog.params],
+            step_evaluator(prog, SOLID_BACKEND, "grad"))
 
 
 def away_from_edges(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.ndarray

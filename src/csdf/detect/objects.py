@@ -52,8 +52,9 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
    :meth:`_Run._own_inliers`): other clusters that
    are mostly claimed are skipped (one object split in two by an occluder), and a
    cluster with enough unclaimed points left is searched again (two objects touching);
-   a cluster no model explains as one, after the band test rejected a large fit, is
-   searched by the halves of its footprint (:meth:`_Run.best_in_parts`). A model whose
+   a cluster no model explains as one, after the band test rejected a large fit, or
+   wider than any model may be, is searched by the halves of its footprint
+   (:meth:`_Run.best_in_parts`). A model whose
    fit explained most of the points but failed is fitted again from ``RETRY_STARTS``
    other parameter starts (:meth:`_Run._other_params`); so is a winner with over
    ``REFIT_UNEXPLAINED`` of its visible surface unexplained. Fits in another pose
@@ -1201,6 +1202,7 @@ class _Run:
         #: their object (:meth:`_gather`)
         self.joined: set[int] = set()
         self.unfit = False  # models were fitted and none passed (best_for)
+        self.too_wide = False  # the points span more than any model may (best_for)
         #: (N,) True at the other half's points while best_in_parts fits one half of a
         #: cluster: another object, not the fit's own (the front test)
         self.foreign: np.ndarray | None = None
@@ -1781,6 +1783,7 @@ class _Run:
         self.unfit = False
         span = _span(self.P[idx])
         fits = [m for m in self.models if span <= 2.0 * m.radius * SIZE_SLACK + 6 * self.sigma]
+        self.too_wide = not fits
         if not fits:
             return None
         sub = self._subsample(idx, SCREEN_POINTS)
@@ -2767,9 +2770,13 @@ class _Run:
         2-means split of the footprint, the larger first, the other half's points
         counted as another object's in the front test (:meth:`_ray_evidence`); the
         first detection found, or None. With :data:`PARTS_WHEN_UNFIT`, also when
-        models were fitted to the points and none passed."""
+        models were fitted to the points and none passed; and when the points span
+        more than any model may (:data:`SIZE_SLACK`), so that none was fitted: a table
+        and a bookshelf behind it, touching in the scan, made one cluster 3.0 m
+        across, and neither was found (benchmark scene 920)."""
         if self.plane is None or not self.upright or len(idx) < 2 * self.mp or \
-                not (self.band_rejected or (PARTS_WHEN_UNFIT and self.unfit)):
+                not (self.band_rejected or self.too_wide
+                     or (PARTS_WHEN_UNFIT and self.unfit)):
             return None
         nrm, off = self.plane
         Q = self.P[idx]

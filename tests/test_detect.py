@@ -1262,6 +1262,24 @@ def test_span_is_the_clusters_diameter_whatever_its_turn():
     assert _span(Q[:1]) == 0.0
 
 
+def test_a_planes_widest_piece_is_its_widest_connected_part():
+    """Two table tops of one height side by side are one plane, but two pieces: the
+    widest piece is one top's length, however unevenly the scan samples it; one top
+    with a sparse stripe across it (farther from the sensor) stays whole."""
+    from csdf.detect.objects import _widest_piece
+
+    rng = np.random.default_rng(1)
+    top = rng.uniform([0.0, 0.0], [1.8, 0.9], (4000, 2))
+    other = rng.uniform([2.2, 0.0], [3.9, 0.8], (3000, 2))
+    assert _widest_piece(np.vstack([top, other])) == pytest.approx(1.8, abs=0.02)
+    assert _widest_piece(top) == pytest.approx(1.8, abs=0.02)
+    sparse = np.vstack([top[top[:, 0] < 0.8], top[top[:, 0] > 1.0],
+                        rng.uniform([0.8, 0.0], [1.0, 0.9], (40, 2))])
+    assert _widest_piece(sparse) == pytest.approx(1.8, abs=0.02)
+    assert _widest_piece(np.zeros((0, 2))) == 0.0
+    assert _widest_piece(np.array([[0.0, 0.0], [1.0, 0.5]])) == 1.0
+
+
 def test_models_are_prepared_once_per_shape_and_name():
     from csdf.detect.objects import _models_arg
 

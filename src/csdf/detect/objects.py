@@ -897,6 +897,32 @@ def _feet(F: np.ndarray, foot: float) -> list[np.ndarray]:
     return feet
 
 
+def _widest_piece(uv: np.ndarray) -> float:
+    """The largest extent along either axis of a connected piece of the points ``uv``
+    ``(K, 2)`` (a plane's inliers in its own frame, scene units): points closer than
+    four times the 90th percentile of their nearest-neighbour distances are linked,
+    so the gaps of the scan's spacing do not split a surface but a gap between two
+    surfaces does."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if len(uv) < 3:
+        return float(np.max(np.ptp(uv, axis=0))) if len(uv) else 0.0
+    tree = cKDTree(uv)
+    dd, _ = tree.query(uv, k=2)
+    link = 4.0 * float(np.percentile(dd[:, 1], 90))
+    pairs = tree.query_pairs(link, output_type="ndarray")
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                   shape=(len(uv), len(uv)))
+    _, lab = connected_components(g, directed=False)
+    lo = np.full((lab.max() + 1, 2), np.inf)
+    hi = np.full((lab.max() + 1, 2), -np.inf)
+    np.minimum.at(lo, lab, uv)
+    np.maximum.at(hi, lab, uv)
+    return float(np.max(hi - lo))
+
+
 def _span(Q: np.ndarray) -> float:
     """The diameter (largest distance between two points, scene units) of the points
     ``Q`` ``(N, 3)`` without the ``SPAN_TRIM`` of them farthest from their median: the
@@ -1222,7 +1248,8 @@ class _Run:
             seed=self.support_seed, viewpoint=self.vp, max_primitives=4)
         # a plane above the first support and parallel to it may be a model's top (a
         # 1.94 m table's spans 2.3 m, over the largest default diameter): it is a
-        # support only if no model could be that large
+        # support only if no model could be that large, piece by piece (two tables of
+        # one height side by side are one plane, 3.6 m across in benchmark scene 1004)
         span_top = SUPPORT_SPAN * 2.0 * max(m.reach for m in self.models)
         for pl in planes:
             Q = self.P[pl.inliers]
@@ -1232,9 +1259,10 @@ class _Run:
             span = float(np.max(uv.max(axis=0) - uv.min(axis=0)))
             if span < span_min:
                 continue
-            if self.plane is not None and span < span_top and abs(
+            if self.plane is not None and abs(
                     nrm @ self.plane[0]) >= math.cos(math.radians(SUPPORT_PARALLEL)) and \
-                    np.median(Q @ self.plane[0]) - self.plane[1] > 3.0 * self.sigma:
+                    np.median(Q @ self.plane[0]) - self.plane[1] > 3.0 * self.sigma and \
+                    _widest_piece(uv) < span_top:
                 continue
             off = float(pl.params["offset"])
             d = self.P @ nrm - off

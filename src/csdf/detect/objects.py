@@ -167,8 +167,11 @@ MAX_SEE_THROUGH = 0.12
 MAX_UNEXPLAINED = 0.25
 #: the most models one call searches for
 MAX_MODELS = 64
-#: a cluster is searched (again) while at least this fraction of it is unclaimed
-CLUSTER_LEFT = 0.3
+#: a cluster is searched (again) while at least this fraction of it is unclaimed (at
+#: 0.3, a bookshelf's 1,334 points left of a 5,731-point cluster it shared with the
+#: table in front of it were never searched, fresh scene 920; at 0.2 it is found, and
+#: no other output of seeds 720-1019 changed)
+CLUSTER_LEFT = 0.2
 #: the least fraction of the free points inside the fitted model's box (its bounds at
 #: the fitted parameters, padded by three noise levels) within three noise levels of
 #: its surface

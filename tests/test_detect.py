@@ -2028,8 +2028,29 @@ def test_a_cluster_wider_than_any_model_is_tried_in_parts(monkeypatch):
     assert csdf.metrics.mssd(pts, dets[1].pose, truth, syms) / csdf.metrics.diameter(pts) < 0.1
     assert np.mean(z["instance"][dets[1].inliers] == 3) > 0.99
     monkeypatch.setattr(O, "CLUSTER_LEFT", 0.3)
+    monkeypatch.setattr(O, "LEFT_PIECE", None)  # which would search its piece too
     dets = csdf.detect(P, ["table", "bookshelf"], viewpoint=(0, 0, 0), seed=0)
     assert [d.model for d in dets] == ["table"]
+
+
+@pytest.mark.parametrize("piece", [5.0, None])
+def test_an_object_left_of_a_large_cluster_is_searched_on_its_own(monkeypatch, piece):
+    """Benchmark scene 721, cropped to 1.8 m about a chair and the bookshelf beside it
+    (the floor thinned to a quarter): the two make one cluster of 11,900 points, and
+    once the bookshelf has claimed its points the chair's 733 left are 6 % of it, too
+    few to search the cluster again (``CLUSTER_LEFT``). They are one connected piece
+    of what is left, and such a piece is searched on its own (``LEFT_PIECE``)."""
+    from csdf.detect import objects as O
+
+    z, P, error = _cropped_scan("chair_beside_bookshelf", "chair")
+    monkeypatch.setattr(O, "LEFT_PIECE", piece)
+    dets = csdf.detect(P, ["chair", "bookshelf"], viewpoint=(0, 0, 0), seed=0)
+    if piece is None:
+        assert [d.model for d in dets] == ["bookshelf"]
+        return
+    assert [d.model for d in dets] == ["bookshelf", "chair"]
+    assert error(dets[1].pose) < 0.1
+    assert np.all(z["instance"][dets[1].inliers] == 1)
 
 
 @pytest.mark.parametrize("limit", [3, None])

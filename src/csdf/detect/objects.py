@@ -172,6 +172,10 @@ MAX_MODELS = 64
 #: table in front of it were never searched, fresh scene 920; at 0.2 it is found, and
 #: no other output of seeds 720-1019 changed)
 CLUSTER_LEFT = 0.2
+#: ... and when less is left, each connected piece of what is left with at least this
+#: many times ``min_points`` points is searched on its own (a chair's 730 points left
+#: of a 11,900-point cluster it shared with a bookshelf, fresh scene 721); None: never
+LEFT_PIECE: float | None = 5.0
 #: the least fraction of the free points inside the fitted model's box (its bounds at
 #: the fitted parameters, padded by three noise levels) within three noise levels of
 #: its surface
@@ -1151,6 +1155,9 @@ def _search(run: _Run, members: np.ndarray, out: list, cap: float) -> set[int]:
     while len(out) < cap:
         free = members[~run.claimed[members]]
         if len(free) < run.mp or len(free) < CLUSTER_LEFT * len(members):
+            if LEFT_PIECE is not None:
+                for piece in run.left_pieces(free):
+                    _search(run, piece, out, cap)
             return set()
         run.joined = set()
         det = run.best_for(free)
@@ -2792,6 +2799,19 @@ class _Run:
         mid = 0.5 * (surf.min(axis=0) + surf.max(axis=0))
         rad = float(np.linalg.norm(surf - mid, axis=1).max()) + 3.0 * self.sigma
         return res.pose.apply(mid[None])[0], rad
+
+    def left_pieces(self, idx: np.ndarray) -> list[np.ndarray]:
+        """The connected pieces (the scan's neighbour links, as the clusters were
+        made) of the points ``idx`` ``(K,)`` with at least ``LEFT_PIECE`` times
+        ``min_points`` points each, largest first: what a cluster's detections left
+        of it that may be an object of its own."""
+        if LEFT_PIECE is None or len(idx) < LEFT_PIECE * self.mp:
+            return []
+        mask = np.zeros(len(self.P), dtype=bool)
+        mask[idx] = True
+        lab = components(self.nb, mask, linked_edges(self.nb, strict=True))[idx]
+        sizes = np.bincount(lab)
+        return [idx[lab == i] for i in np.flatnonzero(sizes >= LEFT_PIECE * self.mp)]
 
     def best_in_parts(self, idx: np.ndarray) -> Detection | None:
         """When no model explains the points ``idx`` as one object, the band test

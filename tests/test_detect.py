@@ -2039,7 +2039,9 @@ def test_an_object_left_of_a_large_cluster_is_searched_on_its_own(monkeypatch, p
     (the floor thinned to a quarter): the two make one cluster of 11,900 points, and
     once the bookshelf has claimed its points the chair's 733 left are 6 % of it, too
     few to search the cluster again (``CLUSTER_LEFT``). They are one connected piece
-    of what is left, and such a piece is searched on its own (``LEFT_PIECE``)."""
+    of what is left, off the bookshelf's surface, and such a piece is searched on its
+    own (``LEFT_PIECE``; a piece on a detection's surface is not:
+    ``test_a_large_table_top_is_not_a_support`` finds one table)."""
     from csdf.detect import objects as O
 
     z, P, error = _cropped_scan("chair_beside_bookshelf", "chair")

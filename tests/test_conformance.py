@@ -237,3 +237,25 @@ def test_reference_chunking_does_not_change_results(mode):
             np.testing.assert_array_equal(got[k], ref[k], err_msg=f"{k}, chunk={chunk}")
     with pytest.raises(ValueError, match="chunk"):
         numpy_backend.evaluate(prog, pts, pv, mode, chunk=0)
+
+
+def test_a_prefix_op_with_zero_derivative_carries_no_tangent_into_the_kernel():
+    """d/da of ``sign(a) / floor(y)`` where ``floor(y) = 0``: ``sign``'s derivative is
+    structurally zero (:mod:`csdf.ops`), so the quotient has none by ``a`` and every
+    evaluator gives 0. The fast kernel gave NaN (its parameter-only prefix passed
+    ``sign(a)``'s explicit zero tangent in, times ``1 / 0``): a CI run's hypothesis
+    example, ``abs(abs(a) / (sign(a) / floor(y)))``."""
+    from csdf.expr import Y, make, param
+
+    a = param("a", 0.5)
+    pts = np.array([[0.0, 0.5, 0.0], [0.0, 1.5, 0.0]])
+    for e in (make("div", make("sign", a), make("floor", Y)),
+              make("abs", make("div", make("abs", a),
+                               make("div", make("sign", a), make("floor", Y))))):
+        prog = compile_expr(e)
+        ref = prog.value_grad_param_jacobian(pts, backend="numpy")
+        for backend in [e.name for e in registry.point_evaluators()
+                        if "float64" in e.dtypes and e.name != "numpy" and e.available()]:
+            got = prog.value_grad_param_jacobian(pts, backend=backend)
+            np.testing.assert_array_equal(got[2], ref[2], err_msg=backend)
+            assert np.isfinite(got[2]).all()

@@ -87,10 +87,13 @@ class Lowered:
         self.n_consts = lay.n_consts
         self.layout = lay
         self.prog = prog
-        # per prefix result: the parameters it depends on (structurally); and the prefix
-        # on local rows (parameters, constants, then one row per result) for
-        # interp_kernels.prefix_kernel, where a parameter's tangent is not zero and a
-        # constant's is
+        # per prefix result: the parameters it depends on (structurally: none for an op
+        # whose derivative is zero, as csdf.ops's kink conventions have it for floor,
+        # step and sign, so that no tangent of it enters the kernel, where 0 times an
+        # infinite factor would make NaN: d/da of sign(a) / floor(y) at floor(y) = 0);
+        # and the prefix on local rows (parameters, constants, then one row per result)
+        # for interp_kernels.prefix_kernel, where a parameter's tangent is not zero and
+        # a constant's is
         deps: dict[int, set[int]] = {lay.param(i): {i} for i in range(P)}
         self._prefix_deps: dict[int, list[int]] = {}
         pre = np.zeros((n_prefix, 5), dtype=np.int32)
@@ -99,7 +102,8 @@ class Lowered:
             src = [_src_row(code, k, a, n_fixed)]
             if OPS_BY_CODE[op].arity == 2:
                 src.append(_src_row(code, k, b, n_fixed))
-            deps[row] = set().union(*(deps.get(r, set()) for r in src))
+            deps[row] = (set() if OPS_BY_CODE[op].derivative.kind == "zero"
+                         else set().union(*(deps.get(r, set()) for r in src)))
             self._prefix_deps[row] = sorted(deps[row])
             local = [r - UNIFORM_BASE for r in src] + [0]
             pre[k, :4] = (op, row - UNIFORM_BASE, local[0], local[1])

@@ -2606,6 +2606,12 @@ class _Run:
         t = np.asarray(res.translation, dtype=float)
         return [(_yaw_matrix(self.plane[0], th) @ res.rotation, t) for th in angles]
 
+    def _turned_by(self, res: FitResult, angle: float) -> FitResult:
+        """The fit ``res`` turned about the support's normal through its own origin by
+        ``angle`` (radians; :meth:`_turned_in_place`)."""
+        return dataclasses.replace(
+            res, rotation=self._turned_in_place(res, np.array([angle]))[0][0])
+
     def _turn_profile(self, m: _Model, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """How turns ``angles`` ``(Y,)`` (radians) about the model's own z axis move its
         surface at its default parameters (whose surface samples lie exactly on it;
@@ -2857,16 +2863,14 @@ class _Run:
             angles, s = self._settle_scores(m, res, rays, own, period)
             i = int(np.argmax(s))
             if RAY_REFIT_EVALS > 0 and self._lead(angles, s, period, i) < RAY_REFIT_BELOW:
-                best = dataclasses.replace(
-                    res, rotation=self._turned_in_place(res, angles[i:i + 1])[0][0])
+                best = self._turned_by(res, angles[i])
                 refit = self._ray_refit(m, best, rays, own)
                 if refit is not best:
                     res = dataclasses.replace(res, params=refit.params)
                     angles, s = self._settle_scores(m, res, rays, own, period)
         i = int(np.argmax(s))  # the first of equals: its own turn when it ties
         if i != 0:
-            res = dataclasses.replace(
-                res, rotation=self._turned_in_place(res, angles[i:i + 1])[0][0])
+            res = self._turned_by(res, angles[i])
         if res is not det.fit:
             det.fit = res
             det.params = dict(res.params)

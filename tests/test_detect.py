@@ -2323,7 +2323,8 @@ def test_a_lamp_standing_on_a_table_is_found_on_its_top(monkeypatch, lift):
     floor. A cluster that nothing standing on the support explains is tried again
     standing on each surface facing up under it (``best_lifted``): here the table's
     top (0.75 m) and its own base's top (2.5 cm higher), and the fit on the table's
-    top, which explains more, wins."""
+    top, which explains more, wins. (Its spokes are hidden in its shade from here, so
+    its half turn scores as well as its turn: it is kept with ``keep_unsettled``.)"""
     from csdf.detect import objects as O
 
     monkeypatch.setattr(O, "LIFT", lift)
@@ -2333,7 +2334,8 @@ def test_a_lamp_standing_on_a_table_is_found_on_its_top(monkeypatch, lift):
     cam = csdf.Camera.look_at(eye=(1.5, -2.5, 1.8), target=(0.0, 0.0, 0.6), fov=50,
                               width=320, height=240)
     P, _, _ = csdf.scan(scene, cam, noise=0.003, seed=1)
-    dets = csdf.detect(P, ["table", "lamp", "chair"], viewpoint=(0, 0, 0))
+    dets = csdf.detect(P, ["table", "lamp", "chair"], viewpoint=(0, 0, 0),
+                       keep_unsettled=True)
     lamps = [cam.R @ d.pose.translation + cam.t for d in dets if d.model == "lamp"]
     assert [d.model for d in dets].count("table") == 1
     if not lift:
@@ -2380,7 +2382,8 @@ def test_a_table_split_by_an_occluder_is_found_once(monkeypatch, merge):
     and width traded too: the table is found once, at its size. (The growth of a
     short winner into what the sensor did not see, ``_completed``, also joins the
     halves here, as a 1.4 m table 4 cm off centre; it is turned off to see the merge
-    alone.)"""
+    alone. The bookshelf is seen side-on, its front and back alike: it is kept with
+    ``keep_unsettled``.)"""
     from csdf.detect import objects as O
 
     monkeypatch.setattr(O, "MERGE_OVERLAP", 0.2 if merge else None)
@@ -2394,7 +2397,8 @@ def test_a_table_split_by_an_occluder_is_found_once(monkeypatch, merge):
     cam = csdf.Camera.look_at(eye=(-0.1, 3.35, 1.87), target=(0.0, 0.0, 0.5), fov=50,
                               width=320, height=240)
     P, _, _ = csdf.scan(scene, cam, noise=0.02, seed=1)
-    dets = csdf.detect(P, ["table", "bookshelf", "chair"], viewpoint=(0, 0, 0))
+    dets = csdf.detect(P, ["table", "bookshelf", "chair"], viewpoint=(0, 0, 0),
+                       keep_unsettled=True)
     tables = [d for d in dets if d.model == "table"]
     if not merge:
         assert len(tables) == 2  # the old behaviour: two short tables

@@ -1164,9 +1164,10 @@ def detect(
                                         "scan with each detection's model drawn over it."),
     keep_unsettled: bool = typer.Option(False, "--keep-unsettled", help="Also keep the "
                                         "detections whose turn about the floor's normal "
-                                        "the scan does not settle (a lamp whose spokes "
-                                        "were not seen): the object is there, its turn "
-                                        "a guess."),
+                                        "(or their own up axis) the scan does not "
+                                        "settle (a lamp whose spokes were not seen, a "
+                                        "bookshelf seen side-on): the object is there, "
+                                        "its turn a guess."),
 ):
     """Find known models in a cluttered scan (csdf.detect) and write them as a scene."""
 

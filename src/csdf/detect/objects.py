@@ -94,9 +94,10 @@ The pipeline, for a cloud that holds several objects, a floor or table and clutt
     ``SETTLED_PLAIN_RAYS`` explained points, its turn is a guess: it is marked
     (:attr:`Detection.settled` False) and left out of the result unless
     ``keep_unsettled`` (its points stay claimed). A detection of another model whose
-    half turn is not a symmetry (a bookshelf) is marked so when its rays score it and
-    its half turn within ``HALF_TURN_TIE`` explained points (:meth:`_Run._half_turn_tied`:
-    seen side-on, front and back look alike).
+    half turn is not a symmetry (a bookshelf) is marked so unless its rays score it
+    ``HALF_TURN_TIE`` explained points above its half turn (:meth:`_Run._half_turn_tied`:
+    seen side-on, front and back look alike; with no support, the half turn about its
+    own z axis).
 
 Deterministic: every random choice comes from ``numpy.random.default_rng(seed)``, drawn
 once at the start: the support search's seed, and a random *priority* per scan point.
@@ -355,8 +356,8 @@ SETTLED_PLAIN_RAYS = 0.5
 SETTLED_APART = 20.0
 #: a detection of a model whose turn is not in doubt but whose half turn about the
 #: support's normal is not a symmetry (a bookshelf: open front, closed back) is
-#: unsettled when its plain rays score it and its half turn within this many explained
-#: points of each other (:meth:`_Run._half_turn_tied`; None: never). Seen side-on, a
+#: unsettled unless its plain rays score it more than this many explained points above
+#: its half turn (:meth:`_Run._half_turn_tied`; None: never). Seen side-on, a
 #: bookshelf's front and back differ by a 6 mm back panel and a kick board set back 2
 #: cm, which the scan's noise hides: over seeds 720-1019 the settled bookshelves whose
 #: half turn scored within 5 points were 7 right and 7 wrong, over fresh seeds
@@ -539,11 +540,12 @@ class Detection:
         fit: the :class:`csdf.FitResult` of the refinement (its ``quality`` holds the
             verification's figures).
         settled: False when the scan does not settle the model's turn about the
-            support's normal: the turn rests on a small part (a lamp's spokes) and
-            the sensor's rays do not prefer it by ``SETTLED_PLAIN_RAYS`` explained
+            support's normal (without a support, about its own z axis): the turn
+            rests on a small part (a lamp's spokes) and the sensor's rays do not
+            prefer it by ``SETTLED_PLAIN_RAYS`` explained
             points to every turn ``SETTLED_APART`` degrees or more away, or the
-            model's front and back differ (a bookshelf) and its rays score its half
-            turn within ``HALF_TURN_TIE`` points of it (seen side-on). The pose is
+            model's front and back differ (a bookshelf) and its rays do not score it
+            ``HALF_TURN_TIE`` points above its half turn (seen side-on). The pose is
             then a guess between turns (the object and its other parameters are
             found). :func:`detect` returns such detections only with
             ``keep_unsettled=True``.
@@ -2839,12 +2841,12 @@ class _Run:
 
     def turn_settled(self, det: Detection) -> bool:
         """Whether the scan settles the turn of ``det`` about the support's normal
-        (:attr:`Detection.settled`), as it stands; only with a viewpoint and a
-        support. A model whose turn is not in doubt is unsettled only when its half
-        turn ties with its own (:meth:`_half_turn_tied`). For a model whose turn is in
-        doubt (:meth:`_doubt`: a turn, not a symmetry, moves under ``YAW_DOUBT`` of its
-        surface), its turns
-        ``SETTLE_STEP`` degrees apart over one period of its symmetry are ray-cast
+        (:attr:`Detection.settled`), as it stands; only with a viewpoint. A model
+        whose turn is not in doubt is unsettled only when its half turn ties with its
+        own (:meth:`_half_turn_tied`; about its own z axis when there is no support).
+        For a model whose turn is in doubt (:meth:`_doubt`: a turn, not a symmetry,
+        moves under ``YAW_DOUBT`` of its surface), only with a support and upright
+        search: its turns ``SETTLE_STEP`` degrees apart over one period of its symmetry are ray-cast
         without the spread at its own parameters (:meth:`_settle_scores`), and it is
         settled when its own turn scores ``SETTLED_PLAIN_RAYS`` explained points more
         than every turn ``SETTLED_APART`` degrees or more away. (Rays see a thin part
@@ -2864,14 +2866,15 @@ class _Run:
         return self._lead(angles, s, period, 0) >= SETTLED_PLAIN_RAYS
 
     def _half_turn_tied(self, det: Detection) -> bool:
-        """Whether the scan cannot tell ``det``'s turn from its half turn about the
-        support's normal: its model's turn is not in doubt (:meth:`_doubt`), its half
-        turn is not a symmetry, and its rays cast without the spread
-        (:meth:`_ray_scores`, its own inliers unclaimed) score the two within
-        ``HALF_TURN_TIE`` explained points. False without a viewpoint, a support,
-        upright search or rays."""
-        if (HALF_TURN_TIE is None or self.plane is None or self.vp is None
-                or not self.upright or det.fit is None):
+        """Whether the scan does not prefer ``det``'s turn to its half turn: its model's
+        turn is not in doubt (:meth:`_doubt`), its half turn is not a symmetry, and its
+        rays cast without the spread (:meth:`_ray_scores`, its own inliers unclaimed)
+        do not score its turn more than ``HALF_TURN_TIE`` explained points above its
+        half turn (a tie, or the half turn better: a lamp at low noise turned 58
+        degrees off, which no earlier step turns back without a support). The half
+        turn is about the support's normal in an upright search, else about the
+        model's own z axis (a scan with no floor). False without a viewpoint or rays."""
+        if HALF_TURN_TIE is None or self.vp is None or det.fit is None:
             return False
         m = next(mm for mm in self.models if mm.name == det.model)
         full, sym, doubt = self._doubt(m)
@@ -2880,11 +2883,16 @@ class _Run:
         rays = self._ray_set(m, det.fit)
         if len(rays) == 0:
             return False
+        res = det.fit
+        if self.plane is not None and self.upright:
+            poses = self._turned_in_place(res, np.array([0.0, math.pi]))
+        else:
+            t = np.asarray(res.translation, dtype=float)
+            poses = [(res.rotation, t), (res.rotation @ np.diag([-1.0, -1.0, 1.0]), t)]
         with self._unclaimed(det.inliers):
-            s = self._ray_scores(m, dict(det.fit.params),
-                                 self._turned_in_place(det.fit, np.array([0.0, math.pi])),
-                                 rays, self._own_clusters(det.inliers))
-        return abs(float(s[1] - s[0])) <= HALF_TURN_TIE * GAIN_CAP_LOG
+            s = self._ray_scores(m, dict(res.params), poses, rays,
+                                 self._own_clusters(det.inliers))
+        return float(s[0] - s[1]) <= HALF_TURN_TIE * GAIN_CAP_LOG
 
     def settle_turn(self, det: Detection) -> bool:
         """The last step for a detection ``det``. When its turn is not in doubt, returns

@@ -2296,7 +2296,8 @@ def test_an_object_scanned_without_a_floor_is_found_at_the_scans_noise(tmp_path)
     assert found == ["chair"], r.output
 
 
-@pytest.mark.parametrize("model, noise", [("lamp", "0.003"), ("table", "0.01")])
+@pytest.mark.parametrize("model, noise", [("lamp", "0.003"), ("lamp", "0.0"),
+                                          ("table", "0.01")])
 def test_an_object_scanned_on_its_own_in_pieces_is_found_once(tmp_path, model, noise):
     """With no support there are no upright hypotheses to gather an object's pieces:
     a lamp's scan falls into two clusters (its shade; its stem and base) whose fits
@@ -2304,8 +2305,9 @@ def test_an_object_scanned_on_its_own_in_pieces_is_found_once(tmp_path, model, n
     legs), and its top alone was fitted as a table 5 cm too high (with joining tried
     only after a cluster failed, its legs were then fitted as a second table). Each
     cluster is now also fitted joined by its nearest clusters, which competes with
-    its own fit. (The lamp's spokes hardly show from here: its rays score its half
-    turn as well as its own, so it is kept with ``--keep-unsettled``.)"""
+    its own fit. With no support, the last step ray-casts its turns about its own
+    axis and turns it to the best (the lamp came out 23 degrees off without it at 3
+    mm noise, 30 degrees off without noise)."""
     import json
 
     from typer.testing import CliRunner
@@ -2318,13 +2320,17 @@ def test_an_object_scanned_on_its_own_in_pieces_is_found_once(tmp_path, model, n
                             "--world"])
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["detect", str(ply), "--models", "chair,table,stool,lamp",
-                            "-o", str(out), "--keep-unsettled"])
+                            "-o", str(out)])
     assert r.exit_code == 0, r.output
     found = json.loads(out.read_text())["instances"]
     assert [i["model"]["zoo"] for i in found] == [model], r.output
     pose = found[0]["pose"]
+    R = np.asarray(pose["rotation"])
     assert np.linalg.norm(pose["translation"]) < 0.02  # scanned at the origin, upright
-    assert np.asarray(pose["rotation"])[2, 2] > math.cos(math.radians(2.0))
+    assert R[2, 2] > math.cos(math.radians(2.0))
+    period = {"lamp": 120.0, "table": 180.0}[model]  # its symmetry about z
+    turn = math.degrees(math.atan2(R[1, 0], R[0, 0])) % period
+    assert min(turn, period - turn) < 5.0
 
 
 def test_a_bookshelf_scanned_side_on_with_no_floor_is_unsettled(tmp_path):

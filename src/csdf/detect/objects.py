@@ -363,8 +363,9 @@ SETTLED_APART = 20.0
 #: bookshelf's front and back differ by a 6 mm back panel and a kick board set back 2
 #: cm, which the scan's noise hides: over seeds 720-1019 the settled bookshelves whose
 #: half turn scored within 5 points were 7 right and 7 wrong, over fresh seeds
-#: 1020-1119 1 right and 7 wrong. With the rule, 720-1019 found 1,101 -> 1,094 objects
-#: with 37 -> 28 false positives, and 1020-1119 359 -> 357 with 16 -> 8
+#: 1020-1119 1 right and 7 wrong. With the rule, 720-1019 found 1,101 -> 1,093 objects
+#: with 37 -> 28 false positives, 1020-1119 359 -> 357 with 16 -> 6, and fresh seeds
+#: 1120-1219 365 -> 361 with 15 -> 9
 HALF_TURN_TIE: float | None = 5.0
 #: a winner's turn is in doubt when the model has a turn, not a symmetry, that moves
 #: less than this fraction of its surface samples by more than three noise levels
@@ -2851,19 +2852,21 @@ class _Run:
         own (:meth:`_half_turn_tied`). With no support, see :meth:`_settle_alone`.
         For a model whose turn is in doubt (:meth:`_doubt`: a turn, not a symmetry,
         moves under ``YAW_DOUBT`` of its surface), only with a support and upright
-        search: its turns ``SETTLE_STEP`` degrees apart over one period of its symmetry are ray-cast
-        without the spread at its own parameters (:meth:`_settle_scores`), and it is
-        settled when its own turn scores ``SETTLED_PLAIN_RAYS`` explained points more
-        than every turn ``SETTLED_APART`` degrees or more away. (Rays see a thin part
-        that the points' distances, blurred by the noise in every direction, do not;
+        search: its turns ``SETTLE_STEP`` degrees apart over one period of its
+        symmetry are ray-cast without the spread at its own parameters
+        (:meth:`_settle_scores`), and it is settled when its own turn scores
+        ``SETTLED_PLAIN_RAYS`` explained points more than every turn
+        ``SETTLED_APART`` degrees or more away. (Rays see a thin part that the points'
+        distances, blurred by the noise in every direction, do not;
         cast at steps finer than the part's width seen from the axis they find its
         peak, which coarser steps fall either side of.)
 
         Scored as when :func:`_search` found it: its own inliers count as unclaimed (a
         point of its own clusters floating in front of a turn counts against that
         turn)."""
-        if self._alone(det) is not None:
-            return self._settle_alone(det, turn=False)
+        alone = self._alone(det)
+        if alone is not None:
+            return self._settle_alone(det, alone, turn=False)
         got = self._settle_rays(det)
         if got is None:
             return not self._half_turn_tied(det)
@@ -2921,16 +2924,17 @@ class _Run:
         need = SETTLED_PLAIN_RAYS if doubt else HALF_TURN_TIE
         return m, rays, self._own_clusters(det.inliers), turns, period, need
 
-    def _settle_alone(self, det: Detection, turn: bool) -> bool:
+    def _settle_alone(self, det: Detection, alone: tuple, turn: bool) -> bool:
         """Whether the scan settles the turn of ``det`` about its own z axis, with no
-        support (:meth:`_alone`): its turns are ray-cast without the spread at its own
-        parameters (its own inliers unclaimed), and it is settled when its turn leads
-        every turn ``SETTLED_APART`` degrees or more away by the lead needed. With
+        support (``alone``: :meth:`_alone`'s answer for it): its turns are ray-cast
+        without the spread at its own parameters (its own inliers unclaimed), and it
+        is settled when its turn leads every turn ``SETTLED_APART`` degrees or more
+        away by the lead needed. With
         ``turn``, it is first turned (in place: pose and fit) to the best turn when
         that scores more than the lead needed above its own (a lamp scanned on its
         own without noise was fitted 30 degrees off, and its rays preferred the true
         turn by 20 points)."""
-        m, rays, own, turns, period, need = self._alone(det)
+        m, rays, own, turns, period, need = alone
         res = det.fit
         with self._unclaimed(det.inliers):
             s = self._ray_scores(m, dict(res.params), self._turned_in_place(res, turns),
@@ -2956,8 +2960,9 @@ class _Run:
         pose, parameters and fit). Returns whether the scan settles that turn
         (:meth:`turn_settled`'s test). Its inliers and score stand: the refit moves
         its surface by a few millimetres, and the turn under ``YAW_DOUBT`` of it."""
-        if self._alone(det) is not None:
-            return self._settle_alone(det, turn=True)
+        alone = self._alone(det)
+        if alone is not None:
+            return self._settle_alone(det, alone, turn=True)
         got = self._settle_rays(det)
         if got is None:
             return not self._half_turn_tied(det)

@@ -2679,9 +2679,15 @@ class _Run:
         """``(turns (Y,) radians, period)``: the turns ``RAY_STEP`` degrees apart over
         one period (radians) of ``m``'s symmetry about its own z axis, from 0, when its
         turn is in doubt (:meth:`_doubt`); None otherwise."""
-        full, sym, doubt = self._doubt(m)
-        if not doubt:
+        if not self._doubt(m)[2]:
             return None
+        return self._period_turns(m)
+
+    def _period_turns(self, m: _Model) -> tuple[np.ndarray, float]:
+        """``(turns (Y,) radians, period)``: the turns ``RAY_STEP`` degrees apart over
+        one period (radians) of ``m``'s symmetry about its own z axis (:meth:`_doubt`),
+        from 0."""
+        full, sym, _ = self._doubt(m)
         nz = np.flatnonzero(sym[1:])
         period = float(full[1 + nz[0]]) if len(nz) else 2.0 * math.pi
         return full[full < period - 1e-9], period
@@ -2864,16 +2870,7 @@ class _Run:
         Scored as when :func:`_search` found it: its own inliers count as unclaimed (a
         point of its own clusters floating in front of a turn counts against that
         turn)."""
-        alone = self._alone(det)
-        if alone is not None:
-            return self._settle_alone(det, alone, turn=False)
-        got = self._settle_rays(det)
-        if got is None:
-            return not self._half_turn_tied(det)
-        m, rays, own, period = got
-        with self._unclaimed(det.inliers):
-            angles, s = self._settle_scores(m, det.fit, rays, own, period)
-        return self._lead(angles, s, period, 0) >= SETTLED_PLAIN_RAYS
+        return self._settle(det, turn=False)
 
     def _half_turn_tied(self, det: Detection) -> bool:
         """Whether the scan does not prefer ``det``'s turn to its half turn: its model's
@@ -2912,10 +2909,8 @@ class _Run:
                 or (self.plane is not None and self.upright)):
             return None
         m = next(mm for mm in self.models if mm.name == det.model)
-        full, sym, doubt = self._doubt(m)
-        nz = np.flatnonzero(sym[1:])
-        period = float(full[1 + nz[0]]) if len(nz) else 2.0 * math.pi
-        turns = full[full < period - 1e-9]
+        doubt = self._doubt(m)[2]
+        turns, period = self._period_turns(m)
         if len(turns) < 2:
             return None
         rays = self._ray_set(m, det.fit)
@@ -2942,7 +2937,7 @@ class _Run:
         i = int(np.argmax(s))
         if not turn or s[i] - s[0] <= need * GAIN_CAP_LOG:
             i = 0
-        elif i != 0:
+        else:  # (i is not 0: the best leads its own turn)
             res = self._turned_by(res, turns[i])
             det.fit = res
             det.pose = Pose(res.rotation, res.translation)
@@ -2960,9 +2955,15 @@ class _Run:
         pose, parameters and fit). Returns whether the scan settles that turn
         (:meth:`turn_settled`'s test). Its inliers and score stand: the refit moves
         its surface by a few millimetres, and the turn under ``YAW_DOUBT`` of it."""
+        return self._settle(det, turn=True)
+
+    def _settle(self, det: Detection, turn: bool) -> bool:
+        """:meth:`settle_turn` (``turn``: judge and turn) or :meth:`turn_settled`
+        (judge only): the one choice of test for ``det`` (with no support, in doubt,
+        or neither) that both make."""
         alone = self._alone(det)
         if alone is not None:
-            return self._settle_alone(det, alone, turn=True)
+            return self._settle_alone(det, alone, turn=turn)
         got = self._settle_rays(det)
         if got is None:
             return not self._half_turn_tied(det)
@@ -2970,6 +2971,8 @@ class _Run:
         res = det.fit
         with self._unclaimed(det.inliers):
             angles, s = self._settle_scores(m, res, rays, own, period)
+            if not turn:
+                return self._lead(angles, s, period, 0) >= SETTLED_PLAIN_RAYS
             i = int(np.argmax(s))
             if RAY_REFIT_EVALS > 0 and self._lead(angles, s, period, i) < RAY_REFIT_BELOW:
                 best = self._turned_by(res, angles[i])

@@ -369,12 +369,16 @@ def test_detect_primitives_finds_every_kind(prim_scene):
     assert len(allin) == len(np.unique(allin))
 
 
-def test_detect_primitives_finds_nothing_in_a_volume_of_noise():
+def test_detect_primitives_finds_no_shell_in_a_volume_of_noise():
     # a shell through a scattered cloud gathers points whose normals agree only by
-    # chance (_agreement); a sphere's surface among the same noise is still found
+    # chance (_agreement); a sphere's surface among the same noise is still found. (A
+    # plane through such a cloud is found in about 1 draw of 120, 4 before the search
+    # ran in Morton order: its normals agree as poorly as a real floor's at 2.8 cm of
+    # range noise, so they cannot tell it.)
     for s in (2, 3, 4):  # clouds where cylinders and a torus were found before the test
         P = np.random.default_rng(s).uniform(-1, 1, (5000, 3))
-        assert csdf.detect_primitives(P, seed=0) == []
+        for seed in (0, 1, 2):
+            assert [d for d in csdf.detect_primitives(P, seed=seed) if d.kind != "plane"] == []
     rng = np.random.default_rng(14)
     u = rng.normal(size=(3000, 3))
     shell = 0.4 * u / np.linalg.norm(u, axis=1, keepdims=True) + rng.normal(0, 0.002,
@@ -526,19 +530,22 @@ def test_detected_cone_radius_is_unbiased():
 
 
 def test_flat_share_keeps_a_shallow_cap():
-    """A spherical cap whose bulge is about three noise levels: one plane explains more
-    than half of it, so detection drops the sphere as a flat patch by default, and
-    keeps it with ``flat_share=1`` (csdf.infer's search among unexplained points)."""
+    """A spherical cap whose bulge is about four noise levels: one plane explains about
+    0.3-0.47 of it (:func:`_flat_share`'s random planes), so ``flat_share=0.25`` drops
+    the sphere as a flat patch, while the default (0.5) and ``flat_share=1`` (csdf.infer's
+    search among unexplained points) keep it; both held for detection seeds 0-9."""
     rng = np.random.default_rng(0)
-    z = rng.uniform(math.cos(0.27), 1.0, 400)  # uniform by area on the cap
+    z = rng.uniform(math.cos(0.3), 1.0, 400)  # uniform by area on the cap
     a = rng.uniform(0.0, 2 * math.pi, 400)
     N = np.column_stack([np.sqrt(1 - z * z) * np.cos(a), np.sqrt(1 - z * z) * np.sin(a), z])
     P = 0.5 * N + rng.normal(0.0, 0.002, (400, 3))
-    assert csdf.detect_primitives(P, N, kinds=("sphere",), seed=0, min_points=30) == []
-    dets = csdf.detect_primitives(P, N, kinds=("sphere",), seed=0, min_points=30,
-                                  flat_share=1.0)
-    assert [d.kind for d in dets] == ["sphere"]
-    assert abs(dets[0].params["radius"] - 0.5) < 0.02
+    assert csdf.detect_primitives(P, N, kinds=("sphere",), seed=0, min_points=30,
+                                  flat_share=0.25) == []
+    for share in (None, 1.0):
+        dets = csdf.detect_primitives(P, N, kinds=("sphere",), seed=0, min_points=30,
+                                      flat_share=share)
+        assert [d.kind for d in dets] == ["sphere"]
+        assert abs(dets[0].params["radius"] - 0.5) < 0.02
     for bad in (0.0, 1.5):
         with pytest.raises(csdf.CsdfError, match="flat_share"):
             csdf.detect_primitives(P, N, flat_share=bad)

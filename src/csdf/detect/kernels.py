@@ -351,6 +351,35 @@ def _block_search(S: np.ndarray, first: np.ndarray, a: int, ix: int, iy: int, iz
     return m
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _spread_bits(x: int) -> int:
+    """The low 21 bits of ``x`` spread out to every third bit (bit ``b`` to ``3 b``)."""
+    x &= 0x1FFFFF
+    x = (x | (x << 32)) & 0x1F00000000FFFF
+    x = (x | (x << 16)) & 0x1F0000FF0000FF
+    x = (x | (x << 8)) & 0x100F00F00F00F00F
+    x = (x | (x << 4)) & 0x10C30C30C30C30C3
+    x = (x | (x << 2)) & 0x1249249249249249
+    return x
+
+
+@njit(cache=True, nogil=True)
+def morton_keys(P: np.ndarray, lo: np.ndarray, scale: float) -> np.ndarray:
+    """``(N,)`` the Morton (Z-order) key of each point of ``P`` ``(N, 3)``: its cell
+    ``floor((p - lo) * scale)`` on a ``2^21`` grid per axis (clamped), the three cell
+    indices' bits interleaved (x lowest). Sorting by the keys puts near points near."""
+    out = np.empty(P.shape[0], dtype=np.int64)
+    top = (1 << 21) - 1
+    for i in range(P.shape[0]):
+        key = 0
+        for c in range(3):
+            v = (P[i, c] - lo[c]) * scale
+            k = 0 if not v > 0.0 else (top if v >= top else int(v))
+            key |= _spread_bits(k) << c
+        out[i] = key
+    return out
+
+
 @njit(cache=True, nogil=True)
 def bounds(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The least and greatest coordinates ``(3,)`` each of the points ``P`` ``(N, 3)``
@@ -379,6 +408,58 @@ def within_ball(P: np.ndarray, idx: np.ndarray, c: np.ndarray, r: float) -> np.n
         dx, dy, dz = P[j, 0] - c[0], P[j, 1] - c[1], P[j, 2] - c[2]
         out[a] = dx * dx + dy * dy + dz * dz <= r2
     return out
+
+
+@njit(cache=True, nogil=True)
+def ball_in_frame(P: np.ndarray, idx: np.ndarray, c: np.ndarray, r: float, R: np.ndarray,
+                  t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The positions ``(M,)`` (ascending) in ``idx`` ``(K,)`` of the points of ``P``
+    ``(N, 3)`` within distance ``r`` of ``c`` ``(3,)``, and those points in the frame
+    of the pose ``p = R q + t``: ``q = (p - t) R`` ``(M, 3)``, C-contiguous (what
+    :func:`within_ball`, a gather and a matrix product give, in one pass)."""
+    pos = np.empty(idx.shape[0], dtype=np.int64)
+    q = np.empty((idx.shape[0], 3))
+    r2 = r * r
+    m = 0
+    for a in range(idx.shape[0]):
+        j = idx[a]
+        dx, dy, dz = P[j, 0] - c[0], P[j, 1] - c[1], P[j, 2] - c[2]
+        if dx * dx + dy * dy + dz * dz <= r2:
+            x, y, z = P[j, 0] - t[0], P[j, 1] - t[1], P[j, 2] - t[2]
+            for col in range(3):
+                q[m, col] = x * R[0, col] + y * R[1, col] + z * R[2, col]
+            pos[m] = a
+            m += 1
+    return pos[:m].copy(), q[:m].copy()
+
+
+@njit(cache=True, nogil=True)
+def close_agreeing(d: np.ndarray, gq: np.ndarray, R: np.ndarray, N: np.ndarray,
+                   rows: np.ndarray, limit: float, cos_tol: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Of the points with signed distances ``d`` ``(M,)`` and gradients ``gq``
+    ``(M, 3)`` in a solid's frame (rotation ``R``: scene = ``R`` times frame), whose
+    normals are the rows ``rows`` ``(M,)`` of ``N`` ``(N, 3)``: which lie within
+    ``limit`` of the surface with normals within ``cos_tol`` (a cosine, either sign) of
+    its gradient (their positions ``(K,)``, ascending) and their unsigned distances
+    ``(K,)``."""
+    pos = np.empty(d.shape[0], dtype=np.int64)
+    dist = np.empty(d.shape[0])
+    m = 0
+    for a in range(d.shape[0]):
+        ad = abs(d[a])
+        if not ad <= limit:
+            continue
+        g0 = R[0, 0] * gq[a, 0] + R[0, 1] * gq[a, 1] + R[0, 2] * gq[a, 2]
+        g1 = R[1, 0] * gq[a, 0] + R[1, 1] * gq[a, 1] + R[1, 2] * gq[a, 2]
+        g2 = R[2, 0] * gq[a, 0] + R[2, 1] * gq[a, 1] + R[2, 2] * gq[a, 2]
+        gn = max(math.sqrt(g0 * g0 + g1 * g1 + g2 * g2), 1e-300)
+        j = rows[a]
+        if abs(g0 * N[j, 0] + g1 * N[j, 1] + g2 * N[j, 2]) / gn >= cos_tol:
+            pos[m] = a
+            dist[m] = ad
+            m += 1
+    return pos[:m].copy(), dist[:m].copy()
 
 
 #: a set of ``m`` points grown from a cloud of ``N`` is sorted when ``m`` times this

@@ -20,7 +20,7 @@ from ..points import NEAR_COPY, NEAR_K, has_near_copies, typical_spacing
 
 __all__ = ["Neighbourhood", "neighbourhood", "knn", "estimate_normals", "points_arg",
            "viewpoint_arg", "distinct_points", "exact_copies", "with_copies", "offset_noise",
-           "range_noise", "along_rays", "tangent_frames",
+           "range_noise", "along_rays", "tangent_frames", "spatial_order",
            "normals_arg", "components",
            "linked_edges", "sparse_points", "K_NORMALS", "MAX_DETECT_POINTS", "LINK",
            "SPARSE"]
@@ -194,6 +194,21 @@ def _near_copies(P: np.ndarray, distinct: np.ndarray) -> np.ndarray | None:
     out = np.arange(len(P))
     out[distinct] = distinct[lowest[comp]]
     return out
+
+
+def spatial_order(P: np.ndarray) -> np.ndarray:
+    """``(N,)`` the order of the points ``P`` ``(N, 3)`` along a Morton (Z-order) curve
+    through their bounding box (:func:`.kernels.morton_keys`; points in one cell keep
+    their order): near points come near in that order, so that searches over a
+    neighbour graph of the reordered cloud stay in the caches."""
+    from .kernels import bounds, morton_keys
+
+    if len(P) < 2:
+        return np.arange(len(P))
+    lo, hi = bounds(P)
+    span = float(np.max(hi - lo))
+    scale = ((1 << 21) - 1) / span if span > 0 else 0.0
+    return np.argsort(morton_keys(P, lo, scale), kind="stable")
 
 
 def with_copies(idx: np.ndarray, owner: np.ndarray) -> np.ndarray:

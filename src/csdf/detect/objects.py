@@ -1294,7 +1294,7 @@ class _Run:
         planes = detect_primitives(
             self.P, self.N, kinds=("plane",), epsilon=3.0 * self.sigma,
             min_points=max(self.mp, int(SUPPORT_MIN_FRACTION * n)),
-            seed=self.support_seed, viewpoint=self.vp, max_primitives=4)
+            seed=self.support_seed, viewpoint=self.vp, max_primitives=4, reorder=False)
         # a plane above the first support and parallel to it may be a model's top (a
         # 1.94 m table's spans 2.3 m, over the largest default diameter): it is a
         # support only if no model could be that large, piece by piece (two tables of

@@ -29,7 +29,7 @@ from ..field import as_field, choose_backend, step_evaluator
 from ..shapes import box, capped_cone, cylinder, sphere, torus
 
 __all__ = ["canonical", "SOLID_PARAMS", "posed", "solid_values", "SOLID_BACKEND",
-           "bounding_sphere", "end_moved", "away_from_edges"]
+           "bounding_sphere", "end_moved", "away_from_edges", "frame_values"]
 
 #: the evaluator of the solids: the compiled one (a kernel per canonical solid and
 #: evaluation mode, compiled once and cached on disk; ten times the interpreter's speed
@@ -72,12 +72,20 @@ def solid_values(kind: str, R: np.ndarray, t: np.ndarray, values: dict, P: np.nd
     """Signed distances ``(S,)`` and unit outward gradients ``(S, 3)`` (scene frame) of
     the solid of ``kind`` with sizes ``values``, placed by rotation ``R`` and
     translation ``t`` (``p = R q + t``), at points ``P`` ``(S, 3)``."""
-    defaults, ev = _evaluator(kind)
     q = np.ascontiguousarray((np.asarray(P, dtype=np.float64) - t) @ R)
-    res = ev(q, np.array([values.get(n, v) for n, v in defaults], dtype=np.float64))
-    g = res["grad"] @ R.T
+    d, gq = frame_values(kind, values, q)
+    g = gq @ R.T
     g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-    return res["value"], g
+    return d, g
+
+
+def frame_values(kind: str, values: dict, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distances ``(S,)`` and gradients ``(S, 3)`` (not normalised) of the
+    canonical solid of ``kind`` with sizes ``values`` at points ``q`` ``(S, 3)`` of its
+    own frame (float64, C-contiguous)."""
+    defaults, ev = _evaluator(kind)
+    res = ev(q, np.array([values.get(n, v) for n, v in defaults], dtype=np.float64))
+    return res["value"], res["grad"]
 
 
 @cache

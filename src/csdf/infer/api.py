@@ -213,6 +213,14 @@ _AXIS_NAMES = {(0, 1): "x", (0, -1): "-x", (1, 1): "y", (1, -1): "-y", (2, 1): "
                (2, -1): "-z"}
 
 
+def _detect_primitives(*args, **kwargs) -> list:
+    """:func:`csdf.detect_primitives` on the points in their given order
+    (``reorder=False``): inference's measured results (``benchmarks/INFER_RESULTS.md``)
+    were made so, and the Morton order's other random draws would need that benchmark
+    run again."""
+    return detect_primitives(*args, reorder=False, **kwargs)
+
+
 def _kinds(kinds) -> tuple[str, ...]:
     if isinstance(kinds, str):
         kinds = [k.strip() for k in kinds.split(",") if k.strip()]
@@ -487,7 +495,7 @@ def _redetected(prob: _Problem, lf: Leaf, inl: np.ndarray, eps: float
         return []
     P, N = prob.P, prob.N
     try:
-        dets = detect_primitives(P[inl], None if N is None else N[inl], kinds=(lf.kind,),
+        dets = _detect_primitives(P[inl], None if N is None else N[inl], kinds=(lf.kind,),
                                  epsilon=eps, seed=prob.seed, viewpoint=prob.vp,
                                  min_points=max(RESIDUAL_MIN,
                                                 int(REDETECT_SHARE * len(inl))),
@@ -524,7 +532,7 @@ def _corner_planes(prob: _Problem, idx: np.ndarray, rmse: float, eps: float) -> 
         return []
     Q, NQ = prob.P[idx], prob.N[idx]
     try:
-        found = detect_primitives(Q, NQ, kinds=("plane",), epsilon=eps,
+        found = _detect_primitives(Q, NQ, kinds=("plane",), epsilon=eps,
                                   min_points=max(RESIDUAL_MIN, len(idx) // 10),
                                   seed=prob.seed, viewpoint=prob.vp, max_primitives=3)
     except CsdfError:
@@ -556,7 +564,7 @@ def _setup(P: np.ndarray, N: np.ndarray | None, vp: np.ndarray | None, ks: tuple
         N_det = N if oriented is None else oriented
         N = oriented
     det_kinds = tuple(ks) + (("plane",) if "box" in ks else ())
-    dets = detect_primitives(P, N_det, kinds=det_kinds, seed=seed, viewpoint=vp,
+    dets = _detect_primitives(P, N_det, kinds=det_kinds, seed=seed, viewpoint=vp,
                              max_primitives=max(3 * max_primitives, 12))
     solids = [d for d in dets if d.solid is not None]
     if not solids and not any(d.kind == "plane" for d in dets):
@@ -781,7 +789,7 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
     det_kinds = tuple(prob.ks) + (("plane",) if "box" in prob.ks else ())
     NS = None if N is None else N[sub]
     try:
-        dets = detect_primitives(P[sub], NS, kinds=det_kinds, seed=prob.seed,
+        dets = _detect_primitives(P[sub], NS, kinds=det_kinds, seed=prob.seed,
                                  viewpoint=prob.vp, min_points=RESIDUAL_MIN,
                                  max_primitives=12)
     except CsdfError:
@@ -796,7 +804,7 @@ def _residual(prob: _Problem, tree) -> list[Leaf]:
         if kind not in prob.ks:
             continue
         try:
-            dets = detect_primitives(P[sub], NS, kinds=(kind,), seed=prob.seed,
+            dets = _detect_primitives(P[sub], NS, kinds=(kind,), seed=prob.seed,
                                      viewpoint=prob.vp, min_points=RESIDUAL_MIN,
                                      max_primitives=RESIDUAL_PER_KIND, flat_share=1.0)
         except CsdfError:

@@ -285,6 +285,58 @@ def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.nd
             exact[i] = m == k and bd[k - 1] <= h2
 
 
+@njit(cache=True, nogil=True)
+def knn_block(S: np.ndarray, order: np.ndarray, first: np.ndarray, skey: np.ndarray,
+              dims: np.ndarray, origin: np.ndarray, h: float, k: int, rows: np.ndarray,
+              R: int, out_d: np.ndarray, out_i: np.ndarray, exact: np.ndarray) -> None:
+    """The ``k`` nearest neighbours (self excluded) of the points at rows ``rows`` of
+    ``S`` (the grid of :func:`knn_cells`; ``skey`` ``(N,)`` each row's cell key),
+    searched in the ``(2 R + 1)^3`` cells around each point's own, which hold every
+    point within ``R h`` of it. Writes, at each point's own row, ``out_d``, ``out_i``
+    and ``exact`` (whether its ``k``-th neighbour lies within ``R h``) as
+    :func:`knn_cells` does."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    bd = np.empty(k)
+    bi = np.empty(k, dtype=np.int64)
+    reach = R * h - 1e-9 * h  # cell boundaries as computed may be off by rounding
+    for r in range(rows.shape[0]):
+        a = rows[r]
+        key = skey[a]
+        ix = key % nx
+        iy = (key // nx) % ny
+        iz = key // (nx * ny)
+        px, py, pz = S[a, 0], S[a, 1], S[a, 2]
+        x0, x1 = max(ix - R, 0), min(ix + R, nx - 1)
+        m = 0
+        worst = np.inf
+        for z in range(max(iz - R, 0), min(iz + R, nz - 1) + 1):
+            for y in range(max(iy - R, 0), min(iy + R, ny - 1) + 1):
+                base = nx * (y + ny * z)
+                for b in range(first[base + x0], first[base + x1 + 1]):
+                    dx = S[b, 0] - px
+                    dy = S[b, 1] - py
+                    dz = S[b, 2] - pz
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 >= worst or b == a:
+                        continue
+                    s = m if m < k else k - 1
+                    while s > 0 and bd[s - 1] > d2:
+                        bd[s] = bd[s - 1]
+                        bi[s] = bi[s - 1]
+                        s -= 1
+                    bd[s] = d2
+                    bi[s] = b
+                    if m < k:
+                        m += 1
+                    if m == k:
+                        worst = bd[k - 1]
+        i = order[a]
+        for q in range(m):
+            out_d[i, q] = math.sqrt(bd[q])
+            out_i[i, q] = order[bi[q]]
+        exact[i] = m == k and bd[k - 1] <= reach * reach
+
+
 #: the rows ``(dy, dz)`` of a 3 x 3 x 3 block of cells, the middle one first
 _ROW_Y = np.array([0, -1, 1, 0, 0, -1, 1, -1, 1], dtype=np.int64)
 _ROW_Z = np.array([0, 0, 0, -1, 1, -1, -1, 1, 1], dtype=np.int64)

@@ -8,7 +8,7 @@ neighbours of every point.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -41,6 +41,11 @@ GRID_MIN_POINTS = 5000
 GRID_SAMPLE = 500
 #: the grid's cell side: this quantile of the sample's k-th neighbour distances
 GRID_QUANTILE = 0.98
+#: the grid's cell side is estimated on every this-many-th point (:func:`_knn`)
+SIZING_STEP = 3
+#: a point whose neighbours the 3 x 3 x 3 block does not settle searches the cells
+#: this many around its own (:func:`_knn`)
+WIDE = 2
 #: the most cells the grid may have (else the tree answers)
 GRID_MAX_CELLS = 4_000_000
 #: points of the sample that tells whether a cloud has near-copies (:func:`distinct_points`)
@@ -237,7 +242,7 @@ class Neighbourhood:
     """The k-nearest-neighbour structure of a cloud.
 
     Attributes:
-        tree: the :class:`cKDTree` of the points.
+        tree: the :class:`cKDTree` of the points (a property, built on first use).
         nbr: ``(N, k)`` the indices of each point's ``k`` nearest neighbours (itself
             excluded).
         lengths: ``(N, k)`` their distances (scene units).
@@ -253,13 +258,22 @@ class Neighbourhood:
             when not asked for).
     """
 
-    tree: cKDTree
     nbr: np.ndarray
     lengths: np.ndarray
     spacing: float
     local: np.ndarray
     noise: float
     normals: np.ndarray | None
+    points: np.ndarray = field(repr=False)
+    _tree: cKDTree | None = field(default=None, repr=False)
+
+    @property
+    def tree(self) -> cKDTree:
+        """The :class:`cKDTree` of the points (built on first use: the neighbours
+        themselves are found on a grid)."""
+        if self._tree is None:
+            self._tree = cKDTree(self.points, balanced_tree=False)
+        return self._tree
 
 
 def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
@@ -269,11 +283,17 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
     the sensor. Without ``want_normals`` the normals are None and the noise level is
     estimated on a subsample of about ``NOISE_SAMPLE`` points."""
     n = len(points)
-    tree = cKDTree(points, balanced_tree=False)  # (a third quicker to build, as quick to ask)
     k = int(min(k, n - 1))
     if k < 2:
         raise CsdfError(f"a cloud of {n} points is too small to estimate normals")
-    dist, idx = knn(points, tree, k)
+    held: list[cKDTree] = []
+
+    def get_tree() -> cKDTree:  # (a third quicker to build, as quick to ask)
+        if not held:
+            held.append(cKDTree(points, balanced_tree=False))
+        return held[0]
+
+    dist, idx = _knn(points, get_tree, k)
     # the noise level from a fixed subsample (every point when normals are wanted)
     normals = None
     if not want_normals:
@@ -283,7 +303,8 @@ def neighbourhood(points: np.ndarray, k: int = K_NORMALS, viewpoint=None,
         if viewpoint is not None:
             flip = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, float) - points) < 0
             normals[flip] *= -1
-    return Neighbourhood(tree=tree, nbr=np.ascontiguousarray(idx), lengths=dist,
+    return Neighbourhood(points=points, _tree=held[0] if held else None,
+                         nbr=np.ascontiguousarray(idx), lengths=dist,
                          spacing=(typical_spacing(dist) if k >= NEAR_K
                                   else float(np.median(dist[:, 0]))),
                          local=dist[:, k // 2 - 1],
@@ -404,26 +425,42 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
     """The ``k`` nearest neighbours of every point of ``points`` ``(N, 3)`` but itself:
     distances ``(N, k)`` (scene units, nearest first) and indices ``(N, k)``.
 
-    Exact, as ``tree.query`` (``tree`` the points' own k-d tree), and faster on large
-    clouds: the points are binned in cubic cells whose side ``h`` is the
-    ``GRID_QUANTILE`` quantile of the ``k``-th neighbour distance of a sample, and
-    each point searches the 3 x 3 x 3 cells around its own (compiled, on every core).
-    That block holds every point within ``h``; points whose ``k``-th neighbour found
-    there is farther (outliers, sparse parts) are searched again with the tree."""
+    Exact, as ``tree.query`` (``tree`` the points' own k-d tree, asked only for small
+    clouds and the points the grid leaves; :func:`_knn`)."""
+    return _knn(points, lambda: tree, k)
+
+
+def _knn(points: np.ndarray, get_tree, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`knn` with the points' k-d tree from ``get_tree()``, called only when it
+    is needed.
+
+    Large clouds are binned in cubic cells whose side ``h`` is the ``GRID_QUANTILE``
+    quantile of a sample's ``k``-th neighbour distance, and each point searches the
+    3 x 3 x 3 cells around its own (compiled, on every core). That block holds every
+    point within ``h``; a point whose ``k``-th neighbour found there is farther (a
+    sparse part) searches the ``(2 WIDE + 1)^3`` cells around its own, which hold every
+    point within ``WIDE h``, and only the few still farther (outliers) ask the tree.
+    ``h`` comes from every ``SIZING_STEP``-th point (its ``k / SIZING_STEP``-th
+    neighbour among them stands for the ``k``-th among all: a third of the points as
+    dense holds a third as many within any radius), so that no tree of every point is
+    built (7 of a 40k-point cloud's 30 ms)."""
     from ..cellsort import group_by_cell
     from ..parallel import N_THREADS, executor
-    from .kernels import bounds, knn_cells
+    from .kernels import bounds, knn_block, knn_cells
 
     n = len(points)
     if n < GRID_MIN_POINTS:
-        d, i = tree.query(points, k=k + 1, workers=-1)
+        d, i = get_tree().query(points, k=k + 1, workers=-1)
         return d[:, 1:], i[:, 1:]
-    ds, _ = tree.query(points[::max(1, n // GRID_SAMPLE)], k=k + 1)
+    sub = points[::SIZING_STEP]
+    ks = max(1, round(k / SIZING_STEP))
+    ds, _ = cKDTree(sub, balanced_tree=False).query(sub[::max(1, len(sub) // GRID_SAMPLE)],
+                                                    k=ks + 1)
     h = float(np.quantile(ds[:, -1], GRID_QUANTILE))
     lo, hi = bounds(points)
     span = hi - lo
     if not (h > 0 and np.prod(span / h + 1.0) <= GRID_MAX_CELLS):
-        d, i = tree.query(points, k=k + 1, workers=-1)
+        d, i = get_tree().query(points, k=k + 1, workers=-1)
         return d[:, 1:], i[:, 1:]
     dims = (span // h).astype(np.int64) + 1
     ijk = np.minimum(((points - lo) // h).astype(np.int64), dims - 1)
@@ -452,7 +489,13 @@ def knn(points: np.ndarray, tree: cKDTree, k: int) -> tuple[np.ndarray, np.ndarr
         list(executor().map(job, jobs))
     redo = np.flatnonzero(~exact)
     if len(redo):
-        d, i = tree.query(points[redo], k=k + 1, workers=-1)
+        pos = np.empty(n, dtype=np.int64)
+        pos[order] = np.arange(n)
+        rows = np.sort(pos[redo])
+        knn_block(S, order, first, skey, dims, lo, h, k, rows, WIDE, dist, idx, exact)
+        redo = np.flatnonzero(~exact)
+    if len(redo):
+        d, i = get_tree().query(points[redo], k=k + 1, workers=-1)
         dist[redo], idx[redo] = d[:, 1:], i[:, 1:]
     return dist, idx
 

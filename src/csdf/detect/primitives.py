@@ -395,7 +395,9 @@ def _build_levels(ctx: _Ctx) -> None:
     m = n
     while True:
         idx = np.sort(perm[:m])
-        ctx.levels.append((idx, ctx.nb.tree if m == n
+        # (level 0's tree is the neighbourhood's, built only if asked: its samples'
+        # neighbours are the neighbourhood's own)
+        ctx.levels.append((idx, None if m == n
                            else cKDTree(ctx.P[idx], balanced_tree=False)))
         m //= 4
         if m < 64:
@@ -423,7 +425,7 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
             # then its nearest neighbours, is the neighbourhood's
             nn = np.concatenate([sel[:, None], ctx.nb.nbr[sel, :k - 1]], axis=1)
         else:
-            _, nn = tree.query(ctx.P[sel], k=k)
+            _, nn = (tree or ctx.nb.tree).query(ctx.P[sel], k=k)
             nn = idx[np.asarray(nn).reshape(len(sel), k)]
         sels.append(sel)
         nns.append(nn)

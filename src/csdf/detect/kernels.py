@@ -232,6 +232,71 @@ def largest_component(sel: np.ndarray, nbr: np.ndarray, linked: np.ndarray,
     return out
 
 
+@njit(cache=True, nogil=True)
+def scatter(P: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The centroid ``(3,)`` and the scatter matrix ``(3, 3)`` (the sum of the outer
+    products of the offsets from it) of the points ``idx`` ``(K,)`` of ``P``
+    ``(N, 3)``, without gathering them."""
+    c = np.zeros(3)
+    for a in range(idx.shape[0]):
+        for u in range(3):
+            c[u] += P[idx[a], u]
+    c /= max(idx.shape[0], 1)
+    S = np.zeros((3, 3))
+    for a in range(idx.shape[0]):
+        j = idx[a]
+        dx, dy, dz = P[j, 0] - c[0], P[j, 1] - c[1], P[j, 2] - c[2]
+        S[0, 0] += dx * dx
+        S[0, 1] += dx * dy
+        S[0, 2] += dx * dz
+        S[1, 1] += dy * dy
+        S[1, 2] += dy * dz
+        S[2, 2] += dz * dz
+    S[1, 0], S[2, 0], S[2, 1] = S[0, 1], S[0, 2], S[1, 2]
+    return c, S
+
+
+@njit(cache=True, nogil=True)
+def any_within(A: np.ndarray, B: np.ndarray, r: float) -> bool:
+    """Whether a point of ``A`` ``(Ka, 3)`` lies nearer than ``r`` (``> 0``) to a
+    point of ``B`` ``(Kb, 3)``: ``B`` binned in cells of side ``r`` (sorted by cell),
+    each point of ``A`` compared with those in the 3 x 3 x 3 cells around its own."""
+    if A.shape[0] == 0 or B.shape[0] == 0:
+        return False
+    lo, hi = bounds(B)
+    nx = int((hi[0] - lo[0]) // r) + 1
+    ny = int((hi[1] - lo[1]) // r) + 1
+    nz = int((hi[2] - lo[2]) // r) + 1
+    keys = np.empty(B.shape[0], dtype=np.int64)
+    for j in range(B.shape[0]):
+        keys[j] = (min(int((B[j, 0] - lo[0]) // r), nx - 1) + nx * (
+            min(int((B[j, 1] - lo[1]) // r), ny - 1)
+            + ny * min(int((B[j, 2] - lo[2]) // r), nz - 1)))
+    order = np.argsort(keys)
+    skeys = keys[order]
+    r2 = r * r
+    for i in range(A.shape[0]):
+        ix = int(math.floor((A[i, 0] - lo[0]) / r))
+        iy = int(math.floor((A[i, 1] - lo[1]) / r))
+        iz = int(math.floor((A[i, 2] - lo[2]) / r))
+        if ix < -1 or iy < -1 or iz < -1 or ix > nx or iy > ny or iz > nz:
+            continue  # no cell of B within one cell
+        for z in range(max(iz - 1, 0), min(iz + 1, nz - 1) + 1):
+            for y in range(max(iy - 1, 0), min(iy + 1, ny - 1) + 1):
+                for x in range(max(ix - 1, 0), min(ix + 1, nx - 1) + 1):
+                    key = x + nx * (y + ny * z)
+                    e = np.searchsorted(skeys, key)
+                    while e < skeys.shape[0] and skeys[e] == key:
+                        j = order[e]
+                        dx = A[i, 0] - B[j, 0]
+                        dy = A[i, 1] - B[j, 1]
+                        dz = A[i, 2] - B[j, 2]
+                        if dx * dx + dy * dy + dz * dz < r2:
+                            return True
+                        e += 1
+    return False
+
+
 # ------------------------------------------------------------------ nearest neighbours
 @njit(cache=True, nogil=True)
 def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.ndarray,

@@ -58,6 +58,7 @@ from ..errors import CsdfError
 from ..fit import fit
 from ..seeds import rng_arg
 from .kernels import (
+    any_within,
     ball_in_frame,
     best_counts,
     bounds,
@@ -65,6 +66,7 @@ from .kernels import (
     grow_inliers,
     largest_component,
     linked_graph,
+    scatter,
     seeded_components,
     within_ball,
 )
@@ -538,7 +540,7 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
             for _ in range(PLANE_REFITS):
                 if len(inl) < 3:
                     break
-                h = _lsq_plane(ctx.P[inl])
+                h, _ = _lsq_plane(ctx, inl)
                 inl = _connected_inliers(ctx, kind, h, free, inl)
         out.append(_Candidate(kind, h, inl))
     return out
@@ -740,33 +742,29 @@ def _connected_inliers(ctx: _Ctx, kind: str, h: np.ndarray, free: np.ndarray,
                         ctx.cos_tol, *ctx.graph)
 
 
-def _lsq_plane(Q: np.ndarray) -> np.ndarray:
-    """The least-squares plane ``(normal, offset)`` ``(4,)`` of points ``Q`` ``(K, 3)``:
-    through their centroid, normal to the least principal axis of their scatter matrix
-    (a ``3 x 3`` eigenproblem, not a ``K x 3`` singular value decomposition)."""
-    c = Q.mean(axis=0)
-    D = Q - c
-    _, v = np.linalg.eigh(D.T @ D)
-    return np.append(v[:, 0], v[:, 0] @ c)
+def _lsq_plane(ctx: _Ctx, inl: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least-squares plane ``(normal, offset)`` ``(4,)`` of the points ``inl``
+    ``(K,)``: through their centroid, normal to the least principal axis of their
+    scatter matrix (a ``3 x 3`` eigenproblem, the matrix summed without gathering the
+    points), and the root mean square distance of the points to it (scene units)."""
+    c, S = scatter(ctx.P, np.asarray(inl, dtype=np.int64))
+    w, v = np.linalg.eigh(S)
+    return np.append(v[:, 0], v[:, 0] @ c), math.sqrt(max(float(w[0]), 0.0) / max(len(inl), 1))
 
 
 def _plane_detection(ctx: _Ctx, inl: np.ndarray) -> PrimitiveDetection:
     from ..shapes import plane
 
-    Q = ctx.P[inl]
-    c = Q.mean(axis=0)
-    nrm = _lsq_plane(Q)[:3]
+    h, rmse = _lsq_plane(ctx, inl)
+    nrm, off = h[:3], float(h[3])
     if ctx.viewpoint is not None:
-        if nrm @ (ctx.viewpoint - c) < 0:
-            nrm = -nrm
+        if nrm @ ctx.viewpoint - off < 0:
+            nrm, off = -nrm, -off
     elif nrm @ ctx.N[inl].sum(axis=0) < 0:
-        nrm = -nrm
-    off = float(nrm @ c)
-    r = Q @ nrm - off
+        nrm, off = -nrm, -off
     return PrimitiveDetection(
         kind="plane", shape=plane(tuple(nrm.tolist()), off),
-        params={"normal": nrm.tolist(), "offset": off}, inliers=inl,
-        rmse=float(np.sqrt(np.mean(r * r))))
+        params={"normal": nrm.tolist(), "offset": off}, inliers=inl, rmse=rmse)
 
 
 def _initial_solid(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray
@@ -927,7 +925,7 @@ def _refine(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray, free: np.ndarr
     fidx = np.flatnonzero(free)
     if kind == "plane":
         # the least-squares plane, then its own inliers
-        return _plane_detection(ctx, _connected_inliers(ctx, "plane", _lsq_plane(ctx.P[inl]),
+        return _plane_detection(ctx, _connected_inliers(ctx, "plane", _lsq_plane(ctx, inl)[0],
                                                         free, inl))
     R, t, vals = _initial_solid(ctx, kind, h, inl)
     pts = _union(inl, _near_solid(ctx, kind, R, t, vals, fidx, inl)[0])
@@ -1039,13 +1037,7 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         if np.any(box[i][0] > box[j][1] - 2.0 * link) or np.any(box[j][0] > box[i][1]
                                                                - 2.0 * link):
             return False  # (neither has a point in the other's grown box)
-        a, b = near(i, j), near(j, i)
-        if not len(a) or not len(b):
-            return False
-        if len(a) < len(b):
-            a, b = b, a
-        dd, _ = cKDTree(b).query(a, k=1, distance_upper_bound=link)
-        return bool(np.isfinite(dd).any())
+        return any_within(near(i, j), near(j, i), link)
 
     parent = {i: i for i in planes}
 

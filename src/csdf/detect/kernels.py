@@ -164,6 +164,20 @@ def inlier_counts(kind: int, H: np.ndarray, P: np.ndarray, N: np.ndarray, eps: f
 
 
 @njit(cache=True, nogil=True)
+def inlier_mask(kind: int, h: np.ndarray, P: np.ndarray, N: np.ndarray, idx: np.ndarray,
+                eps: float, cos_tol: float) -> np.ndarray:
+    """``(K,)`` which of the points ``idx`` ``(K,)`` of ``P`` (unit normals ``N``) lie
+    within ``eps`` of hypothesis ``h`` of ``kind`` with normals agreeing to
+    ``|cos| >= cos_tol``."""
+    ct = math.cos(h[6]) if kind == CONE else 0.0
+    st = math.sin(h[6]) if kind == CONE else 0.0
+    out = np.zeros(idx.shape[0], dtype=np.bool_)
+    for a in range(idx.shape[0]):
+        out[a] = _is_inlier(kind, h, ct, st, P, N, idx[a], eps, cos_tol)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def best_counts(kind: np.ndarray, H: np.ndarray, P: np.ndarray, N: np.ndarray, eps: float,
                 cos_tol: float, first: int, k: int, z: float
                 ) -> tuple[np.ndarray, np.ndarray]:

@@ -64,6 +64,7 @@ from .kernels import (
     bounds,
     close_agreeing,
     grow_inliers,
+    inlier_mask,
     largest_component,
     linked_graph,
     scatter,
@@ -115,6 +116,10 @@ SUBSET = 1500
 SIMPLER_WINS = 0.97
 #: hypotheses scored on all unexplained points per round (the best estimates)
 FULL_SCORES = 2
+#: a round's hypothesis whose inliers on the subset lie mostly (more than this share)
+#: among the connected inliers of a better one of its kind is the same surface, and is
+#: not grown again (:func:`_repeated`)
+REPEAT_SHARE = 0.5
 #: rounds in a row that may find nothing before the search stops
 MAX_FAILURES = 3
 #: default limit on the number of detections
@@ -529,12 +534,14 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
            else ctx.rng.choice(fidx, SUBSET, replace=False))
     scale = len(fidx) / len(sub)
     hyps = _hypotheses(ctx, S)
-    out = []
+    out: list[_Candidate] = []
     for cnt, kind, i in _best_hypotheses(ctx, {k: H for k, (H, _) in hyps.items()}, sub,
                                          FULL_SCORES):
         if cnt * scale < 0.5 * ctx.min_points:
             break
         h = hyps[kind][0][i]
+        if any(c.kind == kind and _repeated(ctx, kind, h, sub, c.inl) for c in out):
+            continue  # the same surface again (two rounds in three): not grown twice
         inl = _connected_inliers(ctx, kind, h, free, S[hyps[kind][1][i]])
         if kind == "plane":  # refitted by least squares: three close points tilt it
             for _ in range(PLANE_REFITS):
@@ -544,6 +551,19 @@ def _round_candidates(ctx: _Ctx, free: np.ndarray) -> list[_Candidate]:
                 inl = _connected_inliers(ctx, kind, h, free, inl)
         out.append(_Candidate(kind, h, inl))
     return out
+
+
+def _repeated(ctx: _Ctx, kind: str, h: np.ndarray, sub: np.ndarray, inl: np.ndarray
+              ) -> bool:
+    """Whether more than ``REPEAT_SHARE`` of the inliers of hypothesis ``h`` among the
+    points ``sub`` (the round's random subset) are among ``inl`` (sorted indices, a
+    candidate's connected inliers): the same surface as that candidate's."""
+    mine = sub[inlier_mask(KIND_ID[kind], np.ascontiguousarray(h, dtype=np.float64), ctx.P,
+                           ctx.N, np.asarray(sub, dtype=np.int64), ctx.eps, ctx.cos_tol)]
+    if not len(mine) or not len(inl):
+        return False
+    pos = np.minimum(np.searchsorted(inl, mine), len(inl) - 1)
+    return np.count_nonzero(inl[pos] == mine) > REPEAT_SHARE * len(mine)
 
 
 def _pick(ctx: _Ctx, cands: list[_Candidate], free: np.ndarray) -> _Candidate | None:

@@ -416,6 +416,63 @@ def knn_block(S: np.ndarray, order: np.ndarray, first: np.ndarray, skey: np.ndar
         exact[i] = m == k and bd[k - 1] <= reach * reach
 
 
+@njit(cache=True, nogil=True)
+def grid_knn(Q: np.ndarray, S: np.ndarray, ids: np.ndarray, first: np.ndarray,
+             dims: np.ndarray, origin: np.ndarray, h: float, k: int) -> np.ndarray:
+    """``(M, k)`` the ``k`` nearest of the points ``S`` ``(K, 3)`` (sorted by their
+    cells of side ``h`` from ``origin``, ``dims`` cells a side, key ``ix + nx (iy + ny
+    iz)``; ``first`` where each cell's run begins) to each query point ``Q`` ``(M, 3)``
+    (inside the grid's box), as the labels ``ids`` ``(K,)`` of those points, nearest
+    first (a point at distance 0 included): searched in the block of cells ``R`` around
+    the query's own, ``R`` growing from 1 until the ``k``-th lies within ``R h`` (then
+    no point outside the block is nearer). ``k <= K``."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    out = np.empty((Q.shape[0], k), dtype=np.int64)
+    bd = np.empty(k)
+    bi = np.empty(k, dtype=np.int64)
+    big = max(nx, ny, nz)
+    for q in range(Q.shape[0]):
+        px, py, pz = Q[q, 0], Q[q, 1], Q[q, 2]
+        ix = min(max(int((px - origin[0]) // h), 0), nx - 1)
+        iy = min(max(int((py - origin[1]) // h), 0), ny - 1)
+        iz = min(max(int((pz - origin[2]) // h), 0), nz - 1)
+        R = 1
+        while True:
+            m = 0
+            worst = np.inf
+            x0, x1 = max(ix - R, 0), min(ix + R, nx - 1)
+            for z in range(max(iz - R, 0), min(iz + R, nz - 1) + 1):
+                for y in range(max(iy - R, 0), min(iy + R, ny - 1) + 1):
+                    base = nx * (y + ny * z)
+                    for b in range(first[base + x0], first[base + x1 + 1]):
+                        dx = S[b, 0] - px
+                        dy = S[b, 1] - py
+                        dz = S[b, 2] - pz
+                        d2 = dx * dx + dy * dy + dz * dz
+                        if d2 >= worst:
+                            continue
+                        s = m if m < k else k - 1
+                        while s > 0 and bd[s - 1] > d2:
+                            bd[s] = bd[s - 1]
+                            bi[s] = bi[s - 1]
+                            s -= 1
+                        bd[s] = d2
+                        bi[s] = b
+                        if m < k:
+                            m += 1
+                        if m == k:
+                            worst = bd[k - 1]
+            reach = (R - 1e-9) * h  # (cell boundaries as computed may be off by rounding)
+            if (m == k and bd[k - 1] <= reach * reach) or R > big:
+                break
+            R += 1
+        for c in range(m):
+            out[q, c] = ids[bi[c]]
+        for c in range(m, k):  # (only when the grid holds fewer than k points)
+            out[q, c] = ids[bi[0]]
+    return out
+
+
 #: the rows ``(dy, dz)`` of a 3 x 3 x 3 block of cells, the middle one first
 _ROW_Y = np.array([0, -1, 1, 0, 0, -1, 1, -1, 1], dtype=np.int64)
 _ROW_Z = np.array([0, 0, 0, -1, 1, -1, -1, 1, 1], dtype=np.int64)

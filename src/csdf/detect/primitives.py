@@ -52,7 +52,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import CsdfError
 from ..fit import fit
@@ -63,6 +62,7 @@ from .kernels import (
     best_counts,
     bounds,
     close_agreeing,
+    grid_knn,
     grow_inliers,
     inlier_mask,
     largest_component,
@@ -178,6 +178,11 @@ SOLID_REFITS = 3
 REFIT_ITER = 5
 #: neighbours searched around a seed point for its minimal set
 SAMPLE_NEIGHBOURS = 10
+#: the cells of a sampling level's grid are this many times its points' estimated
+#: distance to their ``SAMPLE_NEIGHBOURS``-th neighbour (:func:`_build_levels`)
+LEVEL_CELL = 1.5
+#: ... and at most this many in all (wider when they would be more)
+LEVEL_MAX_CELLS = 1_000_000
 
 
 @dataclass
@@ -235,7 +240,7 @@ class _Ctx:
     kinds: tuple[str, ...]
     viewpoint: np.ndarray | None
     flat_share: float = FLAT_SHARE
-    levels: list[tuple[np.ndarray, cKDTree]] = field(default_factory=list)
+    levels: list[_Level] = field(default_factory=list)
     graph: tuple[np.ndarray, np.ndarray] | None = None  # linked_graph(nbr, linked)
 
 
@@ -394,21 +399,55 @@ def _detect(P: np.ndarray, N: np.ndarray | None, opts: _Options
     return [d for d in found if d.kind in opts.kinds]
 
 
+@dataclass
+class _Level:
+    """One level of the sampling pyramid: its points ``idx`` (sorted indices) and, past
+    the first, a grid of them (:func:`.kernels.grid_knn`): the points ``S`` ``(K, 3)``
+    and their indices ``ids`` sorted by cell, where each cell's run begins
+    (``first``), the cells a side ``dims`` and their side ``h`` (scene units), from the
+    cloud's least corner ``lo``."""
+
+    idx: np.ndarray
+    S: np.ndarray | None = None
+    ids: np.ndarray | None = None
+    first: np.ndarray | None = None
+    dims: np.ndarray | None = None
+    lo: np.ndarray | None = None
+    h: float = 0.0
+
+
 def _build_levels(ctx: _Ctx) -> None:
     """The sampling pyramid: random subsets of 1, 1/4, 1/16, ... of the points (down to
-    about 64 points), each with its k-d tree."""
+    about 64 points), each past the first binned in cells about as wide as its points'
+    distance to their ``SAMPLE_NEIGHBOURS``-th neighbour (estimated from the cloud's
+    sampling scale: a quarter of the points as dense reach twice as far)."""
+    from ..cellsort import group_by_cell
+
     n = len(ctx.P)
     perm = ctx.rng.permutation(n)
-    m = n
-    while True:
+    lo, hi = bounds(ctx.P)
+    span = hi - lo
+    # the whole cloud's distance to the SAMPLE_NEIGHBOURS-th neighbour, from that to the
+    # (k // 2)-th (nb.local; on a surface the count within a radius grows as its square)
+    reach = float(np.median(ctx.nb.local)) * math.sqrt(
+        SAMPLE_NEIGHBOURS / max(ctx.nb.nbr.shape[1] // 2, 1))
+    ctx.levels.append(_Level(idx=np.arange(n)))
+    m, scale = n // 4, 2.0
+    while m >= 64:
         idx = np.sort(perm[:m])
-        # (level 0's tree is the neighbourhood's, built only if asked: its samples'
-        # neighbours are the neighbourhood's own)
-        ctx.levels.append((idx, None if m == n
-                           else cKDTree(ctx.P[idx], balanced_tree=False)))
+        h = max(LEVEL_CELL * reach * scale, 1e-12 * float(span.max()), 1e-300)
+        dims = (span // h).astype(np.int64) + 1
+        while np.prod(dims.astype(float)) > LEVEL_MAX_CELLS:
+            h *= 1.5
+            dims = (span // h).astype(np.int64) + 1
+        P = ctx.P[idx]
+        ijk = np.minimum(((P - lo) // h).astype(np.int64), dims - 1)
+        order, first = group_by_cell(ijk[:, 0] + dims[0] * (ijk[:, 1] + dims[1] * ijk[:, 2]),
+                                     int(np.prod(dims)))
+        ctx.levels.append(_Level(idx=idx, S=np.ascontiguousarray(P[order]), ids=idx[order],
+                                 first=first, dims=dims, lo=lo, h=h))
         m //= 4
-        if m < 64:
-            break
+        scale *= 2.0
 
 
 def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = None
@@ -425,15 +464,17 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
         sel = seeds[lev == li]
         if not len(sel):
             continue
-        idx, tree = ctx.levels[li]
-        k = min(SAMPLE_NEIGHBOURS, len(idx))
+        lv = ctx.levels[li]
+        k = min(SAMPLE_NEIGHBOURS, len(lv.idx))
         if li == 0 and k - 1 <= ctx.nb.nbr.shape[1]:
-            # level 0 holds every point: what the tree would return, the seed and
-            # then its nearest neighbours, is the neighbourhood's
+            # level 0 holds every point: the seed and then its nearest neighbours are
+            # the neighbourhood's
             nn = np.concatenate([sel[:, None], ctx.nb.nbr[sel, :k - 1]], axis=1)
+        elif li == 0:
+            nn = ctx.nb.tree.query(ctx.P[sel], k=k)[1].reshape(len(sel), k)
         else:
-            _, nn = (tree or ctx.nb.tree).query(ctx.P[sel], k=k)
-            nn = idx[np.asarray(nn).reshape(len(sel), k)]
+            nn = grid_knn(np.ascontiguousarray(ctx.P[sel]), lv.S, lv.ids, lv.first, lv.dims,
+                          lv.lo, lv.h, k)
         sels.append(sel)
         nns.append(nn)
     if not sels:

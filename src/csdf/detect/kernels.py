@@ -271,6 +271,22 @@ def scatter(P: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, nogil=True)
+def in_box_and_slab(Q: np.ndarray, lo: np.ndarray, hi: np.ndarray, nrm: np.ndarray,
+                    off: float, width: float) -> np.ndarray:
+    """``(M, 3)`` the points of ``Q`` ``(K, 3)`` inside the box ``lo``, ``hi`` ``(3,)``
+    and within ``width`` of the plane ``nrm . p = off``, in order."""
+    out = np.empty_like(Q)
+    m = 0
+    for a in range(Q.shape[0]):
+        x, y, z = Q[a, 0], Q[a, 1], Q[a, 2]
+        if (lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1] and lo[2] <= z <= hi[2]
+                and abs(nrm[0] * x + nrm[1] * y + nrm[2] * z - off) <= width):
+            out[m, 0], out[m, 1], out[m, 2] = x, y, z
+            m += 1
+    return out[:m].copy()
+
+
+@njit(cache=True, nogil=True)
 def any_within(A: np.ndarray, B: np.ndarray, r: float) -> bool:
     """Whether a point of ``A`` ``(Ka, 3)`` lies nearer than ``r`` (``> 0``) to a
     point of ``B`` ``(Kb, 3)``: ``B`` binned in cells of side ``r`` (sorted by cell),

@@ -64,6 +64,7 @@ from .kernels import (
     close_agreeing,
     grid_knn,
     grow_inliers,
+    in_box_and_slab,
     inlier_mask,
     largest_component,
     linked_graph,
@@ -918,9 +919,10 @@ def _fit_solid(ctx: _Ctx, kind: str, R, t, values: dict, pts_idx: np.ndarray,
     return res.rotation, np.asarray(res.translation, float), vals
 
 
-def _solid_detection(ctx: _Ctx, kind: str, R, t, vals, inl: np.ndarray) -> PrimitiveDetection:
-    """The :class:`PrimitiveDetection` of a refined solid and its inliers."""
-    d, _ = solid_values(kind, R, t, vals, ctx.P[inl])
+def _solid_detection(ctx: _Ctx, kind: str, R, t, vals, inl: np.ndarray, d: np.ndarray
+                     ) -> PrimitiveDetection:
+    """The :class:`PrimitiveDetection` of a refined solid, its inliers ``inl`` (sorted
+    indices) and their distances to it ``d`` (scene units, either sign)."""
     a = R[:, 2]
     if kind == "sphere":
         geo = {"center": t.tolist(), "radius": vals["radius"]}
@@ -945,7 +947,7 @@ def _solid_detection(ctx: _Ctx, kind: str, R, t, vals, inl: np.ndarray) -> Primi
     geo.update({("frustum_height" if kind == "cone" and k == "height" else k): v
                 for k, v in vals.items()})
     return PrimitiveDetection(kind=kind, shape=posed(kind, R, t, vals), params=geo,
-                              inliers=np.sort(inl), rmse=float(np.sqrt(np.mean(d * d))),
+                              inliers=inl, rmse=float(np.sqrt(np.mean(d * d))),
                               solid=(kind, R, t, vals))
 
 
@@ -959,7 +961,8 @@ def _settle(ctx: _Ctx, kind: str, R, t, vals, pts: np.ndarray, cand: np.ndarray,
     unbiased: points cut at ``epsilon`` from a surface that is still off lean towards
     it, and a flat end held by few points would then creep to the truth one fit at a
     time. ``wide``: ``pts`` are that band's points already. Returns ``(R, t, vals,
-    inliers)``, the inliers within ``epsilon``."""
+    inliers, distances)``, the inliers within ``epsilon`` (sorted indices) and their
+    unsigned distances (scene units)."""
     if not wide:
         pts = _union(pts, _near_solid(ctx, kind, R, t, vals, cand, pts, FIT_BAND)[0])
     for _ in range(SETTLE_FITS):
@@ -974,7 +977,8 @@ def _settle(ctx: _Ctx, kind: str, R, t, vals, pts: np.ndarray, cand: np.ndarray,
     # the inliers within epsilon connected to ``pts`` are those of ``pts`` (the band's
     # connected points of this very solid) within epsilon: a point within epsilon next
     # to one of them would be one of them
-    return R, t, vals, pts[dist <= ctx.eps]
+    close = dist <= ctx.eps
+    return R, t, vals, pts[close], dist[close]
 
 
 def _refine(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray, free: np.ndarray
@@ -1002,13 +1006,14 @@ def _refine(ctx: _Ctx, kind: str, h: np.ndarray, inl: np.ndarray, free: np.ndarr
                 break
         if len(pts) < ctx.min_points:
             return None
-        R, t, vals, pts = _settle(ctx, kind, R, t, vals, pts if band is None else band, fidx,
-                                  wide=band is not None)
+        R, t, vals, pts, dist = _settle(ctx, kind, R, t, vals,
+                                        pts if band is None else band, fidx,
+                                        wide=band is not None)
     except CsdfError:
         return None
     if len(pts) < ctx.min_points:
         return None
-    return _solid_detection(ctx, kind, R, t, vals, pts)
+    return _solid_detection(ctx, kind, R, t, vals, pts, dist)
 
 
 def _free_of(ctx: _Ctx, found: list[PrimitiveDetection]) -> np.ndarray:
@@ -1059,10 +1064,10 @@ def _absorb_planes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[Primitive
             pts = _union(out[j].inliers, d.inliers)
             cand = _union(pts, _free_of(ctx, out))
             try:
-                R, t, vals, pts = _settle(ctx, kind, R, t, vals, pts, cand)
+                R, t, vals, pts, dist = _settle(ctx, kind, R, t, vals, pts, cand)
             except CsdfError:
                 continue
-            out[j] = _solid_detection(ctx, kind, R, t, vals, pts)
+            out[j] = _solid_detection(ctx, kind, R, t, vals, pts, dist)
             drop.add(i)
             break
     return [d for i, d in enumerate(out) if i not in drop]
@@ -1087,10 +1092,8 @@ def _make_boxes(ctx: _Ctx, found: list[PrimitiveDetection]) -> list[PrimitiveDet
         """The points of plane ``i`` that may lie within ``link`` of one of plane
         ``j``'s: in ``j``'s box grown by ``link``, and within ``link`` of the slab of
         ``j``'s plane that holds its points."""
-        Q = pts[i]
-        Q = Q[np.all((Q >= box[j][0]) & (Q <= box[j][1]), axis=1)]
-        nj, oj = plane[j]
-        return Q[np.abs(Q @ nj - oj) <= link + spread[j]]
+        return in_box_and_slab(pts[i], box[j][0], box[j][1], plane[j][0],
+                               float(plane[j][1]), link + spread[j])
 
     def touch(i: int, j: int) -> bool:
         """Whether a point of plane ``j`` lies within ``link`` of one of plane ``i``
@@ -1160,9 +1163,9 @@ def _box_of(ctx: _Ctx, faces: list[PrimitiveDetection], free: np.ndarray
         if (_on_solid(ctx, "box", R, t, vals, idx)[0].mean() < CAP_SHARE
                 or min(vals.values()) <= 2 * ctx.eps):
             return None
-        R, t, vals, pts = _settle(ctx, "box", R, t, vals, idx, _union(idx, free))
+        R, t, vals, pts, dist = _settle(ctx, "box", R, t, vals, idx, _union(idx, free))
     except CsdfError:
         return None
     if min(vals.values()) <= 2 * ctx.eps:
         return None
-    return _solid_detection(ctx, "box", R, t, vals, pts)
+    return _solid_detection(ctx, "box", R, t, vals, pts, dist)

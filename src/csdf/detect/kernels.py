@@ -329,6 +329,21 @@ def any_within(A: np.ndarray, B: np.ndarray, r: float) -> bool:
 
 # ------------------------------------------------------------------ nearest neighbours
 @njit(cache=True, nogil=True)
+def cell_keys(P: np.ndarray, lo: np.ndarray, h: float, dims: np.ndarray) -> np.ndarray:
+    """``(N,)`` the key ``ix + nx (iy + ny iz)`` of each point's cell of side ``h`` from
+    ``lo`` ``(3,)`` (``dims`` ``(3,)`` = ``(nx, ny, nz)`` cells a side; indices clamped
+    to them): ``(P - lo) // h`` in one pass."""
+    out = np.empty(P.shape[0], dtype=np.int64)
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    for i in range(P.shape[0]):
+        ix = min(int((P[i, 0] - lo[0]) // h), nx - 1)
+        iy = min(int((P[i, 1] - lo[1]) // h), ny - 1)
+        iz = min(int((P[i, 2] - lo[2]) // h), nz - 1)
+        out[i] = ix + nx * (iy + ny * iz)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.ndarray,
               ckey: np.ndarray, dims: np.ndarray, origin: np.ndarray, h: float, k: int,
               c0: int, c1: int, out_d: np.ndarray, out_i: np.ndarray,

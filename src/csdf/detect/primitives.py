@@ -61,6 +61,7 @@ from .kernels import (
     ball_in_frame,
     best_counts,
     bounds,
+    cell_keys,
     close_agreeing,
     grid_knn,
     grow_inliers,
@@ -442,9 +443,7 @@ def _build_levels(ctx: _Ctx) -> None:
             h *= 1.5
             dims = (span // h).astype(np.int64) + 1
         P = ctx.P[idx]
-        ijk = np.minimum(((P - lo) // h).astype(np.int64), dims - 1)
-        order, first = group_by_cell(ijk[:, 0] + dims[0] * (ijk[:, 1] + dims[1] * ijk[:, 2]),
-                                     int(np.prod(dims)))
+        order, first = group_by_cell(cell_keys(P, lo, h, dims), int(np.prod(dims)))
         ctx.levels.append(_Level(idx=idx, S=np.ascontiguousarray(P[order]), ids=idx[order],
                                  first=first, dims=dims, lo=lo, h=h))
         m //= 4

@@ -193,6 +193,53 @@ def test_knn_on_the_grid_is_the_trees():
     assert np.array_equal(d1, d0[:, 1:]) and np.array_equal(i1, i0[:, 1:])
 
 
+def test_a_surfaces_neighbours_need_no_tree_of_every_point():
+    """The grid's cell side comes from a third of the points, the points its 3 x 3 x 3
+    blocks leave are searched in 5 x 5 x 5: a surface without outliers builds no k-d
+    tree of every point, and the neighbours are still the tree's."""
+    from scipy.spatial import cKDTree
+
+    from csdf.detect.neighbours import GRID_MIN_POINTS, neighbourhood
+
+    rng = np.random.default_rng(6)
+    n = 3 * GRID_MIN_POINTS
+    u = rng.uniform(0, 2 * math.pi, n)
+    P = np.c_[np.cos(u), np.sin(u), rng.uniform(-1, 1, n)]
+    nb = neighbourhood(P, want_normals=False)
+    assert nb._tree is None
+    d0, i0 = cKDTree(P).query(P, k=13)
+    assert np.array_equal(nb.lengths, d0[:, 1:]) and np.array_equal(nb.nbr, i0[:, 1:])
+    assert nb.tree.n == n  # built when asked
+
+
+def test_compiled_grid_searches_are_exact():
+    from scipy.spatial import cKDTree
+
+    from csdf.cellsort import group_by_cell
+    from csdf.detect.kernels import any_within, bounds, cell_keys, grid_knn
+
+    rng = np.random.default_rng(9)
+    P = np.concatenate([rng.normal(size=(3000, 3)) * [1, 1, 0.05],
+                        rng.uniform(-4, 4, (50, 3))])
+    lo, hi = bounds(P)
+    for h in (0.05, 0.2, 1.0):
+        dims = ((hi - lo) // h).astype(np.int64) + 1
+        key = cell_keys(P, lo, h, dims)
+        ijk = np.minimum(((P - lo) // h).astype(np.int64), dims - 1)
+        assert np.array_equal(key, ijk[:, 0] + dims[0] * (ijk[:, 1] + dims[1] * ijk[:, 2]))
+        sub = np.sort(rng.choice(len(P), 700, replace=False))
+        order, first = group_by_cell(cell_keys(P[sub], lo, h, dims), int(np.prod(dims)))
+        Q = P[rng.choice(len(P), 200, replace=False)]
+        got = grid_knn(Q, np.ascontiguousarray(P[sub][order]), sub[order], first, dims, lo,
+                       h, 10)
+        _, want = cKDTree(P[sub]).query(Q, k=10)
+        assert np.array_equal(got, sub[want])
+    A, B = P[:1500], P[1500:]
+    d = np.sqrt(((A[:, None, :] - B[None, :, :]) ** 2).sum(axis=2)).min()
+    assert any_within(A, B, 1.0001 * d) and not any_within(A, B, 0.9999 * d)
+    assert not any_within(A[:0], B, 1.0)
+
+
 def test_compiled_bounds_and_cell_order_are_numpys():
     from csdf.cellsort import group_by_cell
     from csdf.detect.kernels import bounds
@@ -367,6 +414,22 @@ def test_detect_primitives_finds_every_kind(prim_scene):
     # no point is in two detections
     allin = np.concatenate([d.inliers for d in dets])
     assert len(allin) == len(np.unique(allin))
+
+
+def test_detect_primitives_does_not_depend_on_the_points_order(prim_scene):
+    """The search runs on the points in Morton order: the same cloud shuffled gives the
+    same detections (inliers named in the input's order); ``reorder=False`` searches the
+    points as given and still finds every kind."""
+    P, N, _ = prim_scene
+    perm = np.random.default_rng(3).permutation(len(P))
+    a = csdf.detect_primitives(P, N, seed=0)
+    b = csdf.detect_primitives(P[perm], N[perm], seed=0)
+    assert [d.kind for d in a] == [d.kind for d in b]
+    for x, y in zip(a, b):
+        assert np.array_equal(x.inliers, np.sort(perm[y.inliers]))
+        assert x.rmse == pytest.approx(y.rmse, rel=1e-9)
+    c = csdf.detect_primitives(P, N, seed=0, reorder=False)
+    assert sorted(d.kind for d in c) == sorted(d.kind for d in a)
 
 
 def test_detect_primitives_finds_no_shell_in_a_volume_of_noise():

@@ -343,6 +343,23 @@ def cell_keys(P: np.ndarray, lo: np.ndarray, h: float, dims: np.ndarray) -> np.n
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _keep_nearest(bd: np.ndarray, bi: np.ndarray, m: int, k: int, d2: float, b: int
+                  ) -> int:
+    """Put candidate ``b`` at squared distance ``d2`` into the ascending lists ``bd``
+    (squared distances) and ``bi`` (labels) of the ``m`` nearest so far (at most
+    ``k``; the farthest drops out when full); returns their new count. Of equally near
+    candidates the earlier one stays first."""
+    s = m if m < k else k - 1
+    while s > 0 and bd[s - 1] > d2:
+        bd[s] = bd[s - 1]
+        bi[s] = bi[s - 1]
+        s -= 1
+    bd[s] = d2
+    bi[s] = b
+    return m + 1 if m < k else m
+
+
 @njit(cache=True, nogil=True)
 def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.ndarray,
               ckey: np.ndarray, dims: np.ndarray, origin: np.ndarray, h: float, k: int,
@@ -429,15 +446,7 @@ def knn_block(S: np.ndarray, order: np.ndarray, first: np.ndarray, skey: np.ndar
                     d2 = dx * dx + dy * dy + dz * dz
                     if d2 >= worst or b == a:
                         continue
-                    s = m if m < k else k - 1
-                    while s > 0 and bd[s - 1] > d2:
-                        bd[s] = bd[s - 1]
-                        bi[s] = bi[s - 1]
-                        s -= 1
-                    bd[s] = d2
-                    bi[s] = b
-                    if m < k:
-                        m += 1
+                    m = _keep_nearest(bd, bi, m, k, d2, b)
                     if m == k:
                         worst = bd[k - 1]
         i = order[a]
@@ -482,15 +491,7 @@ def grid_knn(Q: np.ndarray, S: np.ndarray, ids: np.ndarray, first: np.ndarray,
                         d2 = dx * dx + dy * dy + dz * dz
                         if d2 >= worst:
                             continue
-                        s = m if m < k else k - 1
-                        while s > 0 and bd[s - 1] > d2:
-                            bd[s] = bd[s - 1]
-                            bi[s] = bi[s - 1]
-                            s -= 1
-                        bd[s] = d2
-                        bi[s] = b
-                        if m < k:
-                            m += 1
+                        m = _keep_nearest(bd, bi, m, k, d2, b)
                         if m == k:
                             worst = bd[k - 1]
             reach = (R - 1e-9) * h  # (cell boundaries as computed may be off by rounding)
@@ -556,15 +557,7 @@ def _block_search(S: np.ndarray, first: np.ndarray, a: int, ix: int, iy: int, iz
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= worst or b == a:
                 continue
-            s = m if m < k else k - 1
-            while s > 0 and bd[s - 1] > d2:
-                bd[s] = bd[s - 1]
-                bi[s] = bi[s - 1]
-                s -= 1
-            bd[s] = d2
-            bi[s] = b
-            if m < k:
-                m += 1
+            m = _keep_nearest(bd, bi, m, k, d2, b)
             if m == k:
                 worst = bd[k - 1]
     return m

@@ -2,8 +2,9 @@
 component analysis, the point spacing and noise level, and the k-nearest-neighbour graph
 that connected components are cut from.
 
-All of it comes from one :class:`scipy.spatial.cKDTree` query of the ``k`` nearest
-neighbours of every point.
+All of it comes from one exact search of the ``k`` nearest neighbours of every point,
+made on a grid of cells (:func:`knn`); a :class:`scipy.spatial.cKDTree` of the points is
+built only when something asks for it (:attr:`Neighbourhood.tree`).
 """
 
 from __future__ import annotations

@@ -17,11 +17,12 @@ distances and :func:`csdf.fit` doing the refinement:
    prefixes of it: one that cannot be among the best is dropped after each doubling
    (:func:`_best_hypotheses`). The best are grown from their sample points into their
    connected inliers among all unexplained points (the 12-nearest-neighbour graph,
-   edges shorter than ``cluster_epsilon``). A simpler kind wins over a more complex one
-   that explains at most ``1/SIMPLER_WINS`` more points (a flat face is a plane, not a
-   huge cylinder; a ring of small radius is a sphere, not a torus). Candidates not
-   taken stay in a pool for the next rounds; a pooled plane that nothing can beat is
-   taken without drawing again (:func:`_sure`).
+   edges shorter than ``cluster_epsilon``); one that is the same surface as a better
+   one of its kind is not grown again (:func:`_repeated`). A simpler kind wins over a
+   more complex one that explains at most ``1/SIMPLER_WINS`` more points (a flat face
+   is a plane, not a huge cylinder; a ring of small radius is a sphere, not a torus).
+   Candidates not taken stay in a pool for the next rounds; a pooled plane that
+   nothing can beat is taken without drawing again (:func:`_sure`).
 4. **Refinement.** The winner becomes a csdf solid (:mod:`.solids`: a sphere, capped
    cylinder, frustum or torus spanning its points), which :func:`csdf.fit` refines in
    pose and size from that start: on a subsample while the points near it (caps
@@ -42,8 +43,11 @@ distances and :func:`csdf.fit` doing the refinement:
    planes are fitted with a box, which replaces them when it explains their points, and
    takes the unexplained points on it (faces too small to be found alone).
 
+The search runs on the points in Morton (Z-curve) order (``reorder=True``), so that the
+graph searches and gathers stay in the caches; detections name the input's indices.
 Everything random comes from ``numpy.random.default_rng(seed)``: the same input and seed
-give the same detections.
+give the same detections, whatever the order of the points (``reorder=False``: the same
+input in the same order).
 """
 
 from __future__ import annotations

@@ -105,6 +105,24 @@ def test_a_close_start_needs_no_coarse_stage():
     assert res.params["r"] == pytest.approx(0.7, rel=1e-6)
 
 
+def test_a_looser_tol_stops_sooner_at_the_same_solution():
+    # tol: the last stage stops when a step lowers the cost by less than that fraction
+    shape = _part()
+    M = _init(1.0, 0.002)
+    P = _scene(shape, r=0.13)
+    P = P + np.random.default_rng(4).normal(0.0, 2e-4, P.shape)  # a little noise
+    init = {"rotation": M[:3, :3], "translation": M[:3, 3], "params": {"r": 0.12}}
+    kw = dict(init=init, estimate="pose,params", coarse=False, loss="huber", f_scale=6e-4)
+    a = csdf.fit(shape, P, **kw)
+    b = csdf.fit(shape, P, tol=1e-4, **kw)
+    assert b.iterations < a.iterations
+    assert b.params["r"] == pytest.approx(a.params["r"], abs=2e-5)
+    assert rotation_angle(a.rotation, b.rotation) < 1e-3
+    for bad in (0.0, 1.0, -1e-3, "x"):
+        with pytest.raises(csdf.CsdfError, match="tol"):
+            csdf.fit(shape, P, tol=bad, **kw)
+
+
 def test_scale_size_ambiguity_is_noted_and_resolved():
     r = csdf.param("r", 0.5, 0.1, 2.0)
     shape = csdf.sphere(r) | csdf.box(0.6).translate((0.4, 0, 0))  # r does not resize all

@@ -350,12 +350,13 @@ def lm_solve(prob, P: np.ndarray, st: State, idx: list[int], fs: float, max_iter
 
 def lm_rounds(prob, P: np.ndarray, st: State, idx: list[int], max_iter: int,
               vis: Visibility | None, slack: float = 0.0):
-    """:func:`lm_solve` at ``prob.f_scale``; with visibility, repeated (re-matching the
-    back-facing points each time, like ICP) up to 3 times while the cost drops."""
+    """:func:`lm_solve` at ``prob.f_scale`` and ``prob.tol``; with visibility, repeated
+    (re-matching the back-facing points each time, like ICP) up to 3 times while the
+    cost drops."""
     cost, nev, converged = math.inf, 0, False
     for _ in range(1 if vis is None else 3):
         st, c2, k, converged = lm_solve(prob, P, st, idx, prob.f_scale, max_iter, vis=vis,
-                                        slack=slack)
+                                        slack=slack, tol=prob.tol)
         nev += k
         done = not (c2 < cost * (1 - 1e-4))
         cost = c2

@@ -63,6 +63,7 @@ class Problem:
     estimate: tuple = ()
     bounds: np.ndarray | None = None  # (2, 3) object-frame box of the model, model units
     _evaluators: dict = field(default_factory=dict, repr=False, compare=False)
+    tol: float = 1e-7  # the final LM stages stop below this relative cost decrease
 
     @property
     def pnames(self) -> list[str]:

@@ -360,6 +360,44 @@ def _keep_nearest(bd: np.ndarray, bi: np.ndarray, m: int, k: int, d2: float, b: 
     return m + 1 if m < k else m
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _scan_run(S: np.ndarray, b0: int, b1: int, px: float, py: float, pz: float, skip: int,
+              k: int, bd: np.ndarray, bi: np.ndarray, m: int, worst: float
+              ) -> tuple[int, float]:
+    """Rows ``b0 .. b1 - 1`` of ``S`` (one run of cells) as candidates for the nearest
+    of ``(px, py, pz)``, row ``skip`` left out, kept by :func:`_keep_nearest` when nearer
+    than ``worst`` (squared); returns the new count and ``worst`` (the ``k``-th
+    distance once ``k`` are kept)."""
+    for b in range(b0, b1):
+        dx = S[b, 0] - px
+        dy = S[b, 1] - py
+        dz = S[b, 2] - pz
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= worst or b == skip:
+            continue
+        m = _keep_nearest(bd, bi, m, k, d2, b)
+        if m == k:
+            worst = bd[k - 1]
+    return m, worst
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _search_cube(S: np.ndarray, first: np.ndarray, nx: int, ny: int, nz: int, ix: int,
+                 iy: int, iz: int, R: int, px: float, py: float, pz: float, skip: int,
+                 k: int, bd: np.ndarray, bi: np.ndarray) -> int:
+    """The nearest of ``(px, py, pz)`` (at most ``k``; row ``skip`` left out) among
+    the points of the cells within ``R`` of cell ``(ix, iy, iz)`` of the grid of
+    :func:`knn_cells`, into ``bd`` and ``bi`` (ascending); returns how many."""
+    m, worst = 0, np.inf
+    x0, x1 = max(ix - R, 0), min(ix + R, nx - 1)
+    for z in range(max(iz - R, 0), min(iz + R, nz - 1) + 1):
+        for y in range(max(iy - R, 0), min(iy + R, ny - 1) + 1):
+            base = nx * (y + ny * z)
+            m, worst = _scan_run(S, first[base + x0], first[base + x1 + 1], px, py, pz,
+                                 skip, k, bd, bi, m, worst)
+    return m
+
+
 @njit(cache=True, nogil=True)
 def knn_cells(S: np.ndarray, order: np.ndarray, first: np.ndarray, cstart: np.ndarray,
               ckey: np.ndarray, dims: np.ndarray, origin: np.ndarray, h: float, k: int,
@@ -432,23 +470,8 @@ def knn_block(S: np.ndarray, order: np.ndarray, first: np.ndarray, skey: np.ndar
         ix = key % nx
         iy = (key // nx) % ny
         iz = key // (nx * ny)
-        px, py, pz = S[a, 0], S[a, 1], S[a, 2]
-        x0, x1 = max(ix - R, 0), min(ix + R, nx - 1)
-        m = 0
-        worst = np.inf
-        for z in range(max(iz - R, 0), min(iz + R, nz - 1) + 1):
-            for y in range(max(iy - R, 0), min(iy + R, ny - 1) + 1):
-                base = nx * (y + ny * z)
-                for b in range(first[base + x0], first[base + x1 + 1]):
-                    dx = S[b, 0] - px
-                    dy = S[b, 1] - py
-                    dz = S[b, 2] - pz
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 >= worst or b == a:
-                        continue
-                    m = _keep_nearest(bd, bi, m, k, d2, b)
-                    if m == k:
-                        worst = bd[k - 1]
+        m = _search_cube(S, first, nx, ny, nz, ix, iy, iz, R, S[a, 0], S[a, 1], S[a, 2], a,
+                         k, bd, bi)
         i = order[a]
         for q in range(m):
             out_d[i, q] = math.sqrt(bd[q])
@@ -478,22 +501,7 @@ def grid_knn(Q: np.ndarray, S: np.ndarray, ids: np.ndarray, first: np.ndarray,
         iz = min(max(int((pz - origin[2]) // h), 0), nz - 1)
         R = 1
         while True:
-            m = 0
-            worst = np.inf
-            x0, x1 = max(ix - R, 0), min(ix + R, nx - 1)
-            for z in range(max(iz - R, 0), min(iz + R, nz - 1) + 1):
-                for y in range(max(iy - R, 0), min(iy + R, ny - 1) + 1):
-                    base = nx * (y + ny * z)
-                    for b in range(first[base + x0], first[base + x1 + 1]):
-                        dx = S[b, 0] - px
-                        dy = S[b, 1] - py
-                        dz = S[b, 2] - pz
-                        d2 = dx * dx + dy * dy + dz * dz
-                        if d2 >= worst:
-                            continue
-                        m = _keep_nearest(bd, bi, m, k, d2, b)
-                        if m == k:
-                            worst = bd[k - 1]
+            m = _search_cube(S, first, nx, ny, nz, ix, iy, iz, R, px, py, pz, -1, k, bd, bi)
             reach = (R - 1e-9) * h  # (cell boundaries as computed may be off by rounding)
             if (m == k and bd[k - 1] <= reach * reach) or R > big:
                 break
@@ -550,16 +558,8 @@ def _block_search(S: np.ndarray, first: np.ndarray, a: int, ix: int, iy: int, iz
         x0 = ix - 1 if ix > 0 and g + gxl * gxl < worst else ix
         x1 = ix + 1 if ix < nx - 1 and g + gxh * gxh < worst else ix
         base = nx * (y + ny * z)
-        for b in range(first[base + x0], first[base + x1 + 1]):
-            dx = S[b, 0] - px
-            dy = S[b, 1] - py
-            dz = S[b, 2] - pz
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 >= worst or b == a:
-                continue
-            m = _keep_nearest(bd, bi, m, k, d2, b)
-            if m == k:
-                worst = bd[k - 1]
+        m, worst = _scan_run(S, first[base + x0], first[base + x1 + 1], px, py, pz, a, k,
+                             bd, bi, m, worst)
     return m
 
 

@@ -474,12 +474,10 @@ def _samples(ctx: _Ctx, free: np.ndarray, count: int, fidx: np.ndarray | None = 
             continue
         lv = ctx.levels[li]
         k = min(SAMPLE_NEIGHBOURS, len(lv.idx))
-        if li == 0 and k - 1 <= ctx.nb.nbr.shape[1]:
+        if li == 0:
             # level 0 holds every point: the seed and then its nearest neighbours are
-            # the neighbourhood's
+            # the neighbourhood's (it holds min(12, N - 1) a point, k - 1 at most)
             nn = np.concatenate([sel[:, None], ctx.nb.nbr[sel, :k - 1]], axis=1)
-        elif li == 0:
-            nn = ctx.nb.tree.query(ctx.P[sel], k=k)[1].reshape(len(sel), k)
         else:
             nn = grid_knn(np.ascontiguousarray(ctx.P[sel]), lv.S, lv.ids, lv.first, lv.dims,
                           lv.lo, lv.h, k)
